@@ -1,8 +1,19 @@
 #![doc = include_str!("../README.md")]
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 
+pub mod amplifier;
+pub mod chain;
 pub mod error;
+pub mod field;
+pub mod inverse;
+pub mod magnetization;
+pub mod magnetostriction;
 pub mod math;
 pub mod mechanics;
+pub mod slow;
+pub mod spec;
 
+pub use chain::{Actuator, ActuatorOutput, ActuatorParams, ActuatorState, StepError};
 pub use error::ParamError;
+pub use inverse::{Compensator, CompensatorState};
+pub use spec::{Effect, ModelSpec, SpecError};

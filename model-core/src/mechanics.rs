@@ -198,6 +198,35 @@ mod tests {
         assert!((s.displacement_m - 1e-5).abs() < 1e-10, "{}", s.displacement_m);
     }
 
+    /// 001 eq. 14–15 with Table 1: the paper prints f_n = 1742 Hz and ζ = 0.5; the table's own
+    /// numbers (m_r = ρ A_r l_r / 3) give f_n ≈ 1729 Hz and ζ ≈ 0.59.
+    #[test]
+    fn vibrator_001_natural_frequency_and_damping_from_table_1() {
+        let (l_r, d_r, rho) = (0.1_f64, 0.03_f64, 9250.0_f64);
+        let area = core::f64::consts::PI * d_r * d_r / 4.0;
+        let m_r = rho * area * l_r / 3.0;
+        let (k_r, c_r, k_s, c_o, k_o) = (4.2e8, 2.1e4, 3.5e5, 2.2e5, 1.8e9);
+        let (m_o, m_b, m_a) = (0.4, 6.8, 11.4);
+        let p = MassSpringDamper {
+            mass_kg: (m_a + m_r + m_o + m_b) as f32,
+            damping_n_s_per_m: (c_r + c_o) as f32,
+            stiffness_n_per_m: (k_r + k_s + k_o) as f32,
+        };
+        let (f_n, zeta) = (p.natural_frequency_hz(), p.damping_ratio());
+        assert!((f_n - 1728.8).abs() < 1.0, "f_n = {f_n} Hz (paper: 1742 Hz)");
+        assert!((zeta - 0.5895).abs() < 0.001, "ζ = {zeta} (paper: 0.5)");
+        // c_r is consistent with the table's c_d: c_r = c_d A_r / l_r.
+        assert!((3e6 * area / l_r - c_r).abs() / c_r < 0.02);
+    }
+
+    /// 000 Table 1: √(K/m)/2π ≈ 1584 Hz and ζ ≈ 1.5 (overdamped).
+    #[test]
+    fn transducer_000_natural_frequency_and_damping() {
+        let p = MassSpringDamper { mass_kg: 0.1, damping_n_s_per_m: 3000.0, stiffness_n_per_m: 9.9e6 };
+        assert!((p.natural_frequency_hz() - 1583.6).abs() < 0.5);
+        assert!((p.damping_ratio() - 1.508).abs() < 0.001);
+    }
+
     #[test]
     fn rejects_bad_parameters_by_name() {
         let good = MassSpringDamper { mass_kg: 0.1, damping_n_s_per_m: 3000.0, stiffness_n_per_m: 9.9e6 };

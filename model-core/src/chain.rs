@@ -1,0 +1,339 @@
+//! The actuator model composed from a [`ModelSpec`] and one parameter set:
+//!
+//! ```text
+//! u [V] -amp-> i [A] -coil-> H -eddy-> H_rod -magnetization-> M -aftereffect-> M_obs
+//!   -magnetostriction-> λ -(× rod length, + thermal elongation)-> y_free -mechanics-> y -delay-> y_meas
+//! ```
+//!
+//! Every stage the spec does not name is its minimal form (ideal amplifier: the current is the
+//! input; no eddy lag; linear M = a + bH; no creep; static mechanics y = y_free; no heating; no
+//! delay). The parameter set always holds every stage, so one file serves every spec; only the
+//! stages a spec uses are validated.
+
+use crate::amplifier::{FirstOrderAmp, FirstOrderAmpParams};
+use crate::error::{check, positive, ParamError};
+use crate::field::{CoilField, FirstOrderLag};
+use crate::magnetization::{
+    Anhysteretic, AnhystereticParams, JaParams, JaState, JilesAtherton, LinearMagnetization,
+};
+use crate::magnetostriction::{QuadraticMagnetostriction, QuadraticParams};
+use crate::mechanics::{MassSpringDamper, MechState, SecondOrderZoh};
+use crate::slow::{Aftereffect, AftereffectParams, DelayLine, ThermalDrift, ThermalParams};
+use crate::spec::{Effect, ModelSpec};
+
+/// Longest sensor delay the chain supports [samples].
+pub const MAX_DELAY_SAMPLES: usize = 64;
+
+/// Largest |command| [V] or |current| [A] a step accepts: beyond it the input is a fault, not
+/// a drive signal, and would only push the models towards overflow.
+pub const MAX_INPUT: f32 = 1.0e4;
+
+/// Mechanics as the workbench identifies it: resonance and damping of y_free → y.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct ModalMechanics {
+    /// Natural frequency f_n [Hz].
+    pub natural_frequency_hz: f32,
+    /// Damping ratio ζ.
+    pub damping_ratio: f32,
+}
+
+impl ModalMechanics {
+    /// The unit-stiffness mass-spring-damper with this f_n and ζ (static gain 1).
+    pub fn unit_gain(&self) -> Result<MassSpringDamper, ParamError> {
+        let fn_hz = positive("mech.natural_frequency_hz", self.natural_frequency_hz)?;
+        let zeta = check("mech.damping_ratio", self.damping_ratio, |z| z >= 0.0, ">= 0")?;
+        let w = 2.0 * core::f32::consts::PI * fn_hz;
+        Ok(MassSpringDamper {
+            mass_kg: 1.0 / (w * w),
+            damping_n_s_per_m: 2.0 * zeta / w,
+            stiffness_n_per_m: 1.0,
+        })
+    }
+}
+
+/// One complete parameter set (every stage; the spec decides which are used).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct ActuatorParams {
+    /// Sample period [s] the model is stepped at.
+    pub dt_s: f32,
+    /// `amplifier_dynamics`: first-order amplifier.
+    pub amp: FirstOrderAmpParams,
+    /// Coil field gain and bias.
+    pub coil: CoilField,
+    /// `eddy_current`: lumped eddy time constant τ [s] (see [`crate::field::eddy_time_constant_s`]).
+    pub eddy_tau_s: f32,
+    /// Minimal model: M = a + bH.
+    pub linear: LinearMagnetization,
+    /// `saturation`: Langevin curve.
+    pub anhysteretic: AnhystereticParams,
+    /// `hysteresis`: Jiles–Atherton.
+    pub ja: JaParams,
+    /// Quadratic magnetostriction.
+    pub magnetostriction: QuadraticParams,
+    /// Active rod length [m]: free displacement = λ L.
+    pub rod_length_m: f32,
+    /// `mechanical_dynamics`.
+    pub mech: ModalMechanics,
+    /// `magnetic_aftereffect`.
+    pub aftereffect: AftereffectParams,
+    /// `thermal_drift`.
+    pub thermal: ThermalParams,
+    /// `sensor_delay` [samples], at most [`MAX_DELAY_SAMPLES`].
+    pub delay_samples: u16,
+}
+
+impl ActuatorParams {
+    /// A Terfenol-D actuator in the range of the papers (000 Table 1 coil and mechanics scaled to
+    /// a 10 kHz loop, 002 Table III J–A), the default for simulations and demos.
+    pub const TERFENOL_DEMO: ActuatorParams = ActuatorParams {
+        dt_s: 1e-4,
+        amp: FirstOrderAmpParams { gain_a_per_v: 2.0, tau_s: 2e-4 },
+        coil: CoilField { turns_per_m: 13_541.7, bias_a_per_m: 20_000.0 }, // 1300 turns, 80 mm, k_f 1.2
+        eddy_tau_s: 1.5e-4,
+        linear: LinearMagnetization { offset_a_per_m: 0.0, susceptibility: 7.0 },
+        anhysteretic: AnhystereticParams { ms_a_per_m: 6.0e5, a_a_per_m: 9000.0 },
+        ja: JaParams { ms_a_per_m: 6.0e5, a_a_per_m: 6512.0, alpha: -0.035, k_a_per_m: 4000.0, c: 0.2 },
+        magnetostriction: QuadraticParams {
+            lambda_s: 1.0e-3,
+            ms_a_per_m: 6.0e5,
+            bias_m_a_per_m: 0.0,
+            preload: None,
+        },
+        rod_length_m: 0.08,
+        mech: ModalMechanics { natural_frequency_hz: 1584.0, damping_ratio: 0.3 },
+        aftereffect: AftereffectParams { fraction: 0.1, tau_s: 0.2 },
+        thermal: ThermalParams {
+            coil_resistance_ohm: 6.0,
+            thermal_resistance_c_per_w: 1.5,
+            tau_s: 30.0,
+            rod_length_m: 0.08,
+            expansion_per_c: ThermalParams::TERFENOL_EXPANSION_PER_C,
+        },
+        delay_samples: 3,
+    };
+}
+
+/// The magnetization stage the spec selects.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Magnetization {
+    /// M = a + bH.
+    Linear(LinearMagnetization),
+    /// M = M_s L(H/a).
+    Anhysteretic(Anhysteretic),
+    /// Jiles–Atherton.
+    JilesAtherton(JilesAtherton),
+}
+
+/// The validated, discretised actuator model (immutable).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Actuator {
+    spec: ModelSpec,
+    /// `None` when the current is the input.
+    pub(crate) amp: Option<FirstOrderAmp>,
+    pub(crate) coil: CoilField,
+    pub(crate) eddy: Option<FirstOrderLag>,
+    pub(crate) magnetization: Magnetization,
+    pub(crate) aftereffect: Option<Aftereffect>,
+    pub(crate) magnetostriction: QuadraticMagnetostriction,
+    pub(crate) rod_length_m: f32,
+    pub(crate) mech: Option<SecondOrderZoh>,
+    pub(crate) thermal: Option<ThermalDrift>,
+    pub(crate) delay_samples: usize,
+}
+
+/// Everything that evolves from sample to sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ActuatorState {
+    /// Coil current [A] (amplifier state).
+    pub current_a: f32,
+    /// Field in the rod after the eddy lag [A/m].
+    pub rod_field_a_per_m: f32,
+    /// J–A state (unused by the other magnetization models).
+    pub ja: JaState,
+    /// Slow magnetization of the aftereffect [A/m].
+    pub m_slow_a_per_m: f32,
+    /// Coil temperature rise [°C].
+    pub temperature_rise_c: f32,
+    /// Mechanics.
+    pub mech: MechState,
+    /// Sensor delay line [m].
+    pub delay: DelayLine<MAX_DELAY_SAMPLES>,
+}
+
+/// What one step produces (SI units).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ActuatorOutput {
+    /// Coil current [A].
+    pub current_a: f32,
+    /// Field in the rod [A/m].
+    pub field_a_per_m: f32,
+    /// Observed magnetization [A/m].
+    pub magnetization_a_per_m: f32,
+    /// Magnetostrictive strain λ.
+    pub strain: f32,
+    /// Measured displacement [m] (after mechanics and sensor delay; zero offset).
+    pub displacement_m: f32,
+}
+
+/// A step that could not be taken; the state is unchanged.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StepError {
+    /// The input was NaN, infinite or beyond [`MAX_INPUT`].
+    InputOutOfRange,
+}
+
+impl core::fmt::Display for StepError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            StepError::InputOutOfRange => write!(f, "model input is not finite or beyond ±{MAX_INPUT}"),
+        }
+    }
+}
+
+impl core::error::Error for StepError {}
+
+impl Actuator {
+    /// Builds the model for `spec`, validating only the stages it uses.
+    pub fn new(spec: ModelSpec, p: &ActuatorParams) -> Result<Self, ParamError> {
+        let dt = positive("dt_s", p.dt_s)?;
+        let coil = CoilField::new(p.coil.turns_per_m, p.coil.bias_a_per_m)?;
+        let amp = if spec.has(Effect::AmplifierDynamics) { Some(p.amp.build(dt)?) } else { None };
+        let eddy = if spec.has(Effect::EddyCurrent) {
+            Some(FirstOrderLag::new("eddy_tau_s", p.eddy_tau_s, 1.0, dt)?)
+        } else {
+            None
+        };
+        let magnetization = if spec.has(Effect::Hysteresis) {
+            Magnetization::JilesAtherton(JilesAtherton::new(p.ja)?)
+        } else if spec.has(Effect::Saturation) {
+            Magnetization::Anhysteretic(Anhysteretic::new(p.anhysteretic)?)
+        } else {
+            Magnetization::Linear(LinearMagnetization::new(p.linear.offset_a_per_m, p.linear.susceptibility)?)
+        };
+        let aftereffect = if spec.has(Effect::MagneticAftereffect) {
+            Some(Aftereffect::new(p.aftereffect, dt)?)
+        } else {
+            None
+        };
+        let magnetostriction = QuadraticMagnetostriction::new(p.magnetostriction)?;
+        let rod_length_m = positive("rod_length_m", p.rod_length_m)?;
+        let mech = if spec.has(Effect::MechanicalDynamics) {
+            Some(SecondOrderZoh::new(p.mech.unit_gain()?, dt)?)
+        } else {
+            None
+        };
+        let thermal =
+            if spec.has(Effect::ThermalDrift) { Some(ThermalDrift::new(p.thermal, dt)?) } else { None };
+        let delay_samples = if spec.has(Effect::SensorDelay) {
+            if p.delay_samples as usize > MAX_DELAY_SAMPLES {
+                return Err(ParamError::OutOfRange("delay_samples", "at most 64"));
+            }
+            p.delay_samples as usize
+        } else {
+            0
+        };
+        Ok(Self {
+            spec,
+            amp,
+            coil,
+            eddy,
+            magnetization,
+            aftereffect,
+            magnetostriction,
+            rod_length_m,
+            mech,
+            thermal,
+            delay_samples,
+        })
+    }
+
+    /// The structure this model was built for.
+    pub fn spec(&self) -> ModelSpec {
+        self.spec
+    }
+
+    /// Whether the input is a command voltage (amplifier modelled) rather than the coil current.
+    pub fn input_is_voltage(&self) -> bool {
+        self.amp.is_some()
+    }
+
+    /// The state at rest with zero input (demagnetised rod, cold coil).
+    pub fn rest_state(&self) -> ActuatorState {
+        // The bias field magnetizes the rod before the first sample: settle the magnetization
+        // there so that the recording starts at its operating point.
+        let mut ja = JaState::default();
+        let h0 = self.coil.bias_a_per_m;
+        let m0 = match &self.magnetization {
+            Magnetization::Linear(l) => l.magnetization(h0),
+            Magnetization::Anhysteretic(a) => a.magnetization(h0),
+            Magnetization::JilesAtherton(j) => j.step(&mut ja, h0),
+        };
+        let y0 = self.rod_length_m * self.magnetostriction.strain(m0);
+        let delay = DelayLine::clamped(self.delay_samples, y0); // checked ≤ capacity in `new`
+        ActuatorState {
+            current_a: 0.0,
+            rod_field_a_per_m: h0,
+            ja,
+            m_slow_a_per_m: m0,
+            temperature_rise_c: 0.0,
+            mech: MechState { displacement_m: y0, velocity_m_per_s: 0.0 },
+            delay,
+        }
+    }
+
+    /// One sample. `input` is the command voltage [V] when the amplifier is modelled, else the
+    /// coil current [A].
+    #[inline]
+    pub fn step(&self, s: &mut ActuatorState, input: f32) -> Result<ActuatorOutput, StepError> {
+        if !input.is_finite() || input.abs() > MAX_INPUT {
+            return Err(StepError::InputOutOfRange);
+        }
+        let current = match &self.amp {
+            Some(amp) => amp.step(&mut s.current_a, input),
+            None => {
+                s.current_a = input;
+                input
+            }
+        };
+        let h_coil = self.coil.field(current);
+        let h = match &self.eddy {
+            Some(lag) => lag.step(&mut s.rod_field_a_per_m, h_coil),
+            None => {
+                s.rod_field_a_per_m = h_coil;
+                h_coil
+            }
+        };
+        let m = match &self.magnetization {
+            Magnetization::Linear(l) => l.magnetization(h),
+            Magnetization::Anhysteretic(a) => a.magnetization(h),
+            Magnetization::JilesAtherton(j) => j.step(&mut s.ja, h),
+        };
+        let m_obs = match &self.aftereffect {
+            Some(ae) => ae.step(&mut s.m_slow_a_per_m, m),
+            None => m,
+        };
+        let strain = self.magnetostriction.strain(m_obs);
+        let thermal = match &self.thermal {
+            Some(th) => th.step(&mut s.temperature_rise_c, current),
+            None => 0.0,
+        };
+        let y_free = strain * self.rod_length_m + thermal;
+        let y = match &self.mech {
+            Some(zoh) => zoh.step(&mut s.mech, y_free),
+            None => {
+                s.mech.displacement_m = y_free;
+                y_free
+            }
+        };
+        let y_meas = s.delay.step(y);
+        Ok(ActuatorOutput {
+            current_a: current,
+            field_a_per_m: h,
+            magnetization_a_per_m: m_obs,
+            strain,
+            displacement_m: y_meas,
+        })
+    }
+}

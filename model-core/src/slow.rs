@@ -1,0 +1,188 @@
+//! Slow effects on top of the fast chain: magnetic aftereffect (creep), coil heating → thermal
+//! expansion of the rod, and the displacement sensor's transport delay.
+
+use crate::error::{check, non_negative, positive, ParamError};
+use crate::field::FirstOrderLag;
+
+/// Magnetic aftereffect: a fraction w of every magnetization change arrives with a slow time
+/// constant τ_a (magnetic viscosity): M_out = (1 − w) M + w M_slow, M_slow' = (M − M_slow)/τ_a.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct AftereffectParams {
+    /// Slow fraction w, 0 ≤ w < 1.
+    pub fraction: f32,
+    /// Creep time constant τ_a [s].
+    pub tau_s: f32,
+}
+
+/// Validated aftereffect; state is the slow magnetization M_slow [A/m].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Aftereffect {
+    lag: FirstOrderLag,
+    fraction: f32,
+}
+
+impl Aftereffect {
+    /// Validates and discretises at `dt_s`.
+    pub fn new(p: AftereffectParams, dt_s: f32) -> Result<Self, ParamError> {
+        check("aftereffect.fraction", p.fraction, |w| (0.0..1.0).contains(&w), "in [0, 1)")?;
+        Ok(Self { lag: FirstOrderLag::new("aftereffect.tau_s", p.tau_s, 1.0, dt_s)?, fraction: p.fraction })
+    }
+
+    /// One sample: returns the observed magnetization.
+    #[inline]
+    pub fn step(&self, m_slow: &mut f32, m: f32) -> f32 {
+        let slow = self.lag.step(m_slow, m);
+        (1.0 - self.fraction) * m + self.fraction * slow
+    }
+
+    /// The instantaneous magnetization that makes the observed one equal `m_out` this sample.
+    #[inline]
+    pub fn magnetization_for(&self, m_slow: f32, m_out: f32) -> f32 {
+        // m_out = (1−w) m + w (p s + (1−p) m)  ⇒  m = (m_out − w p s)/(1 − w p)
+        let wp = self.fraction * self.lag.pole();
+        (m_out - wp * m_slow) / (1.0 - wp)
+    }
+}
+
+/// Coil heating → rod thermal expansion: temperature rise θ' = (R_th R i² − θ)/τ_th, expansion
+/// Δy = α_T L θ (α_T = 12.9e-6 /°C for Terfenol-D, 002 §VII).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct ThermalParams {
+    /// Coil resistance R [Ω].
+    pub coil_resistance_ohm: f32,
+    /// Thermal resistance coil→ambient seen by the rod R_th [°C/W].
+    pub thermal_resistance_c_per_w: f32,
+    /// Thermal time constant τ_th [s].
+    pub tau_s: f32,
+    /// Rod length L [m].
+    pub rod_length_m: f32,
+    /// Expansion coefficient α_T [1/°C].
+    pub expansion_per_c: f32,
+}
+
+impl ThermalParams {
+    /// Terfenol-D's thermal expansion coefficient (002 §VII).
+    pub const TERFENOL_EXPANSION_PER_C: f32 = 12.9e-6;
+}
+
+/// Validated thermal drift; state is the temperature rise θ [°C].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ThermalDrift {
+    lag: FirstOrderLag,
+    metres_per_c: f32,
+}
+
+impl ThermalDrift {
+    /// Validates and discretises at `dt_s`.
+    pub fn new(p: ThermalParams, dt_s: f32) -> Result<Self, ParamError> {
+        non_negative("thermal.coil_resistance_ohm", p.coil_resistance_ohm)?;
+        non_negative("thermal.thermal_resistance_c_per_w", p.thermal_resistance_c_per_w)?;
+        let l = positive("thermal.rod_length_m", p.rod_length_m)?;
+        let a = non_negative("thermal.expansion_per_c", p.expansion_per_c)?;
+        let gain = p.coil_resistance_ohm * p.thermal_resistance_c_per_w;
+        Ok(Self { lag: FirstOrderLag::new("thermal.tau_s", p.tau_s, gain, dt_s)?, metres_per_c: a * l })
+    }
+
+    /// One sample at coil current `i`: returns the thermal elongation [m].
+    #[inline]
+    pub fn step(&self, theta_c: &mut f32, current_a: f32) -> f32 {
+        self.lag.step(theta_c, current_a * current_a) * self.metres_per_c
+    }
+
+    /// Elongation [m] for a temperature rise θ.
+    #[inline]
+    pub fn elongation_m(&self, theta_c: f32) -> f32 {
+        theta_c * self.metres_per_c
+    }
+}
+
+/// Pure transport delay of `delay` samples, at most `N` (fixed-size ring buffer).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DelayLine<const N: usize> {
+    buf: [f32; N],
+    head: usize,
+    delay: usize,
+}
+
+impl<const N: usize> DelayLine<N> {
+    /// A delay of `delay` samples (0 ≤ delay ≤ N), initially filled with `initial`.
+    pub fn new(delay: usize, initial: f32) -> Result<Self, ParamError> {
+        if delay > N {
+            return Err(ParamError::OutOfRange("delay.samples", "at most the delay line's capacity"));
+        }
+        Ok(Self::clamped(delay, initial))
+    }
+
+    /// A delay of min(`delay`, N) samples, initially filled with `initial`.
+    pub fn clamped(delay: usize, initial: f32) -> Self {
+        Self { buf: [initial; N], head: 0, delay: delay.min(N) }
+    }
+
+    /// Pushes `x`, returns the value from `delay` samples ago.
+    #[inline]
+    pub fn step(&mut self, x: f32) -> f32 {
+        if self.delay == 0 || N == 0 {
+            return x;
+        }
+        // The slot written `delay` samples ago is `delay` positions behind head.
+        let out = self.buf[(self.head + N - self.delay) % N];
+        self.buf[self.head] = x;
+        self.head = (self.head + 1) % N;
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn delay_line_delays_exactly() {
+        let mut d = DelayLine::<8>::new(3, 0.0).unwrap();
+        let out: Vec<f32> = (1..=6).map(|x| d.step(x as f32)).collect();
+        assert_eq!(out, [0.0, 0.0, 0.0, 1.0, 2.0, 3.0]);
+        let mut full = DelayLine::<4>::new(4, -1.0).unwrap();
+        let out: Vec<f32> = (1..=6).map(|x| full.step(x as f32)).collect();
+        assert_eq!(out, [-1.0, -1.0, -1.0, -1.0, 1.0, 2.0]);
+        assert!(DelayLine::<4>::new(5, 0.0).is_err());
+    }
+
+    #[test]
+    fn aftereffect_creeps_and_inverts() {
+        let ae = Aftereffect::new(AftereffectParams { fraction: 0.2, tau_s: 0.05 }, 1e-4).unwrap();
+        let mut slow = 0.0;
+        let first = ae.step(&mut slow, 1000.0);
+        assert!((first - 800.0).abs() < 1.0, "{first}");
+        for _ in 0..20_000 {
+            ae.step(&mut slow, 1000.0);
+        }
+        assert!((ae.step(&mut slow, 1000.0) - 1000.0).abs() < 0.1);
+        let m = ae.magnetization_for(slow, 1200.0);
+        assert!((ae.step(&mut slow, m) - 1200.0).abs() < 0.05);
+    }
+
+    /// 002 §VII scale: a 20 W coil heating a 100 mm rod by ~2 °C in 20 s gives ≈ 2 µm.
+    #[test]
+    fn thermal_drift_has_the_papers_scale() {
+        let th = ThermalDrift::new(
+            ThermalParams {
+                coil_resistance_ohm: 5.0,
+                thermal_resistance_c_per_w: 0.5,
+                tau_s: 60.0,
+                rod_length_m: 0.1,
+                expansion_per_c: ThermalParams::TERFENOL_EXPANSION_PER_C,
+            },
+            1e-3,
+        )
+        .unwrap();
+        let mut theta = 0.0;
+        let mut y = 0.0;
+        for _ in 0..20_000 {
+            y = th.step(&mut theta, 2.0);
+        }
+        // θ(20 s) = 10 °C·(1 − e^{−1/3}) = 2.835 °C → 3.66 µm.
+        assert!((theta - 2.835).abs() < 0.01 && (y * 1e6 - 3.657).abs() < 0.01, "{theta} °C, {} µm", y * 1e6);
+    }
+}
