@@ -1,5 +1,7 @@
 //! `gma`: the model workbench for giant-magnetostrictive actuators.
 
+mod simulate;
+
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use model_core::mechanics::{MassSpringDamper, MechState, SecondOrderZoh};
@@ -13,6 +15,10 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Simulate an actuator (a model-core chain) under a standard excitation and write a
+    /// measurement CSV (time_s, [command_V,] current_A, displacement_um). Simulated data, for
+    /// tests and demos.
+    Simulate(simulate::SimulateArgs),
     /// Natural frequency, damping ratio and step response of the actuator mechanics
     /// (m ÿ + c ẏ + k y = F, 001 eq. 14–15), discretised exactly at the loop rate.
     Mechanics {
@@ -46,6 +52,7 @@ fn main() -> std::process::ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Simulate(a) => simulate::run(&a),
         Command::Mechanics { mass_kg, damping_n_s_per_m, stiffness_n_per_m, sample_rate_hz, force_n } => {
             let p = MassSpringDamper { mass_kg, damping_n_s_per_m, stiffness_n_per_m };
             let zoh = SecondOrderZoh::new(p, 1.0 / sample_rate_hz).context("mechanics parameters")?;
