@@ -10,11 +10,12 @@
 //! delay). The parameter set always holds every stage, so one file serves every spec; only the
 //! stages a spec uses are validated.
 
-use crate::amplifier::{FirstOrderAmp, FirstOrderAmpParams};
+use crate::amplifier::{AmpState, Amplifier, FirstOrderAmpParams, SecondOrderAmp, SecondOrderAmpParams};
 use crate::error::{check, positive, ParamError};
 use crate::field::{CoilField, FirstOrderLag};
 use crate::magnetization::{
-    Anhysteretic, AnhystereticParams, JaParams, JaState, JilesAtherton, LinearMagnetization,
+    Anhysteretic, AnhystereticParams, JaParams, JaState, JilesAtherton, LinearMagnetization, Preisach,
+    PreisachParams, PreisachState,
 };
 use crate::magnetostriction::{QuadraticMagnetostriction, QuadraticParams};
 use crate::mechanics::{MassSpringDamper, MechState, SecondOrderZoh};
@@ -58,8 +59,12 @@ impl ModalMechanics {
 pub struct ActuatorParams {
     /// Sample period [s] the model is stepped at.
     pub dt_s: f32,
-    /// `amplifier_dynamics`: first-order amplifier.
+    /// `amplifier_dynamics`: first-order amplifier (000 eq. 19).
     pub amp: FirstOrderAmpParams,
+    /// `amplifier_dynamics` with 002's second-order amplifier instead of the first-order one,
+    /// when set (omit it in parameter files to keep the first-order model).
+    #[cfg_attr(feature = "serde", serde(default, skip_serializing_if = "Option::is_none"))]
+    pub amp_second_order: Option<SecondOrderAmpParams>,
     /// Coil field gain and bias.
     pub coil: CoilField,
     /// `eddy_current`: lumped eddy time constant τ [s] (see [`crate::field::eddy_time_constant_s`]).
@@ -70,6 +75,8 @@ pub struct ActuatorParams {
     pub anhysteretic: AnhystereticParams,
     /// `hysteresis`: Jiles–Atherton.
     pub ja: JaParams,
+    /// `preisach`: Preisach density.
+    pub preisach: PreisachParams,
     /// Quadratic magnetostriction.
     pub magnetostriction: QuadraticParams,
     /// Active rod length [m]: free displacement = λ L.
@@ -90,11 +97,18 @@ impl ActuatorParams {
     pub const TERFENOL_DEMO: ActuatorParams = ActuatorParams {
         dt_s: 1e-4,
         amp: FirstOrderAmpParams { gain_a_per_v: 2.0, tau_s: 2e-4 },
+        amp_second_order: None,
         coil: CoilField { turns_per_m: 13_541.7, bias_a_per_m: 20_000.0 }, // 1300 turns, 80 mm, k_f 1.2
         eddy_tau_s: 1.5e-4,
         linear: LinearMagnetization { offset_a_per_m: 0.0, susceptibility: 7.0 },
         anhysteretic: AnhystereticParams { ms_a_per_m: 6.0e5, a_a_per_m: 9000.0 },
         ja: JaParams { ms_a_per_m: 6.0e5, a_a_per_m: 6512.0, alpha: -0.035, k_a_per_m: 4000.0, c: 0.2 },
+        preisach: PreisachParams {
+            ms_a_per_m: 6.0e5,
+            coercive_a_per_m: 3000.0,
+            spread_a_per_m: 10_000.0,
+            h_max_a_per_m: 80_000.0,
+        },
         magnetostriction: QuadraticParams {
             lambda_s: 1.0e-3,
             ms_a_per_m: 6.0e5,
@@ -116,6 +130,8 @@ impl ActuatorParams {
 }
 
 /// The magnetization stage the spec selects.
+// No heap: the Preisach table (4 KB) lives inline; an actuator is built once and kept.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Magnetization {
     /// M = a + bH.
@@ -124,6 +140,8 @@ pub enum Magnetization {
     Anhysteretic(Anhysteretic),
     /// Jiles–Atherton.
     JilesAtherton(JilesAtherton),
+    /// Preisach relay plane.
+    Preisach(Preisach),
 }
 
 /// The validated, discretised actuator model (immutable).
@@ -131,7 +149,7 @@ pub enum Magnetization {
 pub struct Actuator {
     spec: ModelSpec,
     /// `None` when the current is the input.
-    pub(crate) amp: Option<FirstOrderAmp>,
+    pub(crate) amp: Option<Amplifier>,
     pub(crate) coil: CoilField,
     pub(crate) eddy: Option<FirstOrderLag>,
     pub(crate) magnetization: Magnetization,
@@ -146,12 +164,14 @@ pub struct Actuator {
 /// Everything that evolves from sample to sample.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ActuatorState {
-    /// Coil current [A] (amplifier state).
-    pub current_a: f32,
+    /// Coil current [A] and the amplifier's internal state.
+    pub amp: AmpState,
     /// Field in the rod after the eddy lag [A/m].
     pub rod_field_a_per_m: f32,
     /// J–A state (unused by the other magnetization models).
     pub ja: JaState,
+    /// Preisach memory (unused by the other magnetization models).
+    pub preisach: PreisachState,
     /// Slow magnetization of the aftereffect [A/m].
     pub m_slow_a_per_m: f32,
     /// Coil temperature rise [°C].
@@ -199,13 +219,19 @@ impl Actuator {
     pub fn new(spec: ModelSpec, p: &ActuatorParams) -> Result<Self, ParamError> {
         let dt = positive("dt_s", p.dt_s)?;
         let coil = CoilField::new(p.coil.turns_per_m, p.coil.bias_a_per_m)?;
-        let amp = if spec.has(Effect::AmplifierDynamics) { Some(p.amp.build(dt)?) } else { None };
+        let amp = match (spec.has(Effect::AmplifierDynamics), p.amp_second_order) {
+            (false, _) => None,
+            (true, None) => Some(Amplifier::FirstOrder(p.amp.build(dt)?)),
+            (true, Some(p2)) => Some(Amplifier::SecondOrder(SecondOrderAmp::new(p2, dt)?)),
+        };
         let eddy = if spec.has(Effect::EddyCurrent) {
             Some(FirstOrderLag::new("eddy_tau_s", p.eddy_tau_s, 1.0, dt)?)
         } else {
             None
         };
-        let magnetization = if spec.has(Effect::Hysteresis) {
+        let magnetization = if spec.has(Effect::Preisach) {
+            Magnetization::Preisach(Preisach::new(p.preisach)?)
+        } else if spec.has(Effect::Hysteresis) {
             Magnetization::JilesAtherton(JilesAtherton::new(p.ja)?)
         } else if spec.has(Effect::Saturation) {
             Magnetization::Anhysteretic(Anhysteretic::new(p.anhysteretic)?)
@@ -264,18 +290,24 @@ impl Actuator {
         // The bias field magnetizes the rod before the first sample: settle the magnetization
         // there so that the recording starts at its operating point.
         let mut ja = JaState::default();
+        let mut preisach = PreisachState::default();
         let h0 = self.coil.bias_a_per_m;
         let m0 = match &self.magnetization {
             Magnetization::Linear(l) => l.magnetization(h0),
             Magnetization::Anhysteretic(a) => a.magnetization(h0),
             Magnetization::JilesAtherton(j) => j.step(&mut ja, h0),
+            Magnetization::Preisach(p) => {
+                preisach = p.demagnetized();
+                p.step(&mut preisach, h0)
+            }
         };
         let y0 = self.rod_length_m * self.magnetostriction.strain(m0);
         let delay = DelayLine::clamped(self.delay_samples, y0); // checked ≤ capacity in `new`
         ActuatorState {
-            current_a: 0.0,
+            amp: AmpState::default(),
             rod_field_a_per_m: h0,
             ja,
+            preisach,
             m_slow_a_per_m: m0,
             temperature_rise_c: 0.0,
             mech: MechState { displacement_m: y0, velocity_m_per_s: 0.0 },
@@ -291,9 +323,9 @@ impl Actuator {
             return Err(StepError::InputOutOfRange);
         }
         let current = match &self.amp {
-            Some(amp) => amp.step(&mut s.current_a, input),
+            Some(amp) => amp.step(&mut s.amp, input),
             None => {
-                s.current_a = input;
+                s.amp.current_a = input;
                 input
             }
         };
@@ -309,6 +341,7 @@ impl Actuator {
             Magnetization::Linear(l) => l.magnetization(h),
             Magnetization::Anhysteretic(a) => a.magnetization(h),
             Magnetization::JilesAtherton(j) => j.step(&mut s.ja, h),
+            Magnetization::Preisach(p) => p.step(&mut s.preisach, h),
         };
         let m_obs = match &self.aftereffect {
             Some(ae) => ae.step(&mut s.m_slow_a_per_m, m),

@@ -2,6 +2,7 @@
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 
 pub mod amplifier;
+pub mod arx;
 pub mod chain;
 pub mod error;
 pub mod field;
@@ -10,6 +11,7 @@ pub mod magnetization;
 pub mod magnetostriction;
 pub mod math;
 pub mod mechanics;
+pub mod sinusoidal;
 pub mod slow;
 pub mod spec;
 

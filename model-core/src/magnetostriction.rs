@@ -84,7 +84,7 @@ impl QuadraticMagnetostriction {
     /// (λ is even in M); strains below −k_λ M_b² are unreachable and clamp to M = 0.
     #[inline]
     pub fn magnetization_for(&self, lambda: f32, sign_of_m: f32) -> f32 {
-        let m2 = (lambda / self.k_lambda + self.mb2).max(0.0);
+        let m2 = crate::math::at_least(lambda / self.k_lambda + self.mb2, 0.0);
         crate::math::sqrt(m2).copysign(sign_of_m)
     }
 }

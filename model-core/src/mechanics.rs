@@ -8,6 +8,9 @@
 
 use crate::error::{positive, ParamError};
 
+mod ndof;
+pub use ndof::{ChainParams, ChainState, ChainZoh};
+
 /// Physical parameters of the single-degree-of-freedom actuator mechanics (SI units).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]

@@ -15,6 +15,8 @@ pub enum Effect {
     Hysteresis,
     /// Rate-dependent field lag in the rod.
     EddyCurrent,
+    /// Preisach (relay-plane) hysteresis instead of the linear or Jiles–Atherton magnetization.
+    Preisach,
     /// Mass-spring-damper between strain and displacement.
     MechanicalDynamics,
     /// Command voltage → coil current dynamics.
@@ -29,11 +31,12 @@ pub enum Effect {
 
 impl Effect {
     /// Every effect, in chain order.
-    pub const ALL: [Effect; 8] = [
+    pub const ALL: [Effect; 9] = [
         Effect::AmplifierDynamics,
         Effect::EddyCurrent,
         Effect::Saturation,
         Effect::Hysteresis,
+        Effect::Preisach,
         Effect::MagneticAftereffect,
         Effect::MechanicalDynamics,
         Effect::ThermalDrift,
@@ -46,6 +49,7 @@ impl Effect {
             Effect::Saturation => "saturation",
             Effect::Hysteresis => "hysteresis",
             Effect::EddyCurrent => "eddy_current",
+            Effect::Preisach => "preisach",
             Effect::MechanicalDynamics => "mechanical_dynamics",
             Effect::AmplifierDynamics => "amplifier_dynamics",
             Effect::MagneticAftereffect => "magnetic_aftereffect",
@@ -60,6 +64,7 @@ impl Effect {
             Effect::Saturation => Some("anhysteretic"),
             Effect::Hysteresis => None,
             Effect::EddyCurrent => Some("eddy"),
+            Effect::Preisach => None,
             Effect::MechanicalDynamics => Some("mech"),
             Effect::AmplifierDynamics => Some("amp"),
             Effect::MagneticAftereffect => Some("aftereffect"),
@@ -109,6 +114,13 @@ pub enum SpecError {
         /// The nearest known name or alias.
         suggestion: Option<&'static str>,
     },
+    /// Two effects that replace the same stage (e.g. `preisach` and `hysteresis`).
+    Conflict {
+        /// One of them.
+        first: Effect,
+        /// The other.
+        second: Effect,
+    },
 }
 
 impl fmt::Display for SpecError {
@@ -123,6 +135,9 @@ impl fmt::Display for SpecError {
                 }
                 Ok(())
             }
+            SpecError::Conflict { first, second } => {
+                write!(f, "`{first}` and `{second}` both replace the magnetization stage: choose one")
+            }
         }
     }
 }
@@ -130,8 +145,9 @@ impl fmt::Display for SpecError {
 impl core::error::Error for SpecError {}
 
 /// Every accepted word, for suggestions.
-const WORDS: [&str; 17] = [
+const WORDS: [&str; 18] = [
     "linear",
+    "preisach",
     "ja",
     "saturation",
     "anhysteretic",
@@ -183,6 +199,13 @@ impl ModelSpec {
                         })
                     }
                 },
+            }
+        }
+        if spec.has(Effect::Preisach) {
+            for other in [Effect::Hysteresis, Effect::Saturation] {
+                if spec.has(other) {
+                    return Err(SpecError::Conflict { first: other, second: Effect::Preisach });
+                }
             }
         }
         Ok(spec)
@@ -312,5 +335,9 @@ mod tests {
         ));
         assert_eq!(ModelSpec::parse("ja++mech"), Err(SpecError::EmptyEffect { at: 3 }));
         assert_eq!(ModelSpec::parse("  "), Err(SpecError::Empty));
+        assert_eq!(
+            ModelSpec::parse("preisach+ja"),
+            Err(SpecError::Conflict { first: Effect::Hysteresis, second: Effect::Preisach })
+        );
     }
 }

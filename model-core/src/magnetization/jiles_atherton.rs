@@ -16,7 +16,7 @@
 //! dH_e = dh / (1 − α dM/dH_e),  dM_irr = χ_irr dH_e,  dM = (dM/dH_e) dH_e.
 
 use crate::error::{check, positive, ParamError};
-use crate::math::{langevin, langevin_slope};
+use crate::math::{at_least, langevin_with_slope, within};
 
 /// Most sub-steps one sample may take (bounds the worst-case time per sample).
 pub const MAX_SUBSTEPS: u32 = 64;
@@ -53,6 +53,10 @@ impl JaParams {
 pub struct JilesAtherton {
     p: JaParams,
     max_substep: f32,
+    // Reciprocals and products folded once (the sub-step multiplies instead of dividing).
+    inv_a: f32,
+    inv_k: f32,
+    ms_over_a: f32,
 }
 
 /// J–A state: applied field, total and irreversible magnetization (mutable, per sample).
@@ -74,7 +78,13 @@ impl JilesAtherton {
         check("ja.alpha", p.alpha, |v| v.abs() < 1.0, "in (-1, 1)")?;
         positive("ja.k_a_per_m", p.k_a_per_m)?;
         check("ja.c", p.c, |v| (0.0..1.0).contains(&v), "in [0, 1)")?;
-        Ok(Self { p, max_substep: p.a_a_per_m.min(p.k_a_per_m) * 0.25 })
+        Ok(Self {
+            p,
+            max_substep: p.a_a_per_m.min(p.k_a_per_m) * 0.25,
+            inv_a: 1.0 / p.a_a_per_m,
+            inv_k: 1.0 / p.k_a_per_m,
+            ms_over_a: p.ms_a_per_m / p.a_a_per_m,
+        })
     }
 
     /// The parameters.
@@ -100,10 +110,10 @@ impl JilesAtherton {
     fn slopes(&self, s: &JaState, dir: f32) -> (f32, f32) {
         let p = &self.p;
         let he = s.h_a_per_m + p.alpha * s.m_a_per_m;
-        let x = he / p.a_a_per_m;
-        let man = p.ms_a_per_m * langevin(x);
-        let dman = p.ms_a_per_m / p.a_a_per_m * langevin_slope(x);
-        let chi_irr = ((man - s.m_irr_a_per_m) * dir).max(0.0) / p.k_a_per_m;
+        let (l, dl) = langevin_with_slope(he * self.inv_a);
+        let man = p.ms_a_per_m * l;
+        let dman = self.ms_over_a * dl;
+        let chi_irr = at_least((man - s.m_irr_a_per_m) * dir, 0.0) * self.inv_k;
         (p.c * dman + (1.0 - p.c) * chi_irr, chi_irr)
     }
 
@@ -111,7 +121,7 @@ impl JilesAtherton {
     #[inline]
     pub fn susceptibility(&self, s: &JaState, dir: f32) -> f32 {
         let (dm_dhe, _) = self.slopes(s, dir);
-        dm_dhe / (1.0 - self.p.alpha * dm_dhe).max(MIN_DENOMINATOR)
+        dm_dhe / at_least(1.0 - self.p.alpha * dm_dhe, MIN_DENOMINATOR)
     }
 
     /// One integration sub-step of size `dh` (sign gives δ).
@@ -120,9 +130,9 @@ impl JilesAtherton {
         let ms = self.p.ms_a_per_m;
         let dir = if dh >= 0.0 { 1.0 } else { -1.0 };
         let (dm_dhe, chi_irr) = self.slopes(s, dir);
-        let dhe = dh / (1.0 - self.p.alpha * dm_dhe).max(MIN_DENOMINATOR);
-        s.m_irr_a_per_m = (s.m_irr_a_per_m + chi_irr * dhe).clamp(-ms, ms);
-        s.m_a_per_m = (s.m_a_per_m + dm_dhe * dhe).clamp(-ms, ms);
+        let dhe = dh / at_least(1.0 - self.p.alpha * dm_dhe, MIN_DENOMINATOR);
+        s.m_irr_a_per_m = within(s.m_irr_a_per_m + chi_irr * dhe, ms);
+        s.m_a_per_m = within(s.m_a_per_m + dm_dhe * dhe, ms);
         s.h_a_per_m += dh;
     }
 

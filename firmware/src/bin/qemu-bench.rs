@@ -1,0 +1,155 @@
+//! Instruction-count benches of model-core on the Cortex-M4F (QEMU netduinoplus2): one case per
+//! run, chosen by `-append "qemu-bench CASE"`. Each measured step sits between calls to the
+//! marker functions `bench_start` and `bench_end`, which `scripts/fw bench` hands to the
+//! shared QEMU instruction-count plugin; the `empty` case measures the markers alone so that
+//! the script can subtract them. Instructions, not cycles (see toolchain.md).
+#![no_std]
+#![no_main]
+
+use core::hint::black_box;
+use cortex_m_rt::entry;
+use cortex_m_semihosting::hprintln;
+use firmware::semihosting::{cmdline, exit};
+use model_core::arx::{Arx, ArxParams, ArxState};
+use model_core::magnetization::{JaParams, JaState, JilesAtherton, Preisach};
+use model_core::mechanics::{ChainParams, ChainState, ChainZoh, MassSpringDamper, MechState, SecondOrderZoh};
+use model_core::{Actuator, ActuatorParams, Compensator, ModelSpec};
+
+/// Measured steps per case.
+const STEPS: usize = 500;
+
+/// Start marker: one `nop` (a body different from `bench_end`'s, so the two are not merged).
+#[allow(unsafe_code)] // `no_mangle` only fixes the symbol name the script looks up.
+#[no_mangle]
+#[inline(never)]
+pub extern "C" fn bench_start() {
+    cortex_m::asm::nop();
+}
+
+/// End marker: two `nop`s.
+#[allow(unsafe_code)]
+#[no_mangle]
+#[inline(never)]
+pub extern "C" fn bench_end() {
+    cortex_m::asm::nop();
+    cortex_m::asm::nop();
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    hprintln!("qemu-bench: PANIC {}", info);
+    exit(101)
+}
+
+/// One period of a 400 Hz sine sampled at 10 kHz (25 samples), unit amplitude.
+fn unit_sine() -> [f32; 25] {
+    core::array::from_fn(|k| model_core::math::sin_cos(2.0 * core::f32::consts::PI * k as f32 / 25.0).0)
+}
+
+/// Runs `step(n)` STEPS times, each between the markers.
+fn measure(mut step: impl FnMut(usize) -> f32) -> f32 {
+    let mut acc = 0.0;
+    for n in 0..STEPS {
+        bench_start();
+        let y = step(black_box(n));
+        bench_end();
+        acc += black_box(y);
+    }
+    acc
+}
+
+fn run(case: &str) -> Result<f32, &'static str> {
+    let w = unit_sine();
+    let p = ActuatorParams::TERFENOL_DEMO;
+    let err = |_| "model parameters rejected";
+    Ok(match case {
+        "empty" => measure(|n| n as f32),
+        "ja-substep" => {
+            let ja = JilesAtherton::new(JaParams::TSMA_ROD1_002).map_err(err)?;
+            let mut s = JaState { h_a_per_m: 2e4, m_a_per_m: 2e5, m_irr_a_per_m: 1.9e5 };
+            measure(|n| {
+                ja.substep(black_box(&mut s), if n % 50 < 25 { 200.0 } else { -200.0 });
+                s.m_a_per_m
+            })
+        }
+        "ja-sample-400hz" => {
+            // Full scale: ±60 kA/m at 400 Hz, so each sample takes several sub-steps.
+            let ja = JilesAtherton::new(JaParams::TSMA_ROD1_002).map_err(err)?;
+            let mut s = JaState::default();
+            measure(|n| ja.step(black_box(&mut s), 6e4 * w[n % 25]))
+        }
+        "zoh" => {
+            let msd = MassSpringDamper { mass_kg: 0.1, damping_n_s_per_m: 3000.0, stiffness_n_per_m: 9.9e6 };
+            let zoh = SecondOrderZoh::new(msd, 1e-4).map_err(err)?;
+            let mut s = MechState::default();
+            measure(|n| zoh.step(black_box(&mut s), 100.0 * w[n % 25]))
+        }
+        // amp + eddy + J–A + magnetostriction + mechanics, 1 V: at 100 Hz the field moves less
+        // than one J–A sub-step per sample; at 400 Hz it takes several.
+        "chain" | "chain-400hz" => {
+            let spec = ModelSpec::parse("amp+eddy+ja+mech").map_err(|_| "bad spec")?;
+            let model = Actuator::new(spec, &p).map_err(err)?;
+            let mut s = model.rest_state();
+            let stride = if case == "chain" { 1 } else { 4 };
+            measure(|n| {
+                model.step(black_box(&mut s), w[n * stride / 4 % 25]).map_or(f32::NAN, |o| o.displacement_m)
+            })
+        }
+        // Inverse of amp + eddy + J–A + magnetostriction, 10 ± 10 µm at 100 Hz / 400 Hz.
+        "inverse" | "inverse-400hz" => {
+            let spec = ModelSpec::parse("amp+eddy+ja").map_err(|_| "bad spec")?;
+            let model = Actuator::new(spec, &p).map_err(err)?;
+            let y0 = model.rest_state().mech.displacement_m;
+            let comp = Compensator::new(model);
+            let mut s = comp.rest_state();
+            let stride = if case == "inverse" { 1 } else { 4 };
+            measure(|n| comp.step(black_box(&mut s), y0 + 10e-6 * (1.0 + w[n * stride / 4 % 25])))
+        }
+        "preisach" => {
+            let pr = Preisach::new(p.preisach).map_err(err)?;
+            let mut s = pr.demagnetized();
+            measure(|n| pr.step(black_box(&mut s), 2e4 + 3e4 * w[n % 25]))
+        }
+        "ndof" => {
+            let chain = ChainZoh::new(ChainParams::TSMA_002, 1e-4).map_err(err)?;
+            let mut s = ChainState::default();
+            measure(|n| {
+                let f = 100.0 * w[n % 25];
+                chain.step(black_box(&mut s), &ChainParams::tsma_forces([f, f, f]))
+            })
+        }
+        "arx" => {
+            let arx = Arx::new(ArxParams::DAVINO_003).map_err(err)?;
+            let mut s: ArxState<2, 2> = arx.steady_state(0.0).map_err(err)?;
+            measure(|n| arx.step(black_box(&mut s), 13.0 + 13.0 * w[n % 25]))
+        }
+        _ => {
+            return Err(
+                "unknown case (empty, ja-substep, ja-sample-400hz, zoh, chain, chain-400hz, inverse, \
+                 inverse-400hz, preisach, ndof, arx)",
+            )
+        }
+    })
+}
+
+#[entry]
+fn main() -> ! {
+    let mut buf = [0u8; 128];
+    let line = cmdline(&mut buf);
+    // QEMU passes "<kernel path> <-append text>": the case is the word after `qemu-bench`.
+    let case = line.split_whitespace().skip_while(|w| *w != "qemu-bench").nth(1).unwrap_or("");
+    match run(case) {
+        Ok(acc) if acc.is_finite() => {
+            hprintln!("qemu-bench: {} done ({} steps)", case, STEPS);
+            exit(0)
+        }
+        Ok(_) => {
+            hprintln!("qemu-bench: {} produced a non-finite output", case);
+            exit(1)
+        }
+        Err(e) => {
+            hprintln!("qemu-bench: `{}`: {}", case, e);
+            exit(2)
+        }
+    }
+}
