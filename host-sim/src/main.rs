@@ -1,13 +1,29 @@
 //! `gma`: the model workbench for giant-magnetostrictive actuators.
 
-mod simulate;
+use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
-use clap::{Parser, Subcommand};
+use anyhow::{bail, Context, Result};
+use clap::{Args, Parser, Subcommand};
+use host_sim::diagnose::{diagnose, Diagnosis};
+use host_sim::fit::{self, FitOptions, FitResult};
+use host_sim::recording::{write_atomic, Recording};
+use host_sim::{cases, params, plots, report, simulate};
 use model_core::mechanics::{MassSpringDamper, MechState, SecondOrderZoh};
+use serde_json::json;
 
 #[derive(Parser)]
-#[command(name = "gma", version, about = "Model workbench for giant-magnetostrictive (Terfenol-D) actuators")]
+#[command(
+    name = "gma",
+    version,
+    about = "Model workbench for giant-magnetostrictive (Terfenol-D) actuators",
+    long_about = "Model workbench for giant-magnetostrictive (Terfenol-D) actuators: compare a model \
+                  with measurements, see where it fails, learn which physical effect is missing, add it \
+                  and watch the error fall.\n\nMeasurement CSV columns (by name): time_s [s], command_V, \
+                  current_A, displacement_um, force_N, temperature_C. Model specs are `+`-joined effects: \
+                  linear, saturation|anhysteretic, hysteresis|ja, preisach, eddy_current|eddy, \
+                  mechanical_dynamics|mech, amplifier_dynamics|amp, magnetic_aftereffect|aftereffect, \
+                  thermal_drift|thermal, sensor_delay|delay."
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -15,9 +31,20 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Simulate an actuator (a model-core chain) under a standard excitation and write a
-    /// measurement CSV (time_s, [command_V,] current_A, displacement_um). Simulated data, for
-    /// tests and demos.
+    /// The main job on SIMULATED data, in under a minute: a rig with hidden effects, a diagnosis
+    /// from a baseline model, the named effects added one by one, the error falling, an HTML report.
+    Demo(DemoArgs),
+    /// Identify a model's parameters from one or more recordings jointly.
+    Fit(FitArgs),
+    /// Per-file error and plots (loops, time series, residuals) of a model against recordings.
+    Compare(CompareArgs),
+    /// Fit a model, analyse what it leaves unexplained and name the missing effect.
+    Diagnose(DiagnoseArgs),
+    /// Climb the model ladder (diagnose, add the named effect, refit, repeat) and write one
+    /// self-contained HTML page.
+    Report(ReportArgs),
+    /// Simulate a rig (plant simulator) and write a measurement CSV. SIMULATED data, for tests
+    /// and demos.
     Simulate(simulate::SimulateArgs),
     /// Natural frequency, damping ratio and step response of the actuator mechanics
     /// (m ÿ + c ẏ + k y = F, 001 eq. 14–15), discretised exactly at the loop rate.
@@ -40,6 +67,109 @@ enum Command {
     },
 }
 
+/// Model, files and fit settings shared by fit, diagnose and report.
+#[derive(Args)]
+struct ModelFiles {
+    /// Model spec, e.g. `ja+mech` (effects joined by `+`; see `gma --help`).
+    #[arg(long)]
+    model: String,
+    /// Recordings (CSV) to fit.
+    #[arg(required = true, value_name = "FILE")]
+    files: Vec<PathBuf>,
+    /// A validation recording: scored, never fitted (repeat `--val` for several files).
+    #[arg(long, value_name = "FILE")]
+    val: Vec<PathBuf>,
+    /// Start values and fixed parameters (TOML as `--params-out` writes); default: a Terfenol-D demo set.
+    #[arg(long, value_name = "P.toml")]
+    params: Option<PathBuf>,
+    /// Seed of the global search (same seed, same result).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Search effort (1 = default; 2 doubles the swarm iterations and simplex steps).
+    #[arg(long, default_value_t = 1.0)]
+    effort: f64,
+    /// Print exactly one JSON object on stdout (human text goes to stderr).
+    #[arg(long)]
+    json: bool,
+}
+
+/// What the shared options resolve to: spec, start parameters, fit files, validation files, options.
+type Loaded = (model_core::ModelSpec, model_core::ActuatorParams, Vec<Recording>, Vec<Recording>, FitOptions);
+
+impl ModelFiles {
+    fn load(&self) -> Result<Loaded> {
+        let spec = params::parse_spec(&self.model)?;
+        let init = params::load(self.params.as_deref())?;
+        if !(self.effort.is_finite() && self.effort > 0.0 && self.effort <= 20.0) {
+            bail!("--effort must be in (0, 20], got {}", self.effort);
+        }
+        let read = |v: &[PathBuf]| v.iter().map(|p| Recording::read(p)).collect::<Result<Vec<_>>>();
+        let (fit_files, val_files) = (read(&self.files)?, read(&self.val)?);
+        for r in fit_files.iter().chain(&val_files) {
+            fit::drive_for(spec, r)?;
+        }
+        // indicatif draws only when stderr is a terminal.
+        let opts = FitOptions { seed: self.seed, progress: true, effort: self.effort };
+        Ok((spec, init, fit_files, val_files, opts))
+    }
+}
+
+#[derive(Args)]
+struct FitArgs {
+    #[command(flatten)]
+    mf: ModelFiles,
+    /// Write the identified parameter set here (TOML; `compare`, `simulate` and the firmware load it).
+    #[arg(long, value_name = "P.toml")]
+    params_out: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct CompareArgs {
+    /// Model spec, e.g. `ja+mech`.
+    #[arg(long)]
+    model: String,
+    /// Parameter set (TOML from `gma fit --params-out`); default: the demo set.
+    #[arg(long, value_name = "P.toml")]
+    params: Option<PathBuf>,
+    /// Recordings (CSV).
+    #[arg(required = true, value_name = "FILE")]
+    files: Vec<PathBuf>,
+    /// Directory for the plots (created if missing).
+    #[arg(long, default_value = "gma-compare")]
+    out_dir: PathBuf,
+    /// Plot format.
+    #[arg(long, value_parser = ["svg", "png"], default_value = "svg")]
+    format: String,
+    /// Print exactly one JSON object on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args)]
+struct DiagnoseArgs {
+    #[command(flatten)]
+    mf: ModelFiles,
+}
+
+#[derive(Args)]
+struct ReportArgs {
+    #[command(flatten)]
+    mf: ModelFiles,
+    /// The HTML file to write.
+    #[arg(long, short, default_value = "gma-report.html")]
+    out: PathBuf,
+}
+
+#[derive(Args)]
+struct DemoArgs {
+    /// Directory for the simulated recordings, parameter files and the report.
+    #[arg(long, default_value = "gma-demo")]
+    out_dir: PathBuf,
+    /// Seed of the simulated rig's noise and of the fits.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
 fn main() -> std::process::ExitCode {
     match run(Cli::parse()) {
         Ok(()) => std::process::ExitCode::SUCCESS,
@@ -50,9 +180,21 @@ fn main() -> std::process::ExitCode {
     }
 }
 
+/// Human text goes to stdout, or to stderr in `--json` mode.
+macro_rules! say {
+    ($json:expr, $($t:tt)*) => {
+        if $json { eprintln!($($t)*) } else { println!($($t)*) }
+    };
+}
+
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Simulate(a) => simulate::run(&a),
+        Command::Fit(a) => run_fit(&a),
+        Command::Compare(a) => run_compare(&a),
+        Command::Diagnose(a) => run_diagnose(&a),
+        Command::Report(a) => run_report(&a),
+        Command::Demo(a) => run_demo(&a),
         Command::Mechanics { mass_kg, damping_n_s_per_m, stiffness_n_per_m, sample_rate_hz, force_n } => {
             let p = MassSpringDamper { mass_kg, damping_n_s_per_m, stiffness_n_per_m };
             let zoh = SecondOrderZoh::new(p, 1.0 / sample_rate_hz).context("mechanics parameters")?;
@@ -68,4 +210,308 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
     }
+}
+
+fn file_rows(
+    res: &FitResult,
+    spec: model_core::ModelSpec,
+    fit_files: &[Recording],
+    val_files: &[Recording],
+) -> Result<(Vec<serde_json::Value>, Option<f64>)> {
+    let mut rows = Vec::new();
+    let push = |rows: &mut Vec<serde_json::Value>, r: &Recording, split: &str, s: &fit::FileScore| {
+        rows.push(json!({"file": r.name, "split": split, "channel": "displacement", "nrmse": s.nrmse, "offset_um": s.offset_um}));
+        if let Some(c) = s.nrmse_current {
+            rows.push(json!({"file": r.name, "split": split, "channel": "current", "nrmse": c}));
+        }
+    };
+    for (r, s) in fit_files.iter().zip(&res.fit.files) {
+        push(&mut rows, r, "fit", s);
+    }
+    let mut nrmse_val = None;
+    if !val_files.is_empty() {
+        let ev = fit::evaluate(spec, &res.params, val_files)?;
+        for (r, s) in val_files.iter().zip(&ev.files) {
+            push(&mut rows, r, "val", s);
+        }
+        nrmse_val = Some(ev.mean_nrmse());
+    }
+    Ok((rows, nrmse_val))
+}
+
+fn run_fit(a: &FitArgs) -> Result<()> {
+    let (spec, init, fit_files, val_files, opts) = a.mf.load()?;
+    let t = std::time::Instant::now();
+    let res = fit::fit(spec, &init, &fit_files, opts)?;
+    let (rows, nrmse_val) = file_rows(&res, spec, &fit_files, &val_files)?;
+    let j = a.mf.json;
+    say!(
+        j,
+        "model `{spec}` fitted to {} file(s): {} evaluations in {:.1} s (seed {})",
+        fit_files.len(),
+        res.evaluations,
+        t.elapsed().as_secs_f64(),
+        a.mf.seed
+    );
+    for (n, v) in &res.identified {
+        say!(j, "  {n:40} = {v:.6e}");
+    }
+    for r in &rows {
+        say!(
+            j,
+            "  {:5} {:12} NRMSE {:6.3} %  {}",
+            r["split"].as_str().unwrap_or(""),
+            r["channel"].as_str().unwrap_or(""),
+            r["nrmse"].as_f64().unwrap_or(f64::NAN) * 100.0,
+            r["file"].as_str().unwrap_or("")
+        );
+    }
+    say!(
+        j,
+        "  mean fit NRMSE {:.3} %{}",
+        res.fit.mean_nrmse() * 100.0,
+        nrmse_val.map(|v| format!(", validation {:.3} %", v * 100.0)).unwrap_or_default()
+    );
+    if let Some(out) = &a.params_out {
+        let header = format!(
+            "gma fit --model {spec} (seed {}) on {}\nfit NRMSE {:.4} %",
+            a.mf.seed,
+            host_sim::recording::names(&a.mf.files),
+            res.fit.mean_nrmse() * 100.0
+        );
+        write_atomic(out, params::to_toml(&res.params, &header)?.as_bytes())?;
+        say!(j, "  parameters written to {}", out.display());
+    }
+    if j {
+        let params: serde_json::Map<String, serde_json::Value> =
+            res.identified.iter().map(|(n, v)| (n.to_string(), json!(v))).collect();
+        println!(
+            "{}",
+            json!({"model": spec.to_string(), "params": params, "nrmse_fit": res.fit.mean_nrmse(), "nrmse_val": nrmse_val,
+                   "files": rows, "evaluations": res.evaluations, "seed": a.mf.seed})
+        );
+    }
+    Ok(())
+}
+
+fn run_compare(a: &CompareArgs) -> Result<()> {
+    let spec = params::parse_spec(&a.model)?;
+    let p = params::load(a.params.as_deref())?;
+    model_core::Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("parameter set: {e}"))?;
+    std::fs::create_dir_all(&a.out_dir).with_context(|| format!("cannot create {}", a.out_dir.display()))?;
+    let mut rows = Vec::new();
+    let rung = report::Rung {
+        spec,
+        params: p,
+        identified: Vec::new(),
+        fit_nrmse: Vec::new(),
+        val_nrmse: Vec::new(),
+        diagnosis: Diagnosis {
+            model: spec.to_string(),
+            nrmse_fit: 0.0,
+            nrmse_val: None,
+            candidates: vec![],
+            verdict: None,
+            undistinguished: vec![],
+            findings: vec![],
+            baseline: None,
+        },
+    };
+    let mut total = 0.0;
+    for path in &a.files {
+        let rec = Recording::read(path)?;
+        let sim = fit::simulate(spec, &p, &rec)?;
+        let sc = fit::score(spec, &rec, &sim);
+        total += sc.nrmse;
+        let stem = path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "file".into());
+        let mut written = Vec::new();
+        let meas = rec.displacement_um.clone().unwrap_or_default();
+        let time_chart = plots::Chart {
+            title: format!("{} — time series", rec.name),
+            x_label: "time [s]".into(),
+            y_label: "displacement [µm]".into(),
+            series: vec![
+                plots::Series {
+                    label: "measured".into(),
+                    points: plots::thin(
+                        &rec.time_s.iter().copied().zip(meas.iter().copied()).collect::<Vec<_>>(),
+                        4000,
+                    ),
+                    color: 0,
+                },
+                plots::Series {
+                    label: format!("model {spec}"),
+                    points: plots::thin(
+                        &rec.time_s
+                            .iter()
+                            .zip(&sim.displacement_um)
+                            .map(|(t, y)| (*t, y + sc.offset_um))
+                            .collect::<Vec<_>>(),
+                        4000,
+                    ),
+                    color: 1,
+                },
+            ],
+        };
+        for (kind, chart) in [
+            ("loop", report::loop_chart(&rec, std::slice::from_ref(&rung))?),
+            ("time", time_chart),
+            ("residual", report::residual_chart(&rec, std::slice::from_ref(&rung))?),
+        ] {
+            let out = a.out_dir.join(format!("{stem}-{kind}.{}", a.format));
+            plots::write(&out, &chart)?;
+            written.push(out.display().to_string());
+        }
+        say!(
+            a.json,
+            "{:50} NRMSE {:6.3} %  offset {:8.3} µm  plots: {}",
+            rec.name,
+            sc.nrmse * 100.0,
+            sc.offset_um,
+            written.join(", ")
+        );
+        rows.push(json!({"file": rec.name, "channel": "displacement", "nrmse": sc.nrmse, "offset_um": sc.offset_um, "plots": written}));
+        if let Some(c) = sc.nrmse_current {
+            rows.push(json!({"file": rec.name, "channel": "current", "nrmse": c}));
+        }
+    }
+    let mean = total / a.files.len() as f64;
+    say!(a.json, "mean NRMSE {:.3} % over {} file(s), model `{spec}`", mean * 100.0, a.files.len());
+    if a.json {
+        println!("{}", json!({"model": spec.to_string(), "nrmse": mean, "files": rows}));
+    }
+    Ok(())
+}
+
+fn diagnosis_json(d: &Diagnosis) -> serde_json::Value {
+    json!({
+        "model": d.model, "nrmse_fit": d.nrmse_fit, "nrmse_val": d.nrmse_val,
+        "candidates": d.candidates.iter().map(|c| json!({
+            "effect": c.effect, "channel": c.channel, "score": c.score, "evidence": c.evidence,
+            "nrmse_before": c.nrmse_before, "nrmse_after": c.nrmse_after, "evidence_r2": c.evidence_r2})).collect::<Vec<_>>(),
+        "verdict": d.verdict, "undistinguished": d.undistinguished, "findings": d.findings,
+    })
+}
+
+fn print_diagnosis(j: bool, d: &Diagnosis) {
+    say!(
+        j,
+        "model `{}`: fit NRMSE {:.3} %{}",
+        d.model,
+        d.nrmse_fit * 100.0,
+        d.nrmse_val.map(|v| format!(", validation {:.3} %", v * 100.0)).unwrap_or_default()
+    );
+    for f in &d.findings {
+        say!(j, "  - {f}");
+    }
+    say!(j, "  candidates (most likely first):");
+    for c in &d.candidates {
+        say!(
+            j,
+            "    {:22} score {:.2}  {:.2} % → {:.2} %  {}",
+            c.effect,
+            c.score,
+            c.nrmse_before * 100.0,
+            c.nrmse_after * 100.0,
+            c.evidence
+        );
+    }
+    match d.verdict {
+        Some(v) => say!(j, "verdict: `{v}` is missing — try `--model {}+{v}`", d.model),
+        None => say!(j, "verdict: nothing significant is missing"),
+    }
+}
+
+fn run_diagnose(a: &DiagnoseArgs) -> Result<()> {
+    let (spec, init, fit_files, val_files, opts) = a.mf.load()?;
+    let d = diagnose(spec, &init, &fit_files, &val_files, opts)?;
+    print_diagnosis(a.mf.json, &d);
+    if a.mf.json {
+        println!("{}", diagnosis_json(&d));
+    }
+    Ok(())
+}
+
+fn write_report(
+    path: &Path,
+    title: &str,
+    rungs: &[report::Rung],
+    fit_files: &[Recording],
+    val_files: &[Recording],
+    note: &str,
+) -> Result<()> {
+    let html = report::html(title, rungs, fit_files, val_files, note)?;
+    write_atomic(path, html.as_bytes())
+}
+
+fn run_report(a: &ReportArgs) -> Result<()> {
+    let (spec, init, fit_files, val_files, opts) = a.mf.load()?;
+    let j = a.mf.json;
+    let rungs =
+        report::ladder(spec, &init, &fit_files, &val_files, opts, |r| print_diagnosis(j, &r.diagnosis))?;
+    write_report(&a.out, &format!("gma report — {spec}"), &rungs, &fit_files, &val_files, "")?;
+    say!(j, "report written to {}", a.out.display());
+    if j {
+        println!(
+            "{}",
+            json!({"report": a.out.display().to_string(),
+            "ladder": rungs.iter().map(|r| json!({"model": r.spec.to_string(), "nrmse_fit": r.fit_nrmse, "nrmse_val": r.val_nrmse, "verdict": r.diagnosis.verdict})).collect::<Vec<_>>()})
+        );
+    }
+    Ok(())
+}
+
+fn run_demo(a: &DemoArgs) -> Result<()> {
+    let t = std::time::Instant::now();
+    let case = cases::demo();
+    std::fs::create_dir_all(&a.out_dir).with_context(|| format!("cannot create {}", a.out_dir.display()))?;
+    println!("gma demo: a SIMULATED Terfenol-D rig with `{}` (the engineer does not know); the engineer's model is `{}`.", case.plant.spec, case.model);
+    let (fit_files, val_files) = case.recordings(a.seed)?;
+    for r in fit_files.iter().chain(&val_files) {
+        let p = a.out_dir.join(&r.name);
+        r.write(&p)?;
+    }
+    println!(
+        "  recordings: {} fit, {} validation (different frequencies and amplitudes) in {}",
+        fit_files.len(),
+        val_files.len(),
+        a.out_dir.display()
+    );
+    let opts = FitOptions { seed: a.seed, progress: false, effort: 1.0 };
+    let rungs = report::ladder(case.model, &case.init, &fit_files, &val_files, opts, |r| {
+        let d = &r.diagnosis;
+        println!("\n  model `{}`: validation NRMSE {:.2} %", r.spec, r.headline() * 100.0);
+        for c in d.candidates.iter().take(3) {
+            println!(
+                "    {:22} {:.2} % → {:.2} % after adding it",
+                c.effect,
+                c.nrmse_before * 100.0,
+                c.nrmse_after * 100.0
+            );
+        }
+        match d.verdict {
+            Some(v) => println!("    → missing: `{v}`; adding it"),
+            None => println!("    → nothing significant is missing"),
+        }
+    })?;
+    for (k, r) in rungs.iter().enumerate() {
+        let p = a.out_dir.join(format!("params-{k}-{}.toml", r.spec.to_string().replace('+', "_")));
+        write_atomic(&p, params::to_toml(&r.params, &format!("gma demo, model {}", r.spec))?.as_bytes())?;
+    }
+    let html = a.out_dir.join("report.html");
+    write_report(&html, "gma demo — finding the missing physics (SIMULATED rig)", &rungs, &fit_files, &val_files,
+        &format!("Simulated rig with {}; the engineer starts from `{}`. Every number below comes from the fits in this run.", case.plant.spec, case.model))?;
+    let first = rungs.first().map(|r| r.headline()).unwrap_or(f64::NAN);
+    let last = rungs.last().map(|r| r.headline()).unwrap_or(f64::NAN);
+    println!(
+        "\n  validation NRMSE {:.2} % (`{}`) → {:.2} % (`{}`), {:.0}× lower; report: {} ({:.1} s)",
+        first * 100.0,
+        case.model,
+        last * 100.0,
+        rungs.last().map(|r| r.spec.to_string()).unwrap_or_default(),
+        first / last,
+        html.display(),
+        t.elapsed().as_secs_f64()
+    );
+    Ok(())
 }

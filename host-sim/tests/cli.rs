@@ -61,3 +61,155 @@ fn a_bad_parameter_file_is_refused_by_name() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("ja.k_a_per_m") && err.contains("> 0"), "{err}");
 }
+
+/// Simulated recordings for the CLI tests: a `ja+eddy` rig, fitted at 40 and 300 Hz (two
+/// frequencies, or lags of different physics cannot be told apart), validated at 150 Hz.
+fn rig(dir: &std::path::Path) -> (String, String, String) {
+    let fit = dir.join("fit.csv");
+    let fit2 = dir.join("fit2.csv");
+    let val = dir.join("val.csv");
+    for (path, f, a) in [(&fit, "40", "1.5"), (&fit2, "300", "1.0"), (&val, "150", "1.0")] {
+        let o = gma(&[
+            "simulate",
+            "--model",
+            "ja+eddy",
+            "--freq-hz",
+            f,
+            "--amplitude",
+            a,
+            "--bias",
+            "0",
+            "--duration-s",
+            "0.06",
+            "--noise-um",
+            "0.02",
+            "--out",
+            path.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    (s(&fit), s(&fit2), s(&val))
+}
+
+fn json(o: &std::process::Output) -> serde_json::Value {
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
+        panic!("stdout is not one JSON object: {e}\n{}", String::from_utf8_lossy(&o.stdout))
+    })
+}
+
+#[test]
+fn fit_prints_the_json_contract_writes_params_and_is_deterministic() {
+    let dir = tempfile::tempdir().unwrap();
+    let (fit, fit2, val) = rig(dir.path());
+    let p_out = dir.path().join("p.toml");
+    let args = [
+        "fit",
+        "--model",
+        "ja+eddy",
+        "--json",
+        "--seed",
+        "5",
+        "--val",
+        &val,
+        "--params-out",
+        p_out.to_str().unwrap(),
+        &fit,
+        &fit2,
+    ];
+    let a = json(&gma(&args));
+    for key in ["model", "params", "nrmse_fit", "nrmse_val", "files"] {
+        assert!(a.get(key).is_some(), "missing `{key}` in {a}");
+    }
+    assert_eq!(a["model"], "eddy+ja");
+    assert!(a["nrmse_fit"].as_f64().unwrap() < 0.02, "{a}");
+    assert!(a["nrmse_val"].as_f64().unwrap() < 0.03, "{a}");
+    let files = a["files"].as_array().unwrap();
+    assert_eq!(files.len(), 3);
+    assert_eq!(files[0]["split"], "fit");
+    assert_eq!(files[2]["split"], "val");
+    assert_eq!(files[2]["channel"], "displacement");
+    assert!(a["params"]["eddy_tau_s"].as_f64().unwrap() > 0.0);
+    // Same seed, same answer.
+    let b = json(&gma(&args));
+    assert_eq!(a["params"], b["params"]);
+    // The parameter file loads in compare, which reproduces the validation error.
+    let plots = dir.path().join("plots");
+    let c = json(&gma(&[
+        "compare",
+        "--model",
+        "ja+eddy",
+        "--params",
+        p_out.to_str().unwrap(),
+        "--json",
+        "--out-dir",
+        plots.to_str().unwrap(),
+        &val,
+    ]));
+    assert!((c["nrmse"].as_f64().unwrap() - a["nrmse_val"].as_f64().unwrap()).abs() < 1e-3, "{c}");
+    for kind in ["loop", "time", "residual"] {
+        let svg = std::fs::read_to_string(plots.join(format!("val-{kind}.svg"))).unwrap();
+        assert!(svg.starts_with("<svg") && svg.contains("polyline"), "{kind} plot");
+    }
+}
+
+#[test]
+fn diagnose_names_the_missing_effect_in_the_json_contract() {
+    let dir = tempfile::tempdir().unwrap();
+    let (fit, fit2, val) = rig(dir.path());
+    let d = json(&gma(&["diagnose", "--model", "ja", "--json", "--val", &val, &fit, &fit2]));
+    for key in ["model", "nrmse_fit", "nrmse_val", "candidates", "verdict"] {
+        assert!(d.get(key).is_some(), "missing `{key}` in {d}");
+    }
+    let c = d["candidates"].as_array().unwrap();
+    for key in ["effect", "channel", "score", "evidence", "nrmse_before", "nrmse_after"] {
+        assert!(c[0].get(key).is_some(), "candidate lacks `{key}`");
+    }
+    assert_eq!(d["verdict"], "eddy_current", "{d:#}");
+    assert_eq!(c[0]["effect"], "eddy_current");
+}
+
+#[test]
+fn malformed_csv_is_refused_with_file_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(&bad, "time_s,current_A,displacement_um\n0,0.1,1.0\n0.0001,oops,1.1\n0.0002,0.3,1.2\n")
+        .unwrap();
+    let o = gma(&["fit", "--model", "ja", bad.to_str().unwrap()]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("bad.csv:3:2") && err.contains("`oops` is not a number"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    let missing = dir.path().join("none.csv");
+    let o = gma(&["diagnose", "--model", "ja", missing.to_str().unwrap()]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("none.csv"));
+}
+
+#[test]
+fn every_command_explains_its_options_with_units() {
+    for cmd in ["demo", "fit", "compare", "diagnose", "report", "simulate", "mechanics"] {
+        let o = gma(&[cmd, "--help"]);
+        assert!(o.status.success(), "{cmd} --help");
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(text.contains("Usage: gma"), "{cmd}: {text}");
+    }
+    let o = gma(&["simulate", "--help"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("[Hz]") && text.contains("[µm]") && text.contains("[s]"), "{text}");
+}
+
+#[test]
+fn demo_finds_the_hidden_effects_and_writes_the_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    let o = gma(&["demo", "--out-dir", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("missing: `mechanical_dynamics`") && text.contains("missing: `eddy_current`"),
+        "{text}"
+    );
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("<svg") && html.contains("Model ladder") && html.contains("eddy+ja+mech"));
+}

@@ -16,21 +16,26 @@ const LN2_HI: f32 = 0.693_145_75;
 const LN2_LO: f32 = 1.428_606_8e-6;
 
 /// e^x in f32: x = k ln 2 + r with |r| ≤ ln2/2, e^r by its degree-7 Taylor polynomial,
-/// scaled by 2^k through the exponent bits. 0 below −87.3, +∞ above 88.7 (no caller gets near).
+/// scaled by 2^k through the exponent bits. 0 below −87.3, +∞ above 88.7.
 #[inline]
 pub fn exp(x: f32) -> f32 {
-    #[cfg(feature = "math-audit")]
-    if let Some(y) = audit::exp(x) {
-        return y;
-    }
     if x < -87.3 {
         return 0.0;
     }
-    if x.is_nan() {
-        return x;
-    }
+    // (A NaN passes both tests and comes out as NaN from the polynomial.)
     if x > 88.7 {
         return f32::INFINITY;
+    }
+    exp_in_range(x)
+}
+
+/// [`exp`] without the range checks, for callers whose argument is known to lie in
+/// [−87.3, 88.7] (the Langevin function's mid range: [−18, −1]).
+#[inline]
+fn exp_in_range(x: f32) -> f32 {
+    #[cfg(feature = "math-audit")]
+    if let Some(y) = audit::exp(x) {
+        return y;
     }
     let k = (x * core::f32::consts::LOG2_E + 0.5f32.copysign(x)) as i32;
     let kf = k as f32;
@@ -38,7 +43,8 @@ pub fn exp(x: f32) -> f32 {
     let p = 1.0
         + r * (1.0
             + r * (0.5
-                + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r / 5040.0))))));
+                + r * (1.0 / 6.0
+                    + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
     p * f32::from_bits(((k + 127) as u32) << 23)
 }
 
@@ -143,7 +149,7 @@ pub fn langevin(x: f32) -> f32 {
         ax * (1.0 / 3.0
             + x2 * (-1.0 / 45.0 + x2 * (2.0 / 945.0 + x2 * (-1.0 / 4725.0 + x2 * (2.0 / 93555.0)))))
     } else if ax < 9.0 {
-        let e = exp(-2.0 * ax);
+        let e = exp_in_range(-2.0 * ax);
         (1.0 + e) / (1.0 - e) - 1.0 / ax
     } else {
         1.0 - 1.0 / ax
@@ -160,7 +166,7 @@ pub fn langevin_slope(x: f32) -> f32 {
         // 1/3 − x²/15 + 2x⁴/189 − x⁶/675 + 2x⁸/10395
         1.0 / 3.0 + x2 * (-1.0 / 15.0 + x2 * (2.0 / 189.0 + x2 * (-1.0 / 675.0 + x2 * (2.0 / 10395.0))))
     } else if ax < 9.0 {
-        let e = exp(-2.0 * ax);
+        let e = exp_in_range(-2.0 * ax);
         let d = 1.0 - e;
         1.0 / (ax * ax) - 4.0 * e / (d * d)
     } else {
@@ -181,12 +187,15 @@ pub fn langevin_with_slope(x: f32) -> (f32, f32) {
             1.0 / 3.0 + x2 * (-1.0 / 15.0 + x2 * (2.0 / 189.0 + x2 * (-1.0 / 675.0 + x2 * (2.0 / 10395.0)))),
         )
     } else {
-        let inv = 1.0 / ax;
         if ax < 9.0 {
-            let e = exp(-2.0 * ax);
-            let inv_d = 1.0 / (1.0 - e);
+            let e = exp_in_range(-2.0 * ax);
+            // One division for both reciprocals 1/x and 1/(1 − e).
+            let d = 1.0 - e;
+            let r = 1.0 / (ax * d);
+            let (inv, inv_d) = (d * r, ax * r);
             ((1.0 + e) * inv_d - inv, inv * inv - 4.0 * e * inv_d * inv_d)
         } else {
+            let inv = 1.0 / ax;
             (1.0 - inv, inv * inv)
         }
     };

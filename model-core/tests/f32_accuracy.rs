@@ -32,6 +32,9 @@ struct Reference {
     h: f64,
     m: f64,
     m_irr: f64,
+    /// L and L' at the present H_e (the J–A scheme evaluates them once per sub-step).
+    l: f64,
+    dl: f64,
     y: f64,
     v: f64,
     phi: [[f64; 2]; 2],
@@ -72,7 +75,19 @@ impl Reference {
         }
         // B = [0, ω²] for the unit-gain form ÿ = ω²(y_free − y) − 2ζω ẏ.
         let gamma = [psi[0][1] * w * w, psi[1][1] * w * w];
-        let mut r = Reference { p, h_lag: 0.0, h: 0.0, m: 0.0, m_irr: 0.0, y: 0.0, v: 0.0, phi, gamma };
+        let mut r = Reference {
+            p,
+            h_lag: 0.0,
+            h: 0.0,
+            m: 0.0,
+            m_irr: 0.0,
+            l: 0.0,
+            dl: 1.0 / 3.0,
+            y: 0.0,
+            v: 0.0,
+            phi,
+            gamma,
+        };
         let h0 = p.coil.bias_a_per_m as f64;
         r.ja(h0);
         r.h_lag = h0;
@@ -89,14 +104,14 @@ impl Reference {
         let dh = dh_total / n as f64;
         let dir = if dh >= 0.0 { 1.0 } else { -1.0 };
         for _ in 0..n {
-            let he = self.h + alpha * self.m;
-            let (l, dl) = langevin(he / a);
-            let chi_irr = ((ms * l - self.m_irr) * dir).max(0.0) / k;
-            let dm_dhe = c * ms / a * dl + (1.0 - c) * chi_irr;
+            let chi_irr = ((ms * self.l - self.m_irr) * dir).max(0.0) / k;
+            let dm_dhe = c * ms / a * self.dl + (1.0 - c) * chi_irr;
             let dhe = dh / (1.0 - alpha * dm_dhe).max(0.05);
             self.m_irr = (self.m_irr + chi_irr * dhe).clamp(-ms, ms);
-            self.m = (self.m + dm_dhe * dhe).clamp(-ms, ms);
             self.h += dh;
+            let m_predicted = self.m + dm_dhe * dhe;
+            (self.l, self.dl) = langevin((self.h + alpha * m_predicted) / a);
+            self.m = (c * ms * self.l + (1.0 - c) * self.m_irr).clamp(-ms, ms);
         }
     }
 

@@ -66,7 +66,7 @@ fn run(case: &str) -> Result<f32, &'static str> {
         "empty" => measure(|n| n as f32),
         "ja-substep" => {
             let ja = JilesAtherton::new(JaParams::TSMA_ROD1_002).map_err(err)?;
-            let mut s = JaState { h_a_per_m: 2e4, m_a_per_m: 2e5, m_irr_a_per_m: 1.9e5 };
+            let mut s = ja.state(2e4, 2e5, 1.9e5);
             measure(|n| {
                 ja.substep(black_box(&mut s), if n % 50 < 25 { 200.0 } else { -200.0 });
                 s.m_a_per_m

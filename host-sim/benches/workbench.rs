@@ -1,0 +1,84 @@
+//! Workbench speed (issue 4 targets), release build: `cargo bench -p host-sim --bench workbench`
+//! (on 2 cores: `taskset -c 0,1 cargo bench …`). Wall-clock figures of whole jobs, each run once
+//! or a few times — too long for criterion's repeated sampling.
+//!
+//! - plant simulation speed, × real time (target ≥ 500×);
+//! - `fit --model ja+mech` on 4 files of 30 000 samples (target ≤ 20 s);
+//! - `diagnose` on every hidden-effect case (target ≤ 60 s each).
+
+use std::time::Instant;
+
+use host_sim::excitation::Excitation;
+use host_sim::fit::{fit, FitOptions};
+use host_sim::plant::Plant;
+use host_sim::{cases, diagnose};
+use model_core::{ActuatorParams, ModelSpec};
+
+fn main() {
+    println!("rayon threads: {}", rayon::current_num_threads());
+    // Plant: ja+eddy+mech+amp at 10 kHz, integrated at 20 kHz, 1 s of a 100 Hz multisine-ish sine.
+    let plant = Plant::new(ModelSpec::parse("amp+eddy+ja+mech").unwrap(), ActuatorParams::TERFENOL_DEMO);
+    let exc = Excitation::Sine { freq_hz: 100.0, amplitude: 1.0, bias: 0.0 };
+    let mut best = f64::MAX;
+    for seed in 0..5 {
+        let t = Instant::now();
+        let rec = plant.record("bench", &exc, 2.0, seed).unwrap();
+        assert_eq!(rec.len(), 20_000);
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    println!(
+        "| plant amp+eddy+ja+mech, 2 s at 10 kHz (×2 oversampling) | {:.1} ms | {:.0}× real time |",
+        best * 1e3,
+        2.0 / best
+    );
+
+    // Fit ja+mech on 4 files × 30 000 samples.
+    let mut p = ActuatorParams::TERFENOL_DEMO;
+    p.ja.a_a_per_m = 7012.0;
+    p.ja.k_a_per_m = 4283.0;
+    p.mech.natural_frequency_hz = 1300.0;
+    let rig = Plant::new(ModelSpec::parse("ja+mech").unwrap(), p);
+    let files: Vec<_> = [(20.0, 2.0), (80.0, 1.5), (250.0, 1.0), (600.0, 0.8)]
+        .iter()
+        .enumerate()
+        .map(|(i, &(f, a))| {
+            rig.record(
+                &format!("f{i}"),
+                &Excitation::Sine { freq_hz: f, amplitude: a, bias: 0.2 },
+                3.0,
+                i as u64,
+            )
+            .unwrap()
+        })
+        .collect();
+    let t = Instant::now();
+    let r = fit(
+        ModelSpec::parse("ja+mech").unwrap(),
+        &ActuatorParams::TERFENOL_DEMO,
+        &files,
+        FitOptions::default(),
+    )
+    .unwrap();
+    println!(
+        "| fit ja+mech, 4 files × {} samples | {:.1} s | {} evaluations, fit NRMSE {:.3} % |",
+        files[0].len(),
+        t.elapsed().as_secs_f64(),
+        r.evaluations,
+        r.fit.mean_nrmse() * 100.0
+    );
+
+    // Diagnose every hidden-effect case.
+    for case in cases::all() {
+        let (fit_files, val_files) = case.recordings(7).unwrap();
+        let t = Instant::now();
+        let d = diagnose::diagnose(case.model, &case.init, &fit_files, &val_files, FitOptions::default())
+            .unwrap();
+        println!(
+            "| diagnose `{}` (hidden: {}) | {:.1} s | verdict {:?} |",
+            case.model,
+            case.name,
+            t.elapsed().as_secs_f64(),
+            d.verdict
+        );
+    }
+}

@@ -1,0 +1,14 @@
+//! `gma`, the model workbench: measurement files, the plant simulator, identification,
+//! diagnosis of missing physics, plots and reports. The binary (`src/main.rs`) is the CLI over
+//! these modules.
+
+pub mod cases;
+pub mod diagnose;
+pub mod excitation;
+pub mod fit;
+pub mod params;
+pub mod plant;
+pub mod plots;
+pub mod recording;
+pub mod report;
+pub mod simulate;

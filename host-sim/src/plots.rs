@@ -1,0 +1,155 @@
+//! Plots (plotters): loops, time series and residuals, as SVG or PNG files or as SVG text for
+//! the HTML report. The font is bundled (no system fonts needed).
+
+use std::path::Path;
+use std::sync::Once;
+
+use anyhow::{anyhow, bail, Result};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+/// One curve.
+pub struct Series {
+    /// Legend text.
+    pub label: String,
+    /// (x, y) points.
+    pub points: Vec<(f64, f64)>,
+    /// Palette index (0 measured, 1 model, 2 residual, …).
+    pub color: usize,
+}
+
+/// A chart: title, axis labels with units, curves.
+pub struct Chart {
+    /// Caption.
+    pub title: String,
+    /// x axis label with unit.
+    pub x_label: String,
+    /// y axis label with unit.
+    pub y_label: String,
+    /// The curves.
+    pub series: Vec<Series>,
+}
+
+const PALETTE: [RGBColor; 5] = [
+    RGBColor(30, 30, 30),
+    RGBColor(214, 39, 40),
+    RGBColor(31, 119, 180),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+];
+
+fn register_font() -> Result<()> {
+    static ONCE: Once = Once::new();
+    let mut ok = true;
+    ONCE.call_once(|| {
+        ok = plotters::style::register_font(
+            "sans-serif",
+            FontStyle::Normal,
+            epaint_default_fonts::UBUNTU_LIGHT,
+        )
+        .is_ok();
+    });
+    if ok {
+        Ok(())
+    } else {
+        Err(anyhow!("cannot load the bundled plot font"))
+    }
+}
+
+fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, c: &Chart) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    area.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let pts = c.series.iter().flat_map(|s| s.points.iter());
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for &(x, y) in pts {
+        if x.is_finite() && y.is_finite() {
+            x0 = x0.min(x);
+            x1 = x1.max(x);
+            y0 = y0.min(y);
+            y1 = y1.max(y);
+        }
+    }
+    if x0 > x1 {
+        (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
+    }
+    let pad = |a: f64, b: f64| if b > a { 0.04 * (b - a) } else { 0.5 * a.abs().max(1e-9) };
+    let (px, py) = (pad(x0, x1), pad(y0, y1));
+    let mut chart = ChartBuilder::on(area)
+        .caption(&c.title, ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(42)
+        .y_label_area_size(64)
+        .build_cartesian_2d((x0 - px)..(x1 + px), (y0 - py)..(y1 + py))
+        .map_err(|e| anyhow!("{e}"))?;
+    chart
+        .configure_mesh()
+        .x_desc(&c.x_label)
+        .y_desc(&c.y_label)
+        .label_style(("sans-serif", 13))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    for s in &c.series {
+        let color = PALETTE[s.color % PALETTE.len()];
+        chart
+            .draw_series(LineSeries::new(
+                s.points.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()),
+                color.stroke_width(1),
+            ))
+            .map_err(|e| anyhow!("{e}"))?
+            .label(&s.label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2)));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(200, 200, 200))
+        .label_font(("sans-serif", 13))
+        .position(SeriesLabelPosition::UpperLeft)
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    area.present().map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}
+
+/// Draws `chart` to `path` (`.svg` or `.png`, 800 × 500).
+pub fn write(path: &Path, chart: &Chart) -> Result<()> {
+    register_font()?;
+    let size = (800, 500);
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("svg") => {
+            let mut text = String::new();
+            draw(&SVGBackend::with_string(&mut text, size).into_drawing_area(), chart)?;
+            crate::recording::write_atomic(path, text.as_bytes())
+        }
+        Some("png") => {
+            // Draw next to the target (the encoder needs a .png name), then rename into place.
+            let tmp = path.with_file_name(format!(
+                ".{}.partial.png",
+                path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default()
+            ));
+            {
+                let area = BitMapBackend::new(&tmp, size).into_drawing_area();
+                draw(&area, chart)?;
+            }
+            std::fs::rename(&tmp, path).map_err(|e| anyhow!("cannot write {}: {e}", path.display()))
+        }
+        _ => bail!("{}: plots are written as .svg or .png", path.display()),
+    }
+}
+
+/// The chart as SVG text (for inlining in HTML).
+pub fn svg(chart: &Chart, size: (u32, u32)) -> Result<String> {
+    register_font()?;
+    let mut text = String::new();
+    draw(&SVGBackend::with_string(&mut text, size).into_drawing_area(), chart)?;
+    Ok(text)
+}
+
+/// Every `step`-th point (plots need no more than a few thousand).
+pub fn thin<T: Copy>(v: &[T], max_points: usize) -> Vec<T> {
+    let step = v.len().div_ceil(max_points.max(1)).max(1);
+    v.iter().step_by(step).copied().collect()
+}

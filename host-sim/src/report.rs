@@ -1,0 +1,256 @@
+//! The model ladder and its self-contained HTML report (inline SVG): diagnose the given
+//! structure, add the effect it names, refit, and repeat until nothing significant is missing;
+//! then show the error falling, the loops, the residuals and the evidence.
+
+use std::fmt::Write as _;
+
+use anyhow::Result;
+use model_core::{ActuatorParams, ModelSpec};
+
+use crate::diagnose::{diagnose, Diagnosis};
+use crate::fit::{evaluate, simulate, FitOptions};
+use crate::params::parse_spec;
+use crate::plots::{self, Chart, Series};
+use crate::recording::Recording;
+
+/// Most effects the ladder adds before it stops.
+pub const MAX_RUNGS: usize = 4;
+
+/// One rung: a structure, its identified parameters and its errors.
+#[derive(Debug, Clone)]
+pub struct Rung {
+    /// The structure.
+    pub spec: ModelSpec,
+    /// Identified parameters.
+    pub params: ActuatorParams,
+    /// Identified parameter values by name.
+    pub identified: Vec<(&'static str, f64)>,
+    /// NRMSE per fit file.
+    pub fit_nrmse: Vec<f64>,
+    /// NRMSE per validation file.
+    pub val_nrmse: Vec<f64>,
+    /// The diagnosis of this rung.
+    pub diagnosis: Diagnosis,
+}
+
+impl Rung {
+    /// Mean validation NRMSE (fit when there are no validation files).
+    pub fn headline(&self) -> f64 {
+        let v = if self.val_nrmse.is_empty() { &self.fit_nrmse } else { &self.val_nrmse };
+        v.iter().sum::<f64>() / v.len().max(1) as f64
+    }
+}
+
+/// Climbs the ladder from `spec`. `on_rung` is told about each rung as it is found.
+pub fn ladder(
+    spec: ModelSpec,
+    init: &ActuatorParams,
+    fit_files: &[Recording],
+    val_files: &[Recording],
+    opts: FitOptions,
+    mut on_rung: impl FnMut(&Rung),
+) -> Result<Vec<Rung>> {
+    let mut rungs: Vec<Rung> = Vec::new();
+    let mut spec = spec;
+    let mut start = *init;
+    for _ in 0..MAX_RUNGS {
+        let d = diagnose(spec, &start, fit_files, val_files, opts)?;
+        let base = d.baseline.clone().expect("diagnose keeps its baseline fit");
+        let val =
+            if val_files.is_empty() { Vec::new() } else { evaluate(spec, &base.params, val_files)?.files };
+        let rung = Rung {
+            spec,
+            params: base.params,
+            identified: base.identified.clone(),
+            fit_nrmse: base.fit.files.iter().map(|f| f.nrmse).collect(),
+            val_nrmse: val.iter().map(|f| f.nrmse).collect(),
+            diagnosis: d.clone(),
+        };
+        on_rung(&rung);
+        rungs.push(rung);
+        let Some(v) = d.verdict else { break };
+        spec = parse_spec(&format!("{spec}+{v}"))?;
+        // Start the next rung from the verdict's refit.
+        if let Some(c) = d.candidates.iter().find(|c| c.effect == v) {
+            if let Some(f) = &c.refit {
+                start = f.params;
+            }
+        }
+    }
+    Ok(rungs)
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+/// Loop chart (drive → displacement) of one file: measured and every rung's model.
+pub fn loop_chart(rec: &Recording, rungs: &[Rung]) -> Result<Chart> {
+    let (drive, unit) = match (&rec.current_a, &rec.command_v) {
+        (Some(i), _) => (i.clone(), "coil current [A]"),
+        (None, Some(u)) => (u.clone(), "command [V]"),
+        _ => (vec![0.0; rec.len()], "drive"),
+    };
+    let meas = rec.displacement_um.clone().unwrap_or_default();
+    let mut series = vec![Series {
+        label: "measured".into(),
+        points: plots::thin(&drive.iter().copied().zip(meas.iter().copied()).collect::<Vec<_>>(), 4000),
+        color: 0,
+    }];
+    for (k, r) in rungs.iter().enumerate() {
+        let sim = simulate(r.spec, &r.params, rec)?;
+        let off = crate::fit::score(r.spec, rec, &sim).offset_um;
+        let pts: Vec<(f64, f64)> =
+            drive.iter().zip(&sim.displacement_um).map(|(x, y)| (*x, y + off)).collect();
+        series.push(Series {
+            label: format!("model {}", r.spec),
+            points: plots::thin(&pts, 4000),
+            color: k + 1,
+        });
+    }
+    Ok(Chart {
+        title: format!("{} — loop", rec.name),
+        x_label: unit.into(),
+        y_label: "displacement [µm]".into(),
+        series,
+    })
+}
+
+/// Residual chart (measured − model against time) of one file for every rung.
+pub fn residual_chart(rec: &Recording, rungs: &[Rung]) -> Result<Chart> {
+    let meas = rec.displacement_um.clone().unwrap_or_default();
+    let mut series = Vec::new();
+    for (k, r) in rungs.iter().enumerate() {
+        let sim = simulate(r.spec, &r.params, rec)?;
+        let off = crate::fit::score(r.spec, rec, &sim).offset_um;
+        let pts: Vec<(f64, f64)> = rec
+            .time_s
+            .iter()
+            .zip(meas.iter().zip(&sim.displacement_um))
+            .map(|(t, (m, y))| (*t, m - y - off))
+            .collect();
+        series.push(Series { label: format!("{}", r.spec), points: plots::thin(&pts, 4000), color: k + 1 });
+    }
+    Ok(Chart {
+        title: format!("{} — residual", rec.name),
+        x_label: "time [s]".into(),
+        y_label: "measured − model [µm]".into(),
+        series,
+    })
+}
+
+/// The self-contained HTML page.
+pub fn html(
+    title: &str,
+    rungs: &[Rung],
+    fit_files: &[Recording],
+    val_files: &[Recording],
+    note: &str,
+) -> Result<String> {
+    let mut h = String::new();
+    let _ = write!(
+        h,
+        "<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{t}</title><style>\
+         body{{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}}\
+         table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #ccc;padding:4px 8px;text-align:right}}\
+         th{{background:#f3f3f3}}td.l{{text-align:left}}.v{{color:#b00;font-weight:bold}}.fig{{margin:1em 0}}\
+         code{{background:#f3f3f3;padding:0 3px}}</style></head><body><h1>{t}</h1>",
+        t = esc(title)
+    );
+    if !note.is_empty() {
+        let _ = write!(h, "<p>{}</p>", esc(note));
+    }
+    // Ladder table.
+    h.push_str("<h2>Model ladder</h2><table><tr><th class=l>model</th><th>fit NRMSE (mean)</th><th>validation NRMSE (mean)</th>");
+    for f in fit_files {
+        let _ = write!(h, "<th>{} (fit)</th>", esc(&f.name));
+    }
+    for f in val_files {
+        let _ = write!(h, "<th>{} (val)</th>", esc(&f.name));
+    }
+    h.push_str("<th class=l>diagnosis</th></tr>");
+    for r in rungs {
+        let mean = |v: &[f64]| {
+            if v.is_empty() {
+                "—".to_string()
+            } else {
+                format!("{:.2} %", 100.0 * v.iter().sum::<f64>() / v.len() as f64)
+            }
+        };
+        let _ = write!(
+            h,
+            "<tr><td class=l><code>{}</code></td><td>{}</td><td>{}</td>",
+            r.spec,
+            mean(&r.fit_nrmse),
+            mean(&r.val_nrmse)
+        );
+        for v in r.fit_nrmse.iter().chain(&r.val_nrmse) {
+            let _ = write!(h, "<td>{:.2} %</td>", v * 100.0);
+        }
+        let verdict = match r.diagnosis.verdict {
+            Some(v) => format!("<span class=v>missing: {v}</span>"),
+            None => "nothing significant missing".into(),
+        };
+        let _ = write!(h, "<td class=l>{verdict}</td></tr>");
+    }
+    h.push_str("</table>");
+    // Error falling.
+    let fall = Chart {
+        title: "error as effects are added".into(),
+        x_label: "ladder step".into(),
+        y_label: "mean NRMSE [%]".into(),
+        series: vec![
+            Series {
+                label: "validation".into(),
+                points: rungs.iter().enumerate().map(|(k, r)| (k as f64, r.headline() * 100.0)).collect(),
+                color: 1,
+            },
+            Series {
+                label: "fit".into(),
+                points: rungs
+                    .iter()
+                    .enumerate()
+                    .map(|(k, r)| {
+                        (k as f64, 100.0 * r.fit_nrmse.iter().sum::<f64>() / r.fit_nrmse.len().max(1) as f64)
+                    })
+                    .collect(),
+                color: 2,
+            },
+        ],
+    };
+    let _ = write!(h, "<div class=fig>{}</div>", plots::svg(&fall, (700, 320))?);
+    // Diagnoses.
+    for r in rungs {
+        let d = &r.diagnosis;
+        let _ = write!(h, "<h2>Diagnosis of <code>{}</code></h2><ul>", r.spec);
+        for f in &d.findings {
+            let _ = write!(h, "<li>{}</li>", esc(f));
+        }
+        h.push_str("</ul><table><tr><th class=l>candidate</th><th>score</th><th>NRMSE before</th><th>after refit</th><th class=l>evidence</th></tr>");
+        for c in &d.candidates {
+            let cls = if Some(c.effect) == d.verdict { " class=v" } else { "" };
+            let _ = write!(
+                h,
+                "<tr><td class=l><span{cls}>{}</span></td><td>{:.2}</td><td>{:.2} %</td><td>{:.2} %</td><td class=l>{}</td></tr>",
+                c.effect,
+                c.score,
+                c.nrmse_before * 100.0,
+                c.nrmse_after * 100.0,
+                esc(&c.evidence)
+            );
+        }
+        h.push_str("</table><details><summary>identified parameters</summary><table>");
+        for (n, v) in &r.identified {
+            let _ = write!(h, "<tr><td class=l>{n}</td><td>{v:.6e}</td></tr>");
+        }
+        h.push_str("</table></details>");
+    }
+    // Loops and residuals per file.
+    h.push_str("<h2>Loops and residuals</h2>");
+    for rec in val_files.iter().chain(fit_files) {
+        let _ = write!(h, "<div class=fig>{}</div>", plots::svg(&loop_chart(rec, rungs)?, (900, 420))?);
+        let _ = write!(h, "<div class=fig>{}</div>", plots::svg(&residual_chart(rec, rungs)?, (900, 300))?);
+    }
+    h.push_str("<p><small>Generated by gma (host-sim). NRMSE = rms(measured − model) / (max − min of measured), offset fitted per file.</small></p></body></html>");
+    Ok(h)
+}
