@@ -20,6 +20,7 @@ fn main() {
     println!("cargo:rerun-if-changed={}", memory.display());
     println!("cargo:rerun-if-changed=build.rs");
     write_smoke_expected(&out);
+    write_drive_params(&out);
 
     // Only the ARM binaries get the cortex-m-rt (and defmt) linker scripts.
     if env::var("TARGET").is_ok_and(|t| t.starts_with("thumb")) {
@@ -28,6 +29,33 @@ fn main() {
             println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
         }
     }
+}
+
+/// The drive's model: `GMA_MODEL` (spec, default `ja+eddy+mech`) and `GMA_PARAMS` (a TOML file
+/// from `gma fit --params-out`; default: the demo set), compiled in as postcard bytes that the
+/// firmware decodes and validates at start-up.
+fn write_drive_params(out: &std::path::Path) {
+    println!("cargo:rerun-if-env-changed=GMA_MODEL");
+    println!("cargo:rerun-if-env-changed=GMA_PARAMS");
+    let spec = env::var("GMA_MODEL").unwrap_or_else(|_| "ja+eddy+mech".to_string());
+    if let Err(e) = model_core::ModelSpec::parse(&spec) {
+        panic!("GMA_MODEL=`{spec}`: {e}");
+    }
+    let params: model_core::ActuatorParams = match env::var("GMA_PARAMS") {
+        Ok(path) => {
+            println!("cargo:rerun-if-changed={path}");
+            let text = fs::read_to_string(&path).unwrap_or_else(|e| panic!("GMA_PARAMS={path}: {e}"));
+            toml::from_str(&text).unwrap_or_else(|e| panic!("GMA_PARAMS={path}: not a parameter file: {e}"))
+        }
+        Err(_) => model_core::ActuatorParams::TERFENOL_DEMO,
+    };
+    let bytes = postcard::to_stdvec(&params).expect("serialise parameters");
+    let body = format!(
+        "/// Model spec of the drive (GMA_MODEL at build time).\npub const MODEL_SPEC: &str = {spec:?};\n\
+         /// Identified parameter set, postcard-encoded (GMA_PARAMS at build time).\n\
+         pub const PARAMS_POSTCARD: &[u8] = &{bytes:?};\n"
+    );
+    fs::write(out.join("drive_params.rs"), body).expect("write drive_params.rs");
 }
 
 /// Host-side expected values for the QEMU smoke test, from the very same workload code.

@@ -9,6 +9,7 @@ pub mod fit;
 pub mod params;
 pub mod plant;
 pub mod plots;
+pub mod record;
 pub mod recording;
 pub mod report;
 pub mod simulate;

@@ -43,6 +43,9 @@ enum Command {
     /// Climb the model ladder (diagnose, add the named effect, refit, repeat) and write one
     /// self-contained HTML page.
     Report(ReportArgs),
+    /// Turn the drive's telemetry stream (COBS frames captured from its UART) into measurement
+    /// CSVs; lost and corrupt frames are counted, and every gap starts a new file.
+    Record(RecordArgs),
     /// Simulate a rig (plant simulator) and write a measurement CSV. SIMULATED data, for tests
     /// and demos.
     Simulate(simulate::SimulateArgs),
@@ -161,6 +164,22 @@ struct ReportArgs {
 }
 
 #[derive(Args)]
+struct RecordArgs {
+    /// The captured byte stream (`-` for stdin), e.g. `cat /dev/ttyACM0 > stream.bin`.
+    #[arg(long, short)]
+    input: PathBuf,
+    /// Output CSV (segments after gaps get `-2`, `-3`, … suffixes).
+    #[arg(long, short)]
+    out: PathBuf,
+    /// Control tick [s] (the firmware's: 1e-4 s at 10 kHz).
+    #[arg(long, default_value_t = 1e-4)]
+    tick_s: f64,
+    /// Print exactly one JSON object on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args)]
 struct DemoArgs {
     /// Directory for the simulated recordings, parameter files and the report.
     #[arg(long, default_value = "gma-demo")]
@@ -195,6 +214,29 @@ fn run(cli: Cli) -> Result<()> {
         Command::Diagnose(a) => run_diagnose(&a),
         Command::Report(a) => run_report(&a),
         Command::Demo(a) => run_demo(&a),
+        Command::Record(a) => {
+            let bytes = host_sim::record::read_stream(&a.input)?;
+            let r = host_sim::record::record(&bytes, &a.out, a.tick_s)?;
+            let files: Vec<String> = r.files.iter().map(|p| p.display().to_string()).collect();
+            say!(
+                a.json,
+                "{} frames, {} lost (sequence gaps), {} corrupt; wrote {}",
+                r.frames,
+                r.lost,
+                r.corrupt,
+                files.join(", ")
+            );
+            if r.lost > 0 || r.corrupt > 0 {
+                eprintln!("gma: warning: the stream lost {} frames and had {} corrupt ones; each gap starts a new file", r.lost, r.corrupt);
+            }
+            if a.json {
+                println!(
+                    "{}",
+                    json!({"frames": r.frames, "lost": r.lost, "corrupt": r.corrupt, "files": files})
+                );
+            }
+            Ok(())
+        }
         Command::Mechanics { mass_kg, damping_n_s_per_m, stiffness_n_per_m, sample_rate_hz, force_n } => {
             let p = MassSpringDamper { mass_kg, damping_n_s_per_m, stiffness_n_per_m };
             let zoh = SecondOrderZoh::new(p, 1.0 / sample_rate_hz).context("mechanics parameters")?;

@@ -188,7 +188,7 @@ fn malformed_csv_is_refused_with_file_line_and_column() {
 
 #[test]
 fn every_command_explains_its_options_with_units() {
-    for cmd in ["demo", "fit", "compare", "diagnose", "report", "simulate", "mechanics"] {
+    for cmd in ["demo", "fit", "compare", "diagnose", "report", "record", "simulate", "mechanics"] {
         let o = gma(&[cmd, "--help"]);
         assert!(o.status.success(), "{cmd} --help");
         let text = String::from_utf8_lossy(&o.stdout);

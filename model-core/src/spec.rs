@@ -220,6 +220,15 @@ impl ModelSpec {
         ModelSpec { bits }
     }
 
+    /// This spec without `effect` (saturation stays while hysteresis needs it).
+    pub const fn without(self, effect: Effect) -> ModelSpec {
+        let mut bits = self.bits & !effect.bit();
+        if bits & Effect::Hysteresis.bit() != 0 {
+            bits |= Effect::Saturation.bit();
+        }
+        ModelSpec { bits }
+    }
+
     /// Whether the spec includes `effect`.
     pub const fn has(self, effect: Effect) -> bool {
         self.bits & effect.bit() != 0

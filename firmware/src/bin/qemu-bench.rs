@@ -118,6 +118,25 @@ fn run(case: &str) -> Result<f32, &'static str> {
                 chain.step(black_box(&mut s), &ChainParams::tsma_forces([f, f, f]))
             })
         }
+        "control-tick" => {
+            // The whole board tick (gma-control): calibration, faults, reference, compensator
+            // (ja+eddy), PID, current loop, telemetry frame; the simulated rig runs outside the
+            // markers.
+            use gma_control::{sim::SimRig, ControlConfig, Controller};
+            let spec = ModelSpec::parse("ja+eddy+mech").map_err(|_| "bad spec")?;
+            let mut rig = SimRig::new(spec, &p, 1e-4).map_err(err)?;
+            let mut ctl = Controller::new(ControlConfig::REFERENCE, spec, &p);
+            let mut acc = 0.0;
+            for _ in 0..STEPS {
+                let raw = rig.sample();
+                bench_start();
+                let out = ctl.tick(black_box(&raw));
+                bench_end();
+                acc += black_box(out.duty);
+                rig.apply(&out);
+            }
+            acc
+        }
         "arx" => {
             let arx = Arx::new(ArxParams::DAVINO_003).map_err(err)?;
             let mut s: ArxState<2, 2> = arx.steady_state(0.0).map_err(err)?;
@@ -126,7 +145,7 @@ fn run(case: &str) -> Result<f32, &'static str> {
         _ => {
             return Err(
                 "unknown case (empty, ja-substep, ja-sample-400hz, zoh, chain, chain-400hz, inverse, \
-                 inverse-400hz, preisach, ndof, arx)",
+                 inverse-400hz, preisach, ndof, arx, control-tick)",
             )
         }
     })

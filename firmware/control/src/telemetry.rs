@@ -1,0 +1,259 @@
+//! Telemetry frames: every tick's sample, CRC-16 protected and COBS framed (a zero byte ends
+//! each frame), so a receiver resynchronises after any corruption and counts — never hides —
+//! lost and corrupt frames from the sequence numbers.
+
+/// One tick's record.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Frame {
+    /// Tick counter (wraps at 2³²).
+    pub seq: u32,
+    /// Displacement reference [µm] (relative to the rest position).
+    pub reference_um: f32,
+    /// Coil voltage commanded [V].
+    pub command_v: f32,
+    /// Measured coil current [A].
+    pub current_a: f32,
+    /// Measured displacement [µm] (relative to the rest position).
+    pub displacement_um: f32,
+    /// Latched fault bits.
+    pub faults: u16,
+}
+
+/// Payload bytes: seq, four f32, faults.
+pub const PAYLOAD_BYTES: usize = 4 + 4 * 4 + 2;
+/// Payload plus CRC.
+const RAW_BYTES: usize = PAYLOAD_BYTES + 2;
+/// Largest encoded frame: COBS adds one byte per 254, plus the delimiter.
+pub const MAX_ENCODED: usize = RAW_BYTES + 2;
+
+/// CRC-16/CCITT-FALSE.
+pub fn crc16(data: &[u8]) -> u16 {
+    let mut crc: u16 = 0xFFFF;
+    for &b in data {
+        crc ^= (b as u16) << 8;
+        for _ in 0..8 {
+            crc = if crc & 0x8000 != 0 { (crc << 1) ^ 0x1021 } else { crc << 1 };
+        }
+    }
+    crc
+}
+
+impl Frame {
+    fn to_bytes(self) -> [u8; RAW_BYTES] {
+        let mut b = [0u8; RAW_BYTES];
+        b[0..4].copy_from_slice(&self.seq.to_le_bytes());
+        b[4..8].copy_from_slice(&self.reference_um.to_le_bytes());
+        b[8..12].copy_from_slice(&self.command_v.to_le_bytes());
+        b[12..16].copy_from_slice(&self.current_a.to_le_bytes());
+        b[16..20].copy_from_slice(&self.displacement_um.to_le_bytes());
+        b[20..22].copy_from_slice(&self.faults.to_le_bytes());
+        let crc = crc16(&b[..PAYLOAD_BYTES]);
+        b[22..24].copy_from_slice(&crc.to_le_bytes());
+        b
+    }
+
+    fn from_bytes(b: &[u8]) -> Option<Frame> {
+        if b.len() != RAW_BYTES || crc16(&b[..PAYLOAD_BYTES]) != u16::from_le_bytes([b[22], b[23]]) {
+            return None;
+        }
+        let f32_at = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+        Some(Frame {
+            seq: u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+            reference_um: f32_at(4),
+            command_v: f32_at(8),
+            current_a: f32_at(12),
+            displacement_um: f32_at(16),
+            faults: u16::from_le_bytes([b[20], b[21]]),
+        })
+    }
+
+    /// COBS-encodes the frame with its CRC into `out`, ending with the 0 delimiter; returns the
+    /// length.
+    pub fn encode(&self, out: &mut [u8; MAX_ENCODED]) -> usize {
+        let raw = self.to_bytes();
+        let mut code_at = 0;
+        let mut code = 1u8;
+        let mut n = 1;
+        for &b in raw.iter() {
+            if b == 0 {
+                out[code_at] = code;
+                code_at = n;
+                n += 1;
+                code = 1;
+            } else {
+                out[n] = b;
+                n += 1;
+                code += 1;
+            }
+        }
+        out[code_at] = code;
+        out[n] = 0;
+        n + 1
+    }
+}
+
+/// Stream decoder with loss accounting.
+#[derive(Debug, Clone)]
+pub struct Decoder {
+    buf: [u8; MAX_ENCODED],
+    len: usize,
+    overflow: bool,
+    last_seq: Option<u32>,
+    /// Frames decoded.
+    pub frames: u64,
+    /// Frames missing from the sequence (gaps between decoded sequence numbers).
+    pub lost: u64,
+    /// Delimited chunks that failed COBS, length or CRC checks.
+    pub corrupt: u64,
+}
+
+impl Default for Decoder {
+    fn default() -> Self {
+        Self {
+            buf: [0; MAX_ENCODED],
+            len: 0,
+            overflow: false,
+            last_seq: None,
+            frames: 0,
+            lost: 0,
+            corrupt: 0,
+        }
+    }
+}
+
+/// What a decoded frame says about the stream before it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Decoded {
+    /// The frame.
+    pub frame: Frame,
+    /// Frames missing just before this one (0 when contiguous).
+    pub gap: u32,
+}
+
+impl Decoder {
+    /// Feeds one byte; returns a frame when a valid one completes.
+    pub fn push(&mut self, byte: u8) -> Option<Decoded> {
+        if byte != 0 {
+            if self.len < MAX_ENCODED {
+                self.buf[self.len] = byte;
+                self.len += 1;
+            } else {
+                self.overflow = true;
+            }
+            return None;
+        }
+        let (len, overflow) = (self.len, self.overflow);
+        self.len = 0;
+        self.overflow = false;
+        if len == 0 {
+            return None; // idle delimiters
+        }
+        let frame = if overflow {
+            None
+        } else {
+            cobs_decode(&self.buf[..len]).and_then(|(raw, n)| Frame::from_bytes(&raw[..n]))
+        };
+        let Some(frame) = frame else {
+            self.corrupt += 1;
+            return None;
+        };
+        let gap = match self.last_seq {
+            Some(prev) => frame.seq.wrapping_sub(prev).wrapping_sub(1),
+            None => 0,
+        };
+        self.lost += gap as u64;
+        self.last_seq = Some(frame.seq);
+        self.frames += 1;
+        Some(Decoded { frame, gap })
+    }
+}
+
+fn cobs_decode(enc: &[u8]) -> Option<([u8; MAX_ENCODED], usize)> {
+    let mut out = [0u8; MAX_ENCODED];
+    let (mut i, mut n) = (0, 0);
+    while i < enc.len() {
+        let code = enc[i] as usize;
+        i += 1;
+        if code == 0 {
+            return None;
+        }
+        for _ in 1..code {
+            if i >= enc.len() || n >= out.len() {
+                return None;
+            }
+            out[n] = enc[i];
+            n += 1;
+            i += 1;
+        }
+        if code < 0xFF && i < enc.len() {
+            if n >= out.len() {
+                return None;
+            }
+            out[n] = 0;
+            n += 1;
+        }
+    }
+    Some((out, n))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn frame(seq: u32) -> Frame {
+        Frame { seq, reference_um: 1.5, command_v: -3.0, current_a: 0.0, displacement_um: 12.25, faults: 0 }
+    }
+
+    fn stream(frames: impl Iterator<Item = Frame>) -> Vec<u8> {
+        let mut out = Vec::new();
+        for f in frames {
+            let mut buf = [0u8; MAX_ENCODED];
+            let n = f.encode(&mut buf);
+            out.extend_from_slice(&buf[..n]);
+        }
+        out
+    }
+
+    #[test]
+    fn round_trip_including_zero_bytes() {
+        let s = stream((0..100).map(frame));
+        let mut d = Decoder::default();
+        let got: Vec<Frame> = s.iter().filter_map(|&b| d.push(b)).map(|x| x.frame).collect();
+        assert_eq!(got.len(), 100);
+        assert_eq!(got[37], frame(37));
+        assert_eq!((d.lost, d.corrupt), (0, 0));
+    }
+
+    #[test]
+    fn lost_frames_are_counted() {
+        let s = stream((0..50).filter(|k| k % 10 != 3).map(frame));
+        let mut d = Decoder::default();
+        let gaps: Vec<u32> = s.iter().filter_map(|&b| d.push(b)).map(|x| x.gap).filter(|&g| g > 0).collect();
+        assert_eq!(gaps, vec![1; 5]);
+        assert_eq!(d.lost, 5);
+    }
+
+    proptest! {
+        /// Random bit flips: every damaged frame is caught (CRC/COBS) and counted, the decoder
+        /// resynchronises at the next delimiter, and no wrong frame gets through.
+        #[test]
+        fn corruption_is_detected_and_counted(flips in proptest::collection::vec((0usize..2600, 0u8..8), 1..20)) {
+            let mut s = stream((0..100).map(frame));
+            for (pos, bit) in &flips {
+                s[*pos] ^= 1 << bit;
+            }
+            let mut d = Decoder::default();
+            let got: Vec<Decoded> = s.iter().filter_map(|&b| d.push(b)).collect();
+            for g in &got {
+                prop_assert_eq!(g.frame, frame(g.frame.seq));
+            }
+            prop_assert!(d.frames + d.corrupt + d.lost >= 100 - flips.len() as u64);
+            prop_assert!(d.frames >= 100 - 2 * flips.len() as u64);
+            // Every frame not delivered is accounted for as lost (seen as a gap).
+            let last = got.last().map(|g| g.frame.seq).unwrap_or(0) as u64;
+            let first = got.first().map(|g| g.frame.seq).unwrap_or(0) as u64;
+            prop_assert_eq!(d.frames + d.lost, last - first + 1);
+        }
+    }
+}
