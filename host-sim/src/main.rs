@@ -7,7 +7,7 @@ use clap::{Args, Parser, Subcommand};
 use host_sim::diagnose::{diagnose, Diagnosis};
 use host_sim::fit::{self, FitOptions, FitResult};
 use host_sim::recording::{write_atomic, Recording};
-use host_sim::{cases, params, plots, report, simulate};
+use host_sim::{cases, loops, params, plots, report, simulate};
 use model_core::mechanics::{MassSpringDamper, MechState, SecondOrderZoh};
 use serde_json::json;
 
@@ -82,8 +82,9 @@ struct ModelFiles {
     /// A validation recording: scored, never fitted (repeat `--val` for several files).
     #[arg(long, value_name = "FILE")]
     val: Vec<PathBuf>,
-    /// Start values and fixed parameters (TOML as `--params-out` writes); default: a Terfenol-D demo set.
-    #[arg(long, value_name = "P.toml")]
+    /// Start values and fixed parameters (TOML as `--params-out` writes, e.g. from a loop fit);
+    /// default: a Terfenol-D demo set.
+    #[arg(long, visible_alias = "init", value_name = "P.toml")]
     params: Option<PathBuf>,
     /// Seed of the global search (same seed, same result).
     #[arg(long, default_value_t = 1)]
@@ -281,7 +282,95 @@ fn file_rows(
     Ok((rows, nrmse_val))
 }
 
+/// Whether the first positional file is a magnetization-loop file (then all must be).
+fn loop_files(paths: &[PathBuf], val: &[PathBuf]) -> Result<bool> {
+    let mut kinds = Vec::new();
+    for p in paths.iter().chain(val) {
+        let text = std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))?;
+        kinds.push(loops::looks_like_loop(&text));
+    }
+    if kinds.iter().any(|k| *k) && !kinds.iter().all(|k| *k) {
+        bail!("mixing magnetization-loop files and displacement recordings in one fit: fit them separately (a loop fit's --params-out can seed the displacement fit via --params)");
+    }
+    Ok(kinds.first().copied().unwrap_or(false))
+}
+
+/// `gma fit` on magnetization-loop files: the magnetization stage alone.
+fn run_loop_fit(a: &FitArgs) -> Result<()> {
+    let spec = params::parse_spec(&a.mf.model)?;
+    let model = loops::LoopModel::from_spec(spec)?;
+    let read = |v: &[PathBuf]| v.iter().map(|p| loops::read(p)).collect::<Result<Vec<_>>>();
+    let (fit_files, val_files) = (read(&a.mf.files)?, read(&a.mf.val)?);
+    let t = std::time::Instant::now();
+    let opts = host_sim::search::SearchOptions { seed: a.mf.seed, effort: a.mf.effort };
+    let res = loops::fit(model, &fit_files, opts)?;
+    let j = a.mf.json;
+    say!(
+        j,
+        "magnetization model `{spec}` fitted to {} loop file(s): {} evaluations in {:.1} s (seed {})",
+        fit_files.len(),
+        res.evaluations,
+        t.elapsed().as_secs_f64(),
+        a.mf.seed
+    );
+    for (n, v) in &res.params {
+        say!(j, "  {n:20} = {v:.6e}");
+    }
+    let mut rows = Vec::new();
+    for (f, e) in fit_files.iter().zip(&res.nrmse) {
+        say!(j, "  fit   {:14} NRMSE {:6.3} %  {}", f.channel.name(), e * 100.0, f.name);
+        rows.push(json!({"file": f.name, "split": "fit", "channel": f.channel.name(), "nrmse": e}));
+    }
+    let mut val_nrmse = Vec::new();
+    let h_max =
+        fit_files.iter().chain(&val_files).flat_map(|f| f.h.iter()).fold(0.0f64, |m, v| m.max(v.abs()));
+    for f in &val_files {
+        let m = loops::run(model, &res.values(), &f.h, h_max)
+            .map_err(|e| anyhow::anyhow!("{}: {}", f.name, e.0))?;
+        let e = fit::nrmse(&f.value, &f.channel_from_m(&m));
+        say!(j, "  val   {:14} NRMSE {:6.3} %  {}", f.channel.name(), e * 100.0, f.name);
+        rows.push(json!({"file": f.name, "split": "val", "channel": f.channel.name(), "nrmse": e}));
+        val_nrmse.push(e);
+    }
+    for w in &res.warnings {
+        eprintln!("gma: warning: {w}");
+    }
+    let failed: Vec<&String> = res
+        .warnings
+        .iter()
+        .filter(|w| w.contains("integration failed") || w.contains("multivalued"))
+        .collect();
+    if let Some(out) = &a.params_out {
+        let base = params::load(a.mf.params.as_deref())?;
+        let header =
+            format!("gma fit --model {spec} on loop files {}", host_sim::recording::names(&a.mf.files));
+        write_atomic(out, params::to_toml(&res.apply_to(&base), &header)?.as_bytes())?;
+        say!(j, "  parameters written to {}", out.display());
+    }
+    let nrmse_fit = res.nrmse.iter().sum::<f64>() / res.nrmse.len() as f64;
+    let nrmse_val = (!val_nrmse.is_empty()).then(|| val_nrmse.iter().sum::<f64>() / val_nrmse.len() as f64);
+    if j {
+        let params: serde_json::Map<String, serde_json::Value> =
+            res.params.iter().map(|(n, v)| (n.to_string(), json!(v))).collect();
+        println!(
+            "{}",
+            json!({"model": spec.to_string(), "params": params, "nrmse_fit": nrmse_fit, "nrmse_val": nrmse_val,
+            "files": rows, "evaluations": res.evaluations, "warnings": res.warnings, "seed": a.mf.seed})
+        );
+    }
+    if !failed.is_empty() {
+        bail!(
+            "the loop fit did not produce a valid model: {}",
+            failed.iter().map(|s| s.as_str()).collect::<Vec<_>>().join("; ")
+        );
+    }
+    Ok(())
+}
+
 fn run_fit(a: &FitArgs) -> Result<()> {
+    if loop_files(&a.mf.files, &a.mf.val)? {
+        return run_loop_fit(a);
+    }
     let (spec, init, fit_files, val_files, opts) = a.mf.load()?;
     let t = std::time::Instant::now();
     let res = fit::fit(spec, &init, &fit_files, opts)?;
@@ -359,6 +448,9 @@ fn run_compare(a: &CompareArgs) -> Result<()> {
             baseline: None,
         },
     };
+    if loop_files(&a.files, &[])? {
+        return compare_loops(a, spec, &p);
+    }
     let mut total = 0.0;
     for path in &a.files {
         let rec = Recording::read(path)?;
@@ -419,6 +511,62 @@ fn run_compare(a: &CompareArgs) -> Result<()> {
     }
     let mean = total / a.files.len() as f64;
     say!(a.json, "mean NRMSE {:.3} % over {} file(s), model `{spec}`", mean * 100.0, a.files.len());
+    if a.json {
+        println!("{}", json!({"model": spec.to_string(), "nrmse": mean, "files": rows}));
+    }
+    Ok(())
+}
+
+/// `gma compare` on loop files: measured and model loops overlaid, and coercivity, remanence and
+/// largest magnetization read from both.
+fn compare_loops(a: &CompareArgs, spec: model_core::ModelSpec, p: &model_core::ActuatorParams) -> Result<()> {
+    let model = loops::LoopModel::from_spec(spec)?;
+    let values: Vec<f64> = match model {
+        loops::LoopModel::Linear => vec![p.linear.offset_a_per_m as f64, p.linear.susceptibility as f64],
+        loops::LoopModel::Anhysteretic => {
+            vec![p.anhysteretic.ms_a_per_m as f64, p.anhysteretic.a_a_per_m as f64]
+        }
+        loops::LoopModel::JilesAtherton => {
+            let j = p.ja;
+            vec![j.ms_a_per_m as f64, j.a_a_per_m as f64, j.alpha as f64, j.k_a_per_m as f64, j.c as f64]
+        }
+        loops::LoopModel::Preisach => {
+            vec![
+                p.preisach.ms_a_per_m as f64,
+                p.preisach.coercive_a_per_m as f64,
+                p.preisach.spread_a_per_m as f64,
+            ]
+        }
+    };
+    let mut rows = Vec::new();
+    let mut total = 0.0;
+    for path in &a.files {
+        let f = loops::read(path)?;
+        let h_max = f.h.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let m =
+            loops::run(model, &values, &f.h, h_max).map_err(|e| anyhow::anyhow!("{}: {}", f.name, e.0))?;
+        let modelled = f.channel_from_m(&m);
+        let e = fit::nrmse(&f.value, &modelled);
+        total += e;
+        let (fm, fmod) = (loops::features(&f.h, &f.magnetization()), loops::features(&f.h, &m));
+        let stem = path.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "loop".into());
+        let out = a.out_dir.join(format!("{stem}-loop.{}", a.format));
+        let chart = loops::chart(&f, &m, &spec.to_string());
+        plots::write(&out, &chart)?;
+        say!(a.json, "{:40} NRMSE {:6.3} %  plot: {}", f.name, e * 100.0, out.display());
+        say!(a.json, "  {:28} {:>14} {:>14}", "", "measured", "model");
+        for (name, x, y) in [
+            ("coercivity H_c [A/m]", fm.coercivity_a_per_m, fmod.coercivity_a_per_m),
+            ("remanence M_r [A/m]", fm.remanence_a_per_m, fmod.remanence_a_per_m),
+            ("largest |M| [A/m]", fm.max_magnetization_a_per_m, fmod.max_magnetization_a_per_m),
+        ] {
+            say!(a.json, "  {name:28} {x:>14.4e} {y:>14.4e}");
+        }
+        rows.push(json!({"file": f.name, "channel": f.channel.name(), "nrmse": e, "plots": [out.display().to_string()],
+            "measured": {"coercivity_a_per_m": fm.coercivity_a_per_m, "remanence_a_per_m": fm.remanence_a_per_m, "max_magnetization_a_per_m": fm.max_magnetization_a_per_m},
+            "model": {"coercivity_a_per_m": fmod.coercivity_a_per_m, "remanence_a_per_m": fmod.remanence_a_per_m, "max_magnetization_a_per_m": fmod.max_magnetization_a_per_m}}));
+    }
+    let mean = total / a.files.len() as f64;
     if a.json {
         println!("{}", json!({"model": spec.to_string(), "nrmse": mean, "files": rows}));
     }
@@ -487,6 +635,21 @@ fn write_report(
 }
 
 fn run_report(a: &ReportArgs) -> Result<()> {
+    if loop_files(&a.mf.files, &a.mf.val)? {
+        let spec = params::parse_spec(&a.mf.model)?;
+        let files = a.mf.files.iter().map(|p| loops::read(p)).collect::<Result<Vec<_>>>()?;
+        let opts = host_sim::search::SearchOptions { seed: a.mf.seed, effort: a.mf.effort };
+        let res = loops::fit(loops::LoopModel::from_spec(spec)?, &files, opts)?;
+        write_atomic(&a.out, loops::html(&spec.to_string(), &res, &files)?.as_bytes())?;
+        say!(a.mf.json, "loop report written to {}", a.out.display());
+        if a.mf.json {
+            println!(
+                "{}",
+                json!({"report": a.out.display().to_string(), "nrmse": res.nrmse, "warnings": res.warnings})
+            );
+        }
+        return Ok(());
+    }
     let (spec, init, fit_files, val_files, opts) = a.mf.load()?;
     let j = a.mf.json;
     let rungs =

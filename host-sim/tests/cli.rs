@@ -213,3 +213,67 @@ fn demo_finds_the_hidden_effects_and_writes_the_report() {
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("<svg") && html.contains("Model ladder") && html.contains("eddy+ja+mech"));
 }
+
+#[test]
+fn loop_files_fit_the_magnetization_stage_and_compare_reads_coercivity() {
+    use host_sim::loops::{self, LoopModel};
+    let dir = tempfile::tempdir().unwrap();
+    // A Terfenol-D major loop as a permeameter writes it: tab separated, H in kA/m, B in T.
+    let truth = [6.0e5, 6512.0, -0.035, 4000.0, 0.2];
+    let h: Vec<f64> =
+        (0..=240).map(|k| 1.0e5 * (2.0 * std::f64::consts::PI * k as f64 / 240.0).cos()).collect();
+    let m = loops::run(LoopModel::JilesAtherton, &truth, &h, 1.0e5).unwrap();
+    let mut text = String::from("H(kA/m)\tB(T)\n");
+    for (h, m) in h.iter().zip(&m) {
+        text.push_str(&format!("{}\t{}\n", h * 1e-3, 4e-7 * std::f64::consts::PI * (h + m)));
+    }
+    let path = dir.path().join("rod.tsv");
+    std::fs::write(&path, text).unwrap();
+    let p_out = dir.path().join("loop.toml");
+    let f = json(&gma(&[
+        "fit",
+        "--model",
+        "ja",
+        "--json",
+        "--params-out",
+        p_out.to_str().unwrap(),
+        path.to_str().unwrap(),
+    ]));
+    assert_eq!(f["files"][0]["channel"], "flux_density");
+    assert!(f["nrmse_fit"].as_f64().unwrap() < 0.01, "{f}");
+    let ms = f["params"]["ms_a_per_m"].as_f64().unwrap();
+    assert!((ms / 6.0e5 - 1.0).abs() < 0.05, "M_s {ms}");
+    let plots = dir.path().join("plots");
+    let c = json(&gma(&[
+        "compare",
+        "--model",
+        "ja",
+        "--params",
+        p_out.to_str().unwrap(),
+        "--json",
+        "--out-dir",
+        plots.to_str().unwrap(),
+        path.to_str().unwrap(),
+    ]));
+    let (hm, hc) = (
+        c["files"][0]["measured"]["coercivity_a_per_m"].as_f64().unwrap(),
+        c["files"][0]["model"]["coercivity_a_per_m"].as_f64().unwrap(),
+    );
+    assert!(hm > 1000.0 && (hc / hm - 1.0).abs() < 0.05, "coercivity measured {hm} vs model {hc}");
+    assert!(plots.join("rod-loop.svg").exists());
+    let html = dir.path().join("loop.html");
+    let o = gma(&["report", "--model", "ja", "-o", html.to_str().unwrap(), path.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let page = std::fs::read_to_string(&html).unwrap();
+    assert!(page.contains("coercivity") && page.contains("<svg"));
+    // The loop's parameters seed a displacement fit (`--init`).
+    let o = gma(&["fit", "--help"]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("--init"));
+    // A malformed loop file names the line.
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(&bad, "H(A/m),B(T)\n0,0\n100,0.1\n200,x\n300,0.3\n400,0.4\n").unwrap();
+    let o = gma(&["fit", "--model", "ja", bad.to_str().unwrap()]);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("bad.csv:4:2") && err.contains("`x` is not a number"), "{err}");
+}

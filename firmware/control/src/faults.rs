@@ -192,3 +192,42 @@ impl FaultMonitor {
         still
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::units::{Calibration, Volts};
+
+    fn raw_at(i: f32) -> (RawSample, Amps) {
+        let cal = Calibration::REFERENCE_BOARD;
+        let raw =
+            RawSample { current: cal.current_code(Amps(i)), displacement: AdcCode(2000), bus: Volts(24.0) };
+        (raw, cal.current(raw.current))
+    }
+
+    #[test]
+    fn i2t_trips_on_sustained_overload_and_cools_before_it_clears() {
+        let mut m = FaultMonitor::new(FaultLimits::REFERENCE);
+        // 3 A against a 2 A rating: (9 − 4) A² × t reaches 4 A²s after 0.8 s = 8000 ticks.
+        let (raw, i) = raw_at(3.0);
+        let mut tripped_at = None;
+        for k in 0..10_000 {
+            // Alternate the displacement code so that the stuck-sensor check stays quiet.
+            let raw = RawSample { displacement: AdcCode(2000 + (k % 2) as u16), ..raw };
+            if m.check(&raw, i, 1e-4).contains(FaultCode::COIL_I2T) {
+                tripped_at = Some(k);
+                break;
+            }
+        }
+        let k = tripped_at.expect("no I²t trip");
+        assert!((7800..=8200).contains(&k), "tripped after {k} ticks");
+        // Cooling at zero current: (0 − 4) A² → below half the budget after 0.5 s.
+        let (raw0, i0) = raw_at(0.0);
+        assert!(m.clear(&raw0, i0).contains(FaultCode::COIL_I2T), "must not clear while hot");
+        for k in 0..6_000 {
+            let raw = RawSample { displacement: AdcCode(2000 + (k % 2) as u16), ..raw0 };
+            m.present(&raw, i0, 1e-4);
+        }
+        assert!(m.clear(&raw0, i0).is_clear());
+    }
+}

@@ -1,0 +1,525 @@
+//! Magnetization loops (shared/docs/contracts.md): B–H or M–H points in field order — full
+//! loops, minor loops or single branches, unevenly spaced — and fitting the magnetization
+//! models of model-core (the same code the firmware runs) along the file's own field path.
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use model_core::field::MU0;
+use model_core::magnetization::{
+    Anhysteretic, AnhystereticParams, JaParams, JaState, JilesAtherton, LinearMagnetization, Preisach,
+    PreisachParams,
+};
+use model_core::{ActuatorParams, Effect, ModelSpec};
+
+use crate::search::{minimize, Bound, SearchOptions};
+
+/// Which quantity the file gives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LoopChannel {
+    /// Flux density B [T].
+    FluxDensity,
+    /// Magnetization M [A/m].
+    Magnetization,
+}
+
+impl LoopChannel {
+    /// Contract name.
+    pub fn name(self) -> &'static str {
+        match self {
+            LoopChannel::FluxDensity => "flux_density",
+            LoopChannel::Magnetization => "magnetization",
+        }
+    }
+}
+
+/// A loop file, in SI units.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoopFile {
+    /// Where it came from.
+    pub name: String,
+    /// Field H [A/m], in the file's order.
+    pub h: Vec<f64>,
+    /// The file's channel: B [T] or M [A/m].
+    pub value: Vec<f64>,
+    /// Which channel.
+    pub channel: LoopChannel,
+}
+
+impl LoopFile {
+    /// Magnetization M [A/m] (M = B/μ0 − H for flux-density files).
+    pub fn magnetization(&self) -> Vec<f64> {
+        match self.channel {
+            LoopChannel::Magnetization => self.value.clone(),
+            LoopChannel::FluxDensity => self.h.iter().zip(&self.value).map(|(h, b)| b / MU0 - h).collect(),
+        }
+    }
+
+    /// The file's channel from a magnetization.
+    pub fn channel_from_m(&self, m: &[f64]) -> Vec<f64> {
+        match self.channel {
+            LoopChannel::Magnetization => m.to_vec(),
+            LoopChannel::FluxDensity => self.h.iter().zip(m).map(|(h, m)| MU0 * (h + m)).collect(),
+        }
+    }
+}
+
+/// Unit factor to SI for a header such as `H(Oe)`, `H [kA/m]`, `B(mT)`, `M(A/m)`.
+fn unit_factor(header: &str) -> Option<(char, f64)> {
+    let h = header.trim();
+    let quantity = h.chars().next()?.to_ascii_uppercase();
+    let unit = h
+        .find(['(', '['])
+        .map(|i| h[i + 1..].trim_end_matches([')', ']']).trim().to_string())
+        .unwrap_or_default();
+    let f = match (quantity, unit.as_str()) {
+        ('H', "" | "A/m" | "A m^-1") => 1.0,
+        ('H', "kA/m") => 1e3,
+        ('H', "Oe") => 1e3 / (4.0 * std::f64::consts::PI),
+        ('B', "" | "T") => 1.0,
+        ('B', "mT") => 1e-3,
+        ('B', "G" | "Gs") => 1e-4,
+        ('M', "" | "A/m") => 1.0,
+        ('M', "kA/m") => 1e3,
+        _ => return None,
+    };
+    Some((quantity, f))
+}
+
+/// Whether `text` looks like a loop file (named loop columns, or two columns with an H/B header
+/// or none).
+pub fn looks_like_loop(text: &str) -> bool {
+    let first = text.lines().next().unwrap_or("").to_ascii_lowercase();
+    if first.contains("field_a_per_m") {
+        return true;
+    }
+    if first.contains("time_s") || first.contains("displacement_um") {
+        return false;
+    }
+    let sep = if first.contains('\t') { '\t' } else { ',' };
+    let fields: Vec<&str> = first.split(sep).collect();
+    fields.len() == 2
+        && (fields.iter().all(|f| f.trim().parse::<f64>().is_ok()) || first.trim_start().starts_with('h'))
+}
+
+/// Reads a loop file; errors name the file and line.
+pub fn read(path: &Path) -> Result<LoopFile> {
+    let name = path.display().to_string();
+    let text = std::fs::read_to_string(path).with_context(|| format!("{name}: cannot read"))?;
+    parse(&name, &text)
+}
+
+/// Parses loop text.
+pub fn parse(name: &str, text: &str) -> Result<LoopFile> {
+    let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()).peekable();
+    let Some(&(_, first)) = lines.peek() else { bail!("{name}: empty file") };
+    let sep = if first.contains('\t') { '\t' } else { ',' };
+    let cells: Vec<&str> = first.split(sep).map(str::trim).collect();
+    let numeric = cells.iter().all(|c| c.parse::<f64>().is_ok());
+    // Column indices and unit factors for H and the value.
+    let (hi, vi, hf, vf, channel) = if numeric {
+        if cells.len() != 2 {
+            bail!("{name}:1: {} unnamed columns; an unnamed loop file has two: H [A/m], B [T]", cells.len());
+        }
+        (0, 1, 1.0, 1.0, LoopChannel::FluxDensity)
+    } else {
+        lines.next();
+        let find = |n: &str| cells.iter().position(|c| *c == n);
+        if let Some(h) = find("field_A_per_m") {
+            match (find("flux_density_T"), find("magnetization_A_per_m")) {
+                (Some(b), _) => (h, b, 1.0, 1.0, LoopChannel::FluxDensity),
+                (None, Some(m)) => (h, m, 1.0, 1.0, LoopChannel::Magnetization),
+                _ => bail!(
+                    "{name}:1: `field_A_per_m` needs `flux_density_T` or `magnetization_A_per_m` beside it"
+                ),
+            }
+        } else if cells.len() == 2 {
+            let (q0, f0) = unit_factor(cells[0]).with_context(|| {
+                format!("{name}:1: header `{}`: expected H with a unit (A/m, kA/m, Oe)", cells[0])
+            })?;
+            let (q1, f1) = unit_factor(cells[1]).with_context(|| {
+                format!("{name}:1: header `{}`: expected B (T, mT, G) or M (A/m, kA/m)", cells[1])
+            })?;
+            if q0 != 'H' || !(q1 == 'B' || q1 == 'M') {
+                bail!("{name}:1: header `{first}`: expected H then B or M");
+            }
+            let ch = if q1 == 'B' { LoopChannel::FluxDensity } else { LoopChannel::Magnetization };
+            (0, 1, f0, f1, ch)
+        } else {
+            bail!("{name}:1: not a loop file: expected `field_A_per_m` and `flux_density_T` or `magnetization_A_per_m` columns, or two columns H, B");
+        }
+    };
+    let ncols = cells.len();
+    let (mut h, mut v) = (Vec::new(), Vec::new());
+    for (idx, line) in lines {
+        let lineno = idx + 1;
+        let f: Vec<&str> = line.split(sep).map(str::trim).collect();
+        if f.len() != ncols {
+            bail!("{name}:{lineno}: {} fields, but the first line has {ncols}", f.len());
+        }
+        let num = |col: usize| -> Result<f64> {
+            let x: f64 = f[col]
+                .parse()
+                .map_err(|_| anyhow::anyhow!("{name}:{lineno}:{}: `{}` is not a number", col + 1, f[col]))?;
+            if !x.is_finite() {
+                bail!("{name}:{lineno}:{}: `{}` is not a finite number", col + 1, f[col]);
+            }
+            Ok(x)
+        };
+        h.push(num(hi)? * hf);
+        v.push(num(vi)? * vf);
+    }
+    if h.len() < 5 {
+        bail!("{name}: {} points; a loop fit needs at least 5", h.len());
+    }
+    Ok(LoopFile { name: name.to_string(), h, value: v, channel })
+}
+
+/// Coercivity, remanence and saturation read from a loop (NaN when the path does not show it).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoopFeatures {
+    /// Mean |H| where M crosses zero [A/m].
+    pub coercivity_a_per_m: f64,
+    /// Mean |M| where H crosses zero [A/m].
+    pub remanence_a_per_m: f64,
+    /// Largest |M| [A/m].
+    pub max_magnetization_a_per_m: f64,
+}
+
+/// Reads the features from an (H, M) path by linear interpolation at the crossings.
+pub fn features(h: &[f64], m: &[f64]) -> LoopFeatures {
+    let crossings = |x: &[f64], y: &[f64]| -> f64 {
+        let v: Vec<f64> = x
+            .windows(2)
+            .zip(y.windows(2))
+            .filter(|(xw, _)| xw[0] * xw[1] < 0.0 || (xw[0] == 0.0 && xw[1] != 0.0))
+            .map(|(xw, yw)| {
+                let t = xw[0] / (xw[0] - xw[1]);
+                (yw[0] + t * (yw[1] - yw[0])).abs()
+            })
+            .collect();
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
+    LoopFeatures {
+        coercivity_a_per_m: crossings(m, h),
+        remanence_a_per_m: crossings(h, m),
+        max_magnetization_a_per_m: m.iter().fold(0.0f64, |a, v| a.max(v.abs())),
+    }
+}
+
+/// The magnetization model a loop fit identifies.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LoopModel {
+    /// M = a + bH.
+    Linear,
+    /// Langevin.
+    Anhysteretic,
+    /// Jiles–Atherton.
+    JilesAtherton,
+    /// Preisach.
+    Preisach,
+}
+
+impl LoopModel {
+    /// From a model spec: only the magnetization stage counts.
+    pub fn from_spec(spec: ModelSpec) -> Result<Self> {
+        let others = [
+            Effect::EddyCurrent,
+            Effect::MechanicalDynamics,
+            Effect::AmplifierDynamics,
+            Effect::MagneticAftereffect,
+            Effect::ThermalDrift,
+            Effect::SensorDelay,
+        ];
+        if let Some(e) = others.iter().find(|e| spec.has(**e)) {
+            bail!(
+                "a magnetization loop fits the magnetization stage only; `{e}` needs displacement recordings"
+            );
+        }
+        Ok(if spec.has(Effect::Preisach) {
+            LoopModel::Preisach
+        } else if spec.has(Effect::Hysteresis) {
+            LoopModel::JilesAtherton
+        } else if spec.has(Effect::Saturation) {
+            LoopModel::Anhysteretic
+        } else {
+            LoopModel::Linear
+        })
+    }
+
+    /// Parameter names, bounds (given the loop's field and magnetization scale).
+    fn bounds(self, h_max: f64, m_max: f64) -> Vec<Bound> {
+        let ms = Bound::log("ms_a_per_m", 0.9 * m_max, 5.0 * m_max);
+        match self {
+            LoopModel::Linear => {
+                vec![Bound::lin("offset_a_per_m", -m_max, m_max), Bound::log("susceptibility", 1e-3, 1e6)]
+            }
+            LoopModel::Anhysteretic => vec![ms, Bound::log("a_a_per_m", 1e-3 * h_max, 10.0 * h_max)],
+            LoopModel::JilesAtherton => vec![
+                ms,
+                Bound::log("a_a_per_m", 1e-3 * h_max, 10.0 * h_max),
+                Bound::lin("alpha", -0.5, 0.9),
+                Bound::log("k_a_per_m", 1e-4 * h_max, 5.0 * h_max),
+                Bound::lin("c", 0.0, 0.99),
+            ],
+            LoopModel::Preisach => vec![
+                ms,
+                Bound::log("coercive_a_per_m", 1e-3 * h_max, 0.8 * h_max),
+                Bound::log("spread_a_per_m", 1e-3 * h_max, 2.0 * h_max),
+            ],
+        }
+    }
+}
+
+/// Why a model run along a path is not a valid result.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunError(pub String);
+
+/// The model's magnetization along the file's field path. The rod starts demagnetised at
+/// H = 0, follows the initial curve to the first point, then the path; a closed path (ends
+/// where it starts) is run twice and the second pass returned (the loop's steady state).
+pub fn run(model: LoopModel, p: &[f64], h: &[f64], h_max: f64) -> Result<Vec<f64>, RunError> {
+    let closed = (h[0] - h[h.len() - 1]).abs() <= 0.02 * h_max;
+    let lead: Vec<f64> = (1..=50).map(|k| h[0] * k as f64 / 50.0).collect();
+    let passes = if closed { 2 } else { 1 };
+    let path = lead.iter().chain((0..passes).flat_map(|_| h.iter()));
+    let mut out = Vec::with_capacity(lead.len() + passes * h.len());
+    match model {
+        LoopModel::Linear => {
+            let lm =
+                LinearMagnetization::new(p[0] as f32, p[1] as f32).map_err(|e| RunError(e.to_string()))?;
+            out.extend(path.map(|&x| lm.magnetization(x as f32) as f64));
+        }
+        LoopModel::Anhysteretic => {
+            let an =
+                Anhysteretic::new(AnhystereticParams { ms_a_per_m: p[0] as f32, a_a_per_m: p[1] as f32 })
+                    .map_err(|e| RunError(e.to_string()))?;
+            out.extend(path.map(|&x| an.magnetization(x as f32) as f64));
+        }
+        LoopModel::JilesAtherton => {
+            let jp = JaParams {
+                ms_a_per_m: p[0] as f32,
+                a_a_per_m: p[1] as f32,
+                alpha: p[2] as f32,
+                k_a_per_m: p[3] as f32,
+                c: p[4] as f32,
+            };
+            let ja = JilesAtherton::new(jp).map_err(|e| RunError(e.to_string()))?;
+            let mut s = JaState::default();
+            out.extend(path.map(|&x| ja.step(&mut s, x as f32) as f64));
+        }
+        LoopModel::Preisach => {
+            let pr = Preisach::new(PreisachParams {
+                ms_a_per_m: p[0] as f32,
+                coercive_a_per_m: p[1] as f32,
+                spread_a_per_m: p[2] as f32,
+                h_max_a_per_m: (1.05 * h_max) as f32,
+            })
+            .map_err(|e| RunError(e.to_string()))?;
+            let mut s = pr.demagnetized();
+            out.extend(path.map(|&x| pr.step(&mut s, x as f32) as f64));
+        }
+    }
+    let tail = out.split_off(out.len() - h.len());
+    if tail.iter().any(|v| !v.is_finite()) {
+        return Err(RunError("the integration produced a non-finite magnetization".into()));
+    }
+    Ok(tail)
+}
+
+/// rms(a − b) / (max − min of a).
+fn nrmse(a: &[f64], b: &[f64]) -> f64 {
+    crate::fit::nrmse(a, b)
+}
+
+/// A loop fit's outcome.
+#[derive(Debug, Clone)]
+pub struct LoopFit {
+    /// The model.
+    pub model: LoopModel,
+    /// Identified (name, value).
+    pub params: Vec<(&'static str, f64)>,
+    /// NRMSE per file on its own channel.
+    pub nrmse: Vec<f64>,
+    /// Objective evaluations.
+    pub evaluations: usize,
+    /// Problems that make the result untrustworthy (empty: valid).
+    pub warnings: Vec<String>,
+}
+
+impl LoopFit {
+    /// The identified values in order.
+    pub fn values(&self) -> Vec<f64> {
+        self.params.iter().map(|p| p.1).collect()
+    }
+
+    /// The parameter set with this fit's magnetization model written in (`M_s` also normalises
+    /// the magnetostriction), to seed a displacement fit.
+    pub fn apply_to(&self, base: &ActuatorParams) -> ActuatorParams {
+        let mut p = *base;
+        let v = self.values();
+        match self.model {
+            LoopModel::Linear => {
+                p.linear.offset_a_per_m = v[0] as f32;
+                p.linear.susceptibility = v[1] as f32;
+            }
+            LoopModel::Anhysteretic => {
+                p.anhysteretic = AnhystereticParams { ms_a_per_m: v[0] as f32, a_a_per_m: v[1] as f32 };
+                p.magnetostriction.ms_a_per_m = v[0] as f32;
+            }
+            LoopModel::JilesAtherton => {
+                p.ja = JaParams {
+                    ms_a_per_m: v[0] as f32,
+                    a_a_per_m: v[1] as f32,
+                    alpha: v[2] as f32,
+                    k_a_per_m: v[3] as f32,
+                    c: v[4] as f32,
+                };
+                p.anhysteretic.ms_a_per_m = v[0] as f32;
+                p.magnetostriction.ms_a_per_m = v[0] as f32;
+            }
+            LoopModel::Preisach => {
+                p.preisach.ms_a_per_m = v[0] as f32;
+                p.preisach.coercive_a_per_m = v[1] as f32;
+                p.preisach.spread_a_per_m = v[2] as f32;
+                p.magnetostriction.ms_a_per_m = v[0] as f32;
+            }
+        }
+        p
+    }
+}
+
+/// Fits `model` to the loops jointly.
+pub fn fit(model: LoopModel, files: &[LoopFile], opts: SearchOptions) -> Result<LoopFit> {
+    let h_max = files.iter().flat_map(|f| f.h.iter()).fold(0.0f64, |a, v| a.max(v.abs()));
+    let m_max = files.iter().flat_map(|f| f.magnetization()).fold(0.0f64, |a, v| a.max(v.abs()));
+    if !(h_max > 0.0 && m_max > 0.0) {
+        bail!("the loop has no field or no magnetization excursion");
+    }
+    let bounds = model.bounds(h_max, m_max);
+    let targets: Vec<Vec<f64>> = files.iter().map(|f| f.value.clone()).collect();
+    let cost = |p: &[f64]| -> f64 {
+        let mut sum = 0.0;
+        for (f, t) in files.iter().zip(&targets) {
+            match run(model, p, &f.h, h_max) {
+                Ok(m) => {
+                    let e = nrmse(t, &f.channel_from_m(&m));
+                    sum += e * e;
+                }
+                Err(_) => return 10.0,
+            }
+        }
+        sum / files.len() as f64
+    };
+    let (best, evaluations) = minimize(&bounds, &cost, opts);
+    let mut warnings = Vec::new();
+    let mut per_file = Vec::new();
+    for f in files {
+        match run(model, &best, &f.h, h_max) {
+            Ok(m) => per_file.push(nrmse(&f.value, &f.channel_from_m(&m))),
+            Err(RunError(e)) => {
+                warnings
+                    .push(format!("{}: the model integration failed at the best parameters: {e}", f.name));
+                per_file.push(f64::NAN);
+            }
+        }
+    }
+    let params: Vec<(&'static str, f64)> = bounds.iter().map(|b| b.name).zip(best.iter().copied()).collect();
+    for (b, v) in bounds.iter().zip(&best) {
+        if b.at_edge(*v) {
+            warnings.push(format!(
+                "`{}` = {v:.4e} ended at the edge of its search range [{:.3e}, {:.3e}]",
+                b.name, b.lo, b.hi
+            ));
+        }
+    }
+    if model == LoopModel::JilesAtherton {
+        let (ms, a, alpha) = (best[0], best[1], best[2]);
+        if alpha * ms / (3.0 * a) >= 1.0 {
+            warnings.push(format!(
+                "J–A region α·M_s/(3a) = {:.2} ≥ 1: the mean field makes the anhysteretic curve multivalued; \
+                 the loop there is an artefact of the integration limits, not physics",
+                alpha * ms / (3.0 * a)
+            ));
+        }
+    }
+    Ok(LoopFit { model, params, nrmse: per_file, evaluations, warnings })
+}
+
+/// The loop chart of one file: measured and modelled, H in kA/m.
+pub fn chart(f: &LoopFile, m: &[f64], label: &str) -> crate::plots::Chart {
+    use crate::plots::{Chart, Series};
+    let modelled = f.channel_from_m(m);
+    let (unit, scale) = match f.channel {
+        LoopChannel::FluxDensity => ("flux density B [T]", 1.0),
+        LoopChannel::Magnetization => ("magnetization M [kA/m]", 1e-3),
+    };
+    Chart {
+        title: format!("{} — {label}", f.name),
+        x_label: "field H [kA/m]".into(),
+        y_label: unit.into(),
+        series: vec![
+            Series {
+                label: "measured".into(),
+                points: f.h.iter().zip(&f.value).map(|(h, v)| (h * 1e-3, v * scale)).collect(),
+                color: 0,
+            },
+            Series {
+                label: format!("model {label}"),
+                points: f.h.iter().zip(&modelled).map(|(h, v)| (h * 1e-3, v * scale)).collect(),
+                color: 1,
+            },
+        ],
+    }
+}
+
+/// A self-contained HTML page for a loop fit: parameters, warnings, per-file error, loops
+/// overlaid, and coercivity, remanence and largest |M| side by side.
+pub fn html(spec: &str, fit: &LoopFit, files: &[LoopFile]) -> Result<String> {
+    use std::fmt::Write as _;
+    let h_max = files.iter().flat_map(|f| f.h.iter()).fold(0.0f64, |a, v| a.max(v.abs()));
+    let mut h = String::new();
+    let _ = write!(
+        h,
+        "<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>gma loop fit — {spec}</title>\
+         <style>body{{font-family:system-ui,sans-serif;max-width:1000px;margin:2em auto}}table{{border-collapse:collapse}}\
+         td,th{{border:1px solid #ccc;padding:4px 8px;text-align:right}}td.l{{text-align:left}}.w{{color:#b00}}</style>\
+         </head><body><h1>Magnetization loop fit — <code>{spec}</code></h1><p>{} evaluations.</p><table><tr><th>parameter</th><th>value</th></tr>",
+        fit.evaluations
+    );
+    for (n, v) in &fit.params {
+        let _ = write!(h, "<tr><td class=l>{n}</td><td>{v:.5e}</td></tr>");
+    }
+    h.push_str("</table>");
+    for w in &fit.warnings {
+        let _ = write!(h, "<p class=w>warning: {}</p>", w.replace('<', "&lt;"));
+    }
+    for (f, e) in files.iter().zip(&fit.nrmse) {
+        let m =
+            run(fit.model, &fit.values(), &f.h, h_max).map_err(|e| anyhow::anyhow!("{}: {}", f.name, e.0))?;
+        let (a, b) = (features(&f.h, &f.magnetization()), features(&f.h, &m));
+        let _ = write!(
+            h,
+            "<h2>{}</h2><p>NRMSE {:.3} % ({})</p><table><tr><th></th><th>measured</th><th>model</th></tr>\
+             <tr><td class=l>coercivity H_c [A/m]</td><td>{:.4e}</td><td>{:.4e}</td></tr>\
+             <tr><td class=l>remanence M_r [A/m]</td><td>{:.4e}</td><td>{:.4e}</td></tr>\
+             <tr><td class=l>largest |M| [A/m]</td><td>{:.4e}</td><td>{:.4e}</td></tr></table>{}",
+            f.name.replace('<', "&lt;"),
+            e * 100.0,
+            f.channel.name(),
+            a.coercivity_a_per_m,
+            b.coercivity_a_per_m,
+            a.remanence_a_per_m,
+            b.remanence_a_per_m,
+            a.max_magnetization_a_per_m,
+            b.max_magnetization_a_per_m,
+            crate::plots::svg(&chart(f, &m, spec), (900, 520))?
+        );
+    }
+    h.push_str("</body></html>");
+    Ok(h)
+}

@@ -1,0 +1,99 @@
+//! Magnetization-loop fits (issue 7): loops generated from known J–A parameters of three kinds
+//! of material, full loops and single descending branches, with noise, fitted back.
+
+use host_sim::loops::{self, LoopChannel, LoopFile, LoopModel};
+use host_sim::search::SearchOptions;
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+
+struct Material {
+    name: &'static str,
+    /// M_s, a, α, k, c.
+    truth: [f64; 5],
+    h_max: f64,
+}
+
+const MATERIALS: [Material; 3] = [
+    Material { name: "soft iron-like", truth: [1.3e6, 150.0, 2e-4, 120.0, 0.2], h_max: 3000.0 },
+    Material { name: "Terfenol-D (002 rod 1)", truth: [6.0e5, 6512.0, -0.035, 4000.0, 0.2], h_max: 1.2e5 },
+    Material { name: "permanent-magnet-like", truth: [9.0e5, 4.0e4, 0.05, 3.0e5, 0.05], h_max: 1.2e6 },
+];
+
+fn loop_file(m: &Material, branch_only: bool, seed: u64) -> LoopFile {
+    // A full major loop (cosine: starts and ends at +H_max, denser near the tips) or one
+    // descending branch, 300 points.
+    let n = 300;
+    let h: Vec<f64> = (0..=n)
+        .map(|k| {
+            let u = k as f64 / n as f64;
+            m.h_max
+                * if branch_only {
+                    (std::f64::consts::PI * u).cos()
+                } else {
+                    (2.0 * std::f64::consts::PI * u).cos()
+                }
+        })
+        .collect();
+    let clean = loops::run(LoopModel::JilesAtherton, &m.truth, &h, m.h_max).unwrap();
+    let range = clean.iter().fold(f64::MIN, |a, &v| a.max(v)) - clean.iter().fold(f64::MAX, |a, &v| a.min(v));
+    let noise = Normal::new(0.0, 0.002 * range).unwrap();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let value = clean.iter().map(|v| v + noise.sample(&mut rng)).collect();
+    LoopFile {
+        name: format!("{}{}", m.name, if branch_only { " (branch)" } else { "" }),
+        h,
+        value,
+        channel: LoopChannel::Magnetization,
+    }
+}
+
+#[test]
+fn jiles_atherton_is_recovered_from_loops_of_three_materials() {
+    // 0.2 % noise; the fits reach that floor (NRMSE ≈ 0.19 %) on every case.
+    let names = ["M_s", "a", "alpha", "k", "c"];
+    let mut failures = Vec::new();
+    for m in &MATERIALS {
+        for branch in [false, true] {
+            let f = loop_file(m, branch, 5);
+            let t = std::time::Instant::now();
+            let fit =
+                loops::fit(LoopModel::JilesAtherton, std::slice::from_ref(&f), SearchOptions::default())
+                    .unwrap();
+            let v = fit.values();
+            let errs: Vec<f64> = v.iter().zip(&m.truth).map(|(g, w)| ((g - w) / w).abs()).collect();
+            println!(
+                "{:40} NRMSE {:.3} %, {} evaluations, {:.1} s; errors: {}{}",
+                f.name,
+                fit.nrmse[0] * 100.0,
+                fit.evaluations,
+                t.elapsed().as_secs_f64(),
+                names
+                    .iter()
+                    .zip(&errs)
+                    .map(|(n, e)| format!("{n} {:.1} %", e * 100.0))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                if fit.warnings.is_empty() {
+                    String::new()
+                } else {
+                    format!(" — {}", fit.warnings.join("; "))
+                }
+            );
+            if fit.nrmse[0] > 0.01 {
+                failures.push(format!("{}: NRMSE {:.2} %", f.name, fit.nrmse[0] * 100.0));
+            }
+            // Identifiable: M_s and a from any branch, k from a full loop (both branches pin the
+            // coercivity). c and α trade off against k and a within the noise of one loop, and k
+            // from a single branch is weakly determined: reported above, not asserted.
+            let identifiable: &[usize] = if branch { &[0, 1] } else { &[0, 1, 3] };
+            {
+                for &i in identifiable {
+                    if errs[i] > 0.05 {
+                        failures.push(format!("{}: {} off by {:.1} %", f.name, names[i], errs[i] * 100.0));
+                    }
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
