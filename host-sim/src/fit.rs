@@ -438,10 +438,21 @@ pub fn fit_from(
 
     // Local: Nelder–Mead from the two best seeds (in parallel), each run twice: a simplex of 5 %
     // of each range, then a fresh 1 % simplex at its result (restarts undo collapsed simplices).
+    // The first, coarse simplex runs on the first half of long files (at least 8000 samples),
+    // the second on everything.
+    let halves: Vec<Recording> = files.iter().map(|r| r.head(8000.max(r.len() / 2))).collect();
     let local =
         |(base, start, _): &(ActuatorParams, Vec<f64>, f64)| -> Result<(ActuatorParams, Vec<f64>, f64)> {
             let mut best = start.clone();
-            for step in [0.05, 0.01] {
+            for (step, data) in [(0.05, &halves[..]), (0.01, files)] {
+                let problem = |base: ActuatorParams| Problem {
+                    spec,
+                    base,
+                    free: &free,
+                    files: data,
+                    evals: &evals,
+                    bar: &bar,
+                };
                 let mut simplex = vec![best.clone()];
                 for i in 0..d {
                     let mut v = best.clone();
