@@ -52,6 +52,33 @@ impl Plant {
         }
     }
 
+    /// The actuator model at the integration step (delay scaled to keep its time).
+    fn fine_model(&self) -> Result<(Actuator, f64)> {
+        if self.oversample == 0 {
+            bail!("oversample must be ≥ 1");
+        }
+        let fine_dt = self.params.dt_s as f64 / self.oversample as f64;
+        let mut fine = self.params;
+        fine.dt_s = fine_dt as f32;
+        let delay = self.params.delay_samples as u32 * self.oversample;
+        fine.delay_samples = u16::try_from(delay).context("delay too long")?;
+        Ok((Actuator::new(self.spec, &fine).context("plant parameters")?, fine_dt))
+    }
+
+    /// The plant stepped one recording period at a time under a drive the caller holds over the
+    /// period (a controller's output), for closed-loop tests. No sensor noise.
+    pub fn stepper(&self) -> Result<PlantStepper> {
+        let (model, _) = self.fine_model()?;
+        let state = model.rest_state();
+        Ok(PlantStepper {
+            displacement_m: state.mech.displacement_m as f64,
+            current_a: 0.0,
+            model,
+            state,
+            oversample: self.oversample,
+        })
+    }
+
     /// Records `duration_s` of the response to `exc` (the drive is the command [V] when the
     /// plant has an amplifier, else the coil current [A]). `seed` fixes the noise.
     pub fn record(&self, name: &str, exc: &Excitation, duration_s: f64, seed: u64) -> Result<Recording> {
@@ -59,16 +86,8 @@ impl Plant {
         if !(duration_s.is_finite() && duration_s > 0.0) {
             bail!("duration must be > 0 s, got {duration_s}");
         }
-        if self.oversample == 0 {
-            bail!("oversample must be ≥ 1");
-        }
+        let (model, fine_dt) = self.fine_model()?;
         let dt = self.params.dt_s as f64;
-        let fine_dt = dt / self.oversample as f64;
-        let mut fine = self.params;
-        fine.dt_s = fine_dt as f32;
-        let delay = self.params.delay_samples as u32 * self.oversample;
-        fine.delay_samples = u16::try_from(delay).context("delay too long")?;
-        let model = Actuator::new(self.spec, &fine).context("plant parameters")?;
         let n = (duration_s / dt).round() as usize;
         let mut rec = Recording::with_time(name, n, dt);
         let voltage = model.input_is_voltage();
@@ -135,6 +154,37 @@ impl Plant {
         }
         rec.displacement_um = Some(disp);
         Ok(rec)
+    }
+}
+
+/// A plant advanced period by period (see [`Plant::stepper`]).
+pub struct PlantStepper {
+    model: Actuator,
+    state: model_core::ActuatorState,
+    oversample: u32,
+    displacement_m: f64,
+    current_a: f64,
+}
+
+impl PlantStepper {
+    /// Coil current [A] now.
+    pub fn current_a(&self) -> f64 {
+        self.current_a
+    }
+
+    /// Displacement [µm] now (the plant's absolute value).
+    pub fn displacement_um(&self) -> f64 {
+        self.displacement_m * 1e6
+    }
+
+    /// Holds `drive` (command [V] with an amplifier, else current [A]) for one recording period.
+    pub fn step(&mut self, drive: f64) -> Result<()> {
+        for _ in 0..self.oversample {
+            let o = self.model.step(&mut self.state, drive as f32).context("plant input")?;
+            self.displacement_m = o.displacement_m as f64;
+            self.current_a = o.current_a as f64;
+        }
+        Ok(())
     }
 }
 
