@@ -321,7 +321,7 @@ pub fn diagnose(
             Ok((f, after)) => (Some(f), after),
             Err(_) => (None, before),
         };
-        let cut = before / after.max(1e-12);
+        let cut = if before > 0.0 && after > 0.0 { before / after } else { 1.0 };
         let evidence = format!(
             "{} explains {:.0} % of the residual variance; adding it and refitting takes the {} NRMSE from {:.2} % to {:.2} % ({:.1}× {})",
             signature_words(e),

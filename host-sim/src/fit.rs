@@ -33,8 +33,23 @@ pub enum Drive {
 
 /// The drive `spec` uses for `rec`, or why it cannot be simulated.
 pub fn drive_for(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
-    if rec.displacement_um.is_none() {
+    let Some(y) = rec.displacement_um.as_deref() else {
         bail!("{}: no `displacement_um` column: nothing to compare the model with", rec.name);
+    };
+    let span =
+        |v: &[f64]| v.iter().fold(f64::MIN, |a, &b| a.max(b)) - v.iter().fold(f64::MAX, |a, &b| a.min(b));
+    if span(y) <= 0.0 {
+        bail!(
+            "{}: the displacement never changes: there is nothing to fit (sensor unplugged or stuck?)",
+            rec.name
+        );
+    }
+    let drive = rec.current_a.as_deref().or(rec.command_v.as_deref()).unwrap_or_default();
+    if span(drive) <= 0.0 {
+        bail!(
+            "{}: the drive (current_A/command_V) is constant: the model's response cannot be identified",
+            rec.name
+        );
     }
     if spec.has(Effect::AmplifierDynamics) {
         if rec.command_v.is_none() {

@@ -181,6 +181,12 @@ fn malformed_csv_is_refused_with_file_line_and_column() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("bad.csv:3:2") && err.contains("`oops` is not a number"), "{err}");
     assert!(!err.contains("panicked"), "{err}");
+    // Degenerate data is refused with the reason, not fitted to a meaningless 0 %.
+    let flat = dir.path().join("flat.csv");
+    std::fs::write(&flat, "time_s,current_A,displacement_um\n0,1,5\n0.0001,1,5\n0.0002,1,5\n0.0003,1,5\n")
+        .unwrap();
+    let o = gma(&["fit", "--model", "ja", flat.to_str().unwrap()]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("displacement never changes"));
     let missing = dir.path().join("none.csv");
     let o = gma(&["diagnose", "--model", "ja", missing.to_str().unwrap()]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("none.csv"));
