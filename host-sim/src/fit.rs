@@ -95,12 +95,14 @@ fn run_model(
     p.dt_s = rec.dt_s() as f32;
     let model = Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
     let n = rec.len();
-    let input: Vec<f64> = match drive {
-        Drive::Current => rec.current_a.clone().unwrap_or_default(),
+    // Borrowed from the recording (this runs at every fit evaluation); only the ideal amplifier's
+    // scaled command is a new vector.
+    let input: std::borrow::Cow<[f64]> = match drive {
+        Drive::Current => rec.current_a.as_deref().unwrap_or_default().into(),
         Drive::CommandIdeal => {
-            rec.command_v.iter().flatten().map(|u| u * p.amp.gain_a_per_v as f64).collect()
+            rec.command_v.iter().flatten().map(|u| u * p.amp.gain_a_per_v as f64).collect::<Vec<_>>().into()
         }
-        Drive::CommandDynamic => rec.command_v.clone().unwrap_or_default(),
+        Drive::CommandDynamic => rec.command_v.as_deref().unwrap_or_default().into(),
     };
     let mut s = model.rest_state();
     let mut out = Simulation {
@@ -373,7 +375,7 @@ pub fn fit_from(
     // λ_s is solved in closed form at every evaluation (see `evaluate_projected`).
     let free: Vec<FreeParam> = free_params(spec, command_driven)
         .into_iter()
-        .filter(|f| f.name != "magnetostriction.lambda_s")
+        .filter(|f| f.name() != "magnetostriction.lambda_s")
         .collect();
     let d = free.len();
     let particles = 8 + 3 * d;
@@ -496,7 +498,7 @@ pub fn fit_from(
     params.magnetostriction.lambda_s = lambda as f32;
     let fit = evaluate(spec, &params, files)?;
     let mut identified: Vec<(&'static str, f64)> = vec![("magnetostriction.lambda_s", lambda)];
-    identified.extend(free.iter().map(|f| (f.name, (f.get)(&params))));
+    identified.extend(free.iter().map(|f| (f.name(), (f.get)(&params))));
     if delay_scan {
         identified.push(("delay_samples", params.delay_samples as f64));
     }

@@ -11,17 +11,14 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use model_core::{ActuatorParams, Effect, ModelSpec};
 
-/// One identified parameter: its file name, unit, bounds and whether it is searched in log scale.
+use crate::search::Bound;
+
+/// One identified parameter: its bounds and scale ([`Bound`], named as in parameter files,
+/// e.g. `ja.k_a_per_m`) and how to read and write it in a parameter set.
 #[derive(Clone, Copy)]
 pub struct FreeParam {
-    /// Name as in parameter files (`ja.k_a_per_m`).
-    pub name: &'static str,
-    /// Lower bound.
-    pub lo: f64,
-    /// Upper bound.
-    pub hi: f64,
-    /// Search in log scale (positive quantities spanning decades).
-    pub log: bool,
+    /// Name, range and scale.
+    pub bound: Bound,
     /// Reads it from a parameter set.
     pub get: fn(&ActuatorParams) -> f64,
     /// Writes it into a parameter set.
@@ -29,38 +26,26 @@ pub struct FreeParam {
 }
 
 impl FreeParam {
-    /// Maps a value to [0, 1] (clamped).
+    /// Name as in parameter files.
+    pub fn name(&self) -> &'static str {
+        self.bound.name
+    }
+
+    /// Maps a value to [0, 1] (clamped; 0.5 for a value the scale cannot map).
     pub fn to_unit(&self, v: f64) -> f64 {
-        let u = if self.log {
-            (v.ln() - self.lo.ln()) / (self.hi.ln() - self.lo.ln())
-        } else {
-            (v - self.lo) / (self.hi - self.lo)
-        };
-        if u.is_finite() {
-            u.clamp(0.0, 1.0)
-        } else {
-            0.5
-        }
+        self.bound.to_unit(v)
     }
 
     /// Maps [0, 1] back to a value (clamped into the bounds).
     pub fn from_unit(&self, u: f64) -> f64 {
-        let u = u.clamp(0.0, 1.0);
-        if self.log {
-            (self.lo.ln() + u * (self.hi.ln() - self.lo.ln())).exp()
-        } else {
-            self.lo + u * (self.hi - self.lo)
-        }
+        self.bound.from_unit(u)
     }
 }
 
 macro_rules! param {
     ($name:literal, $lo:expr, $hi:expr, $log:expr, $($field:ident).+) => {
         FreeParam {
-            name: $name,
-            lo: $lo,
-            hi: $hi,
-            log: $log,
+            bound: Bound { name: $name, lo: $lo, hi: $hi, log: $log },
             get: |p| p.$($field).+ as f64,
             set: |p, v| p.$($field).+ = v as f32,
         }

@@ -34,6 +34,26 @@ impl Bound {
         Self { name, lo, hi, log: true }
     }
 
+    /// Position of `v` in the range, 0 at `lo` and 1 at `hi` (unclamped; NaN when the scale
+    /// cannot map it).
+    fn unit_raw(&self, v: f64) -> f64 {
+        if self.log {
+            (v.ln() - self.lo.ln()) / (self.hi.ln() - self.lo.ln())
+        } else {
+            (v - self.lo) / (self.hi - self.lo)
+        }
+    }
+
+    /// Value → [0, 1] (clamped; 0.5 for a value the scale cannot map).
+    pub fn to_unit(&self, v: f64) -> f64 {
+        let u = self.unit_raw(v);
+        if u.is_finite() {
+            u.clamp(0.0, 1.0)
+        } else {
+            0.5
+        }
+    }
+
     /// [0, 1] → value (clamped).
     pub fn from_unit(&self, u: f64) -> f64 {
         let u = u.clamp(0.0, 1.0);
@@ -46,12 +66,7 @@ impl Bound {
 
     /// Whether `v` sits within 0.5 % of the range's ends.
     pub fn at_edge(&self, v: f64) -> bool {
-        let u = if self.log {
-            (v.ln() - self.lo.ln()) / (self.hi.ln() - self.lo.ln())
-        } else {
-            (v - self.lo) / (self.hi - self.lo)
-        };
-        !(0.005..=0.995).contains(&u)
+        !(0.005..=0.995).contains(&self.unit_raw(v))
     }
 }
 
