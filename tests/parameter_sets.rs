@@ -43,3 +43,31 @@ fn a_corrupt_parameter_set_is_refused_by_name() {
     // Stages the spec does not use are not validated: the same set builds a linear model.
     assert!(Actuator::new(ModelSpec::LINEAR, &p).is_ok());
 }
+
+/// Found by the model_step fuzz target (tests/fuzz): λ_s = 3.4e38, M_s = 3.6e10, a 3.9e28 A/V
+/// amplifier, a 2.4e-38 A/m field scale and a 3.6e5 Ω coil all passed validation and stepped to
+/// inf/NaN. Each is now refused by name, so a valid set steps to finite outputs.
+#[test]
+fn sets_that_overflowed_are_refused_by_name() {
+    use model_core::ParamError;
+    let spec = ModelSpec::parse("amp+ja+thermal").unwrap();
+    let demo = ActuatorParams::TERFENOL_DEMO;
+    let mut cases = [
+        (demo, "magnetostriction.lambda_s"),
+        (demo, "ja.ms_a_per_m"),
+        (demo, "amp.gain_a_per_v"),
+        (demo, "ja.a_a_per_m"),
+        (demo, "thermal.coil_resistance_ohm"),
+    ];
+    cases[0].0.magnetostriction.lambda_s = 3.4e38;
+    cases[1].0.ja.ms_a_per_m = 3.6e10;
+    cases[2].0.amp.gain_a_per_v = 3.9e28;
+    cases[3].0.ja.a_a_per_m = 2.4e-38;
+    cases[4].0.thermal.coil_resistance_ohm = 3.6e5;
+    for (p, name) in cases {
+        match Actuator::new(spec, &p) {
+            Err(ParamError::OutOfRange(n, _)) => assert_eq!(n, name),
+            other => panic!("{name}: {other:?}"),
+        }
+    }
+}

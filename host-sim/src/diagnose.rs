@@ -16,7 +16,7 @@
 //!    the data cannot separate the effects: the diagnosis says so and names the stage nearest
 //!    the drive.
 
-use anyhow::Result;
+use anyhow::{bail, Result};
 use model_core::{Effect, ModelSpec};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -239,6 +239,29 @@ fn whiteness(sigs: &[Signals]) -> f64 {
     outside as f64 / total.max(1) as f64
 }
 
+/// Direction reversals of `x`, ignoring wiggles below 10 % of its span (noise).
+pub fn reversals(x: &[f64]) -> usize {
+    let (lo, hi) = x.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    let band = 0.1 * (hi - lo);
+    let (mut n, mut dir, mut extreme) = (0, 0.0, x.first().copied().unwrap_or(0.0));
+    for &v in x {
+        let d = v - extreme;
+        if dir == 0.0 {
+            if d.abs() > band {
+                dir = d.signum();
+                extreme = v;
+            }
+        } else if d * dir > 0.0 {
+            extreme = v;
+        } else if -d * dir > band {
+            n += 1;
+            dir = -dir;
+            extreme = v;
+        }
+    }
+    n
+}
+
 /// Diagnoses `spec` on `fit_files` (scored on `val_files` when given).
 pub fn diagnose(
     spec: ModelSpec,
@@ -247,6 +270,19 @@ pub fn diagnose(
     val_files: &[Recording],
     opts: FitOptions,
 ) -> Result<Diagnosis> {
+    for rec in fit_files {
+        let drive = rec.current_a.as_deref().or(rec.command_v.as_deref()).unwrap_or_default();
+        let n = reversals(drive);
+        if n < 2 {
+            bail!(
+                "{}: the drive covers less than one cycle ({n} reversal{} in {:.1} ms): a diagnosis compares \
+                 both branches of the loop, so record at least one full period of the excitation",
+                rec.name,
+                if n == 1 { "" } else { "s" },
+                rec.duration_s() * 1e3
+            );
+        }
+    }
     let base = fit::fit(spec, init, fit_files, opts)?;
     let score_files = if val_files.is_empty() { fit_files } else { val_files };
     let before = evaluate(spec, &base.params, score_files)?.mean_nrmse();

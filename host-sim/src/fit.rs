@@ -496,7 +496,17 @@ pub fn fit_from(
     bar.finish_and_clear();
     let (_, lambda) = evaluate_projected(spec, &params, files)?;
     params.magnetostriction.lambda_s = lambda as f32;
+    // Never hand back NaN or an invalid set: say the fit failed instead.
+    model_core::Actuator::new(spec, &params).map_err(|e| {
+        anyhow::anyhow!(
+            "the fit ended on an invalid parameter set ({e}; λ_s = {lambda:e}): the model cannot follow \
+             these recordings (check the drive and displacement columns and their units)"
+        )
+    })?;
     let fit = evaluate(spec, &params, files)?;
+    if !fit.mean_nrmse().is_finite() {
+        bail!("the fit found no parameter set whose simulation stays finite on these recordings");
+    }
     let mut identified: Vec<(&'static str, f64)> = vec![("magnetostriction.lambda_s", lambda)];
     identified.extend(free.iter().map(|f| (f.name(), (f.get)(&params))));
     if delay_scan {

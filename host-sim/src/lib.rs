@@ -13,5 +13,6 @@ pub mod plots;
 pub mod record;
 pub mod recording;
 pub mod report;
+pub mod rig;
 pub mod search;
 pub mod simulate;

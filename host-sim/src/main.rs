@@ -33,24 +33,32 @@ struct Cli {
 enum Command {
     /// The main job on SIMULATED data, in under a minute: a rig with hidden effects, a diagnosis
     /// from a baseline model, the named effects added one by one, the error falling, an HTML report.
+    #[command(allow_negative_numbers = true)]
     Demo(DemoArgs),
     /// Identify a model's parameters from one or more recordings jointly.
+    #[command(allow_negative_numbers = true)]
     Fit(FitArgs),
     /// Per-file error and plots (loops, time series, residuals) of a model against recordings.
+    #[command(allow_negative_numbers = true)]
     Compare(CompareArgs),
     /// Fit a model, analyse what it leaves unexplained and name the missing effect.
+    #[command(allow_negative_numbers = true)]
     Diagnose(DiagnoseArgs),
     /// Climb the model ladder (diagnose, add the named effect, refit, repeat) and write one
     /// self-contained HTML page.
+    #[command(allow_negative_numbers = true)]
     Report(ReportArgs),
     /// Turn the drive's telemetry stream (COBS frames captured from its UART) into measurement
     /// CSVs; lost and corrupt frames are counted, and every gap starts a new file.
+    #[command(allow_negative_numbers = true)]
     Record(RecordArgs),
     /// Simulate a rig (plant simulator) and write a measurement CSV. SIMULATED data, for tests
     /// and demos.
+    #[command(allow_negative_numbers = true)]
     Simulate(simulate::SimulateArgs),
     /// Natural frequency, damping ratio and step response of the actuator mechanics
     /// (m ÿ + c ẏ + k y = F, 001 eq. 14–15), discretised exactly at the loop rate.
+    #[command(allow_negative_numbers = true)]
     Mechanics {
         /// Moving mass m [kg].
         #[arg(long, default_value_t = 0.1)]
@@ -95,6 +103,35 @@ struct ModelFiles {
     /// Print exactly one JSON object on stdout (human text goes to stderr).
     #[arg(long)]
     json: bool,
+    /// Samples kept per file (memory ≈ 50 bytes per sample); longer files are still read and
+    /// checked to the end, and the first this many samples are used, with a warning.
+    #[arg(long, default_value_t = DEFAULT_MAX_SAMPLES, value_name = "N")]
+    max_samples: usize,
+}
+
+/// 200 s at the board's 10 kHz: about 100 MB for a recording with every column.
+const DEFAULT_MAX_SAMPLES: usize = 2_000_000;
+
+/// Reads recordings as streams, keeping at most `max_samples` of each and saying so.
+fn read_recordings(paths: &[PathBuf], max_samples: usize) -> Result<Vec<Recording>> {
+    if max_samples < 3 {
+        bail!("--max-samples must be at least 3, got {max_samples}");
+    }
+    paths
+        .iter()
+        .map(|p| {
+            let (r, rows) = Recording::read_window(p, max_samples)?;
+            if rows > r.len() as u64 {
+                eprintln!(
+                    "gma: warning: {}: {rows} samples; using the first {} ({:.1} s); raise --max-samples to use more",
+                    r.name,
+                    r.len(),
+                    r.duration_s()
+                );
+            }
+            Ok(r)
+        })
+        .collect()
 }
 
 /// What the shared options resolve to: spec, start parameters, fit files, validation files, options.
@@ -103,12 +140,12 @@ type Loaded = (model_core::ModelSpec, model_core::ActuatorParams, Vec<Recording>
 impl ModelFiles {
     fn load(&self) -> Result<Loaded> {
         let spec = params::parse_spec(&self.model)?;
-        let init = params::load(self.params.as_deref())?;
+        let init = params::load(self.params.as_deref(), spec)?;
         if !(self.effort.is_finite() && self.effort > 0.0 && self.effort <= 20.0) {
             bail!("--effort must be in (0, 20], got {}", self.effort);
         }
-        let read = |v: &[PathBuf]| v.iter().map(|p| Recording::read(p)).collect::<Result<Vec<_>>>();
-        let (fit_files, val_files) = (read(&self.files)?, read(&self.val)?);
+        let (fit_files, val_files) =
+            (read_recordings(&self.files, self.max_samples)?, read_recordings(&self.val, self.max_samples)?);
         for r in fit_files.iter().chain(&val_files) {
             fit::drive_for(spec, r)?;
         }
@@ -147,6 +184,9 @@ struct CompareArgs {
     /// Print exactly one JSON object on stdout.
     #[arg(long)]
     json: bool,
+    /// Samples kept per file (see `gma fit --help`).
+    #[arg(long, default_value_t = DEFAULT_MAX_SAMPLES, value_name = "N")]
+    max_samples: usize,
 }
 
 #[derive(Args)]
@@ -169,7 +209,8 @@ struct RecordArgs {
     /// The captured byte stream (`-` for stdin), e.g. `cat /dev/ttyACM0 > stream.bin`.
     #[arg(long, short)]
     input: PathBuf,
-    /// Output CSV (segments after gaps get `-2`, `-3`, … suffixes).
+    /// Output CSV (segments after gaps get `-2`, `-3`, … suffixes; each file appears only when
+    /// its segment is complete).
     #[arg(long, short)]
     out: PathBuf,
     /// Control tick [s] (the firmware's: 1e-4 s at 10 kHz).
@@ -216,29 +257,58 @@ fn run(cli: Cli) -> Result<()> {
         Command::Report(a) => run_report(&a),
         Command::Demo(a) => run_demo(&a),
         Command::Record(a) => {
-            let bytes = host_sim::record::read_stream(&a.input)?;
-            let r = host_sim::record::record(&bytes, &a.out, a.tick_s)?;
+            let stream = host_sim::record::open_stream(&a.input)?;
+            let r = host_sim::record::record(stream, &a.out, a.tick_s)
+                .with_context(|| format!("{}", a.input.display()))?;
             let files: Vec<String> = r.files.iter().map(|p| p.display().to_string()).collect();
             say!(
                 a.json,
-                "{} frames, {} lost (sequence gaps), {} corrupt; wrote {}",
+                "{} frames, {} lost (sequence gaps), {} corrupt, {} invalid, {} restarts; wrote {}",
                 r.frames,
                 r.lost,
                 r.corrupt,
+                r.invalid,
+                r.restarts,
                 files.join(", ")
             );
-            if r.lost > 0 || r.corrupt > 0 {
-                eprintln!("gma: warning: the stream lost {} frames and had {} corrupt ones; each gap starts a new file", r.lost, r.corrupt);
+            if r.lost + r.corrupt + r.invalid + r.restarts > 0 {
+                eprintln!(
+                    "gma: warning: {} frames lost, {} corrupt chunks, {} frames with non-finite values, {} restarts; \
+                     none of them written, and each gap starts a new file",
+                    r.lost, r.corrupt, r.invalid, r.restarts
+                );
+            }
+            if r.short > 0 {
+                eprintln!(
+                    "gma: warning: {} frames in segments shorter than 3 frames were not written",
+                    r.short
+                );
             }
             if a.json {
                 println!(
                     "{}",
-                    json!({"frames": r.frames, "lost": r.lost, "corrupt": r.corrupt, "files": files})
+                    json!({"frames": r.frames, "lost": r.lost, "corrupt": r.corrupt, "invalid": r.invalid,
+                           "restarts": r.restarts, "short": r.short, "files": files})
                 );
             }
             Ok(())
         }
         Command::Mechanics { mass_kg, damping_n_s_per_m, stiffness_n_per_m, sample_rate_hz, force_n } => {
+            for (name, v) in [
+                ("--mass-kg", mass_kg),
+                ("--stiffness-n-per-m", stiffness_n_per_m),
+                ("--sample-rate-hz", sample_rate_hz),
+            ] {
+                if !(v.is_finite() && v > 0.0) {
+                    bail!("{name} must be a positive number, got {v}");
+                }
+            }
+            if !(damping_n_s_per_m.is_finite() && damping_n_s_per_m >= 0.0) {
+                bail!("--damping-n-s-per-m must be ≥ 0, got {damping_n_s_per_m}");
+            }
+            if !force_n.is_finite() {
+                bail!("--force-n must be a finite number, got {force_n}");
+            }
             let p = MassSpringDamper { mass_kg, damping_n_s_per_m, stiffness_n_per_m };
             let zoh = SecondOrderZoh::new(p, 1.0 / sample_rate_hz).context("mechanics parameters")?;
             println!("natural frequency f_n = {:.1} Hz", p.natural_frequency_hz());
@@ -286,8 +356,12 @@ fn file_rows(
 fn loop_files(paths: &[PathBuf], val: &[PathBuf]) -> Result<bool> {
     let mut kinds = Vec::new();
     for p in paths.iter().chain(val) {
-        let text = std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))?;
-        kinds.push(loops::looks_like_loop(&text));
+        // The header decides; never read a whole (possibly huge) file for it.
+        let mut head = Vec::with_capacity(4096);
+        std::fs::File::open(p)
+            .and_then(|f| std::io::Read::read_to_end(&mut std::io::Read::take(f, 4096), &mut head))
+            .with_context(|| format!("{}: cannot read", p.display()))?;
+        kinds.push(loops::looks_like_loop(&String::from_utf8_lossy(&head)));
     }
     if kinds.iter().any(|k| *k) && !kinds.iter().all(|k| *k) {
         bail!("mixing magnetization-loop files and displacement recordings in one fit: fit them separately (a loop fit's --params-out can seed the displacement fit via --params)");
@@ -341,7 +415,7 @@ fn run_loop_fit(a: &FitArgs) -> Result<()> {
         .filter(|w| w.contains("integration failed") || w.contains("multivalued"))
         .collect();
     if let Some(out) = &a.params_out {
-        let base = params::load(a.mf.params.as_deref())?;
+        let base = params::load(a.mf.params.as_deref(), spec)?;
         let header =
             format!("gma fit --model {spec} on loop files {}", host_sim::recording::names(&a.mf.files));
         write_atomic(out, params::to_toml(&res.apply_to(&base), &header)?.as_bytes())?;
@@ -427,8 +501,7 @@ fn run_fit(a: &FitArgs) -> Result<()> {
 
 fn run_compare(a: &CompareArgs) -> Result<()> {
     let spec = params::parse_spec(&a.model)?;
-    let p = params::load(a.params.as_deref())?;
-    model_core::Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("parameter set: {e}"))?;
+    let p = params::load(a.params.as_deref(), spec)?;
     std::fs::create_dir_all(&a.out_dir).with_context(|| format!("cannot create {}", a.out_dir.display()))?;
     let mut rows = Vec::new();
     let rung = report::Rung {
@@ -452,8 +525,12 @@ fn run_compare(a: &CompareArgs) -> Result<()> {
         return compare_loops(a, spec, &p);
     }
     let mut total = 0.0;
-    for path in &a.files {
-        let rec = Recording::read(path)?;
+    // Every file is checked before the first plot is written: a bad file leaves no partial output.
+    let recs = read_recordings(&a.files, a.max_samples)?;
+    for r in &recs {
+        fit::drive_for(spec, r)?;
+    }
+    for (path, rec) in a.files.iter().zip(recs) {
         let sim = fit::simulate(spec, &p, &rec)?;
         let sc = fit::score(spec, &rec, &sim);
         total += sc.nrmse;

@@ -9,7 +9,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use model_core::{ActuatorParams, Effect, ModelSpec};
+use model_core::{Actuator, ActuatorParams, Effect, ModelSpec};
 
 use crate::search::Bound;
 
@@ -103,16 +103,57 @@ pub fn free_params(spec: ModelSpec, command_driven: bool) -> Vec<FreeParam> {
 /// Largest sensor delay searched [samples].
 pub const MAX_DELAY_SEARCH: u16 = 16;
 
-/// Loads a parameter file (TOML as `--params-out` writes), or the built-in demo set.
-pub fn load(path: Option<&Path>) -> Result<ActuatorParams> {
+/// Loads a parameter file (TOML as `--params-out` writes), or the built-in demo set, and checks
+/// it for `spec` (every stage the spec uses must be valid).
+pub fn load(path: Option<&Path>, spec: ModelSpec) -> Result<ActuatorParams> {
     match path {
         None => Ok(ActuatorParams::TERFENOL_DEMO),
         Some(p) => {
-            let text = std::fs::read_to_string(p).with_context(|| format!("{}: cannot read", p.display()))?;
-            toml::from_str(&text)
-                .map_err(|e| anyhow::anyhow!("{}: not a valid parameter file: {e}", p.display()))
+            let name = p.display().to_string();
+            let bytes = std::fs::read(p).with_context(|| format!("{name}: cannot read"))?;
+            let text = std::str::from_utf8(&bytes).map_err(|e| {
+                let line = bytes[..e.valid_up_to()].iter().filter(|b| **b == b'\n').count() + 1;
+                anyhow::anyhow!("{name}:{line}: not UTF-8 text (not a parameter file?)")
+            })?;
+            parse(&name, text, spec)
         }
     }
+}
+
+/// Parses and checks parameter-file text; errors name the file, line and parameter.
+pub fn parse(file: &str, text: &str, spec: ModelSpec) -> Result<ActuatorParams> {
+    let p: ActuatorParams = toml::from_str(text).map_err(|e| toml_error(file, text, &e))?;
+    Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("{file}: {e} (checked for model `{spec}`)"))?;
+    Ok(p)
+}
+
+/// `file:line:column: message`, naming the parameter a missing field belongs to.
+fn toml_error(file: &str, text: &str, e: &toml::de::Error) -> anyhow::Error {
+    let msg = e.message().trim();
+    let Some(span) = e.span() else { return anyhow::anyhow!("{file}: not a valid parameter file: {msg}") };
+    let before = &text[..span.start.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    let at = text.get(span.clone()).unwrap_or("").trim();
+    // A missing field is reported at its table's header: name it as `table.field`.
+    if let Some(field) = msg.strip_prefix("missing field `").and_then(|m| m.strip_suffix('`')) {
+        let table = at.strip_prefix('[').and_then(|t| t.strip_suffix(']'));
+        let full = table.map_or(field.to_string(), |t| format!("{t}.{field}"));
+        return anyhow::anyhow!("{file}:{line}: parameter `{full}` is missing");
+    }
+    match key_at(before) {
+        Some(key) => anyhow::anyhow!("{file}:{line}:{col}: parameter `{key}`: {msg} (found `{at}`)"),
+        None => anyhow::anyhow!("{file}:{line}:{col}: {msg} (at `{at}`)"),
+    }
+}
+
+/// The dotted key (`table.key`) whose value starts where `before` ends, if that is a value.
+fn key_at(before: &str) -> Option<String> {
+    let (head, line) = before.rsplit_once('\n').unwrap_or(("", before));
+    let key = line.split_once('=')?.0.trim();
+    let table = head.lines().rev().map(str::trim).find(|l| l.starts_with('['));
+    let table = table.map(|t| t.trim_matches(|c| c == '[' || c == ']').trim());
+    Some(table.map_or(key.to_string(), |t| format!("{t}.{key}")))
 }
 
 /// The TOML text of a parameter set, with a header saying where it came from.

@@ -140,8 +140,9 @@ impl Plant {
             for j in 0..self.oversample {
                 let tf = t + j as f64 * fine_dt;
                 let drive = if j == 0 { u } else { drive_at(tf) };
-                let out =
-                    model.step(&mut s, drive as f32).with_context(|| format!("plant input at t = {tf} s"))?;
+                let out = model.step(&mut s, drive as f32).with_context(|| {
+                    format!("plant input at t = {tf:.6} s (is --amplitude or --bias in range?)")
+                })?;
                 y_m = out.displacement_m as f64;
                 i_now = out.current_a as f64;
             }

@@ -3,91 +3,139 @@
 //! gap in the sequence numbers starts a new file, because a recording's time axis must be
 //! uniform (never a silently stitched one).
 
-use std::io::Read;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use gma_control::telemetry::{Decoder, Frame};
-
-use crate::recording::write_atomic;
+use gma_control::telemetry::Decoder;
 
 /// What a stream held.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct RecordSummary {
-    /// Frames decoded.
+    /// Frames decoded (CRC valid).
     pub frames: u64,
     /// Frames missing from the sequence.
     pub lost: u64,
-    /// Corrupt chunks.
+    /// Chunks that failed the COBS, length or CRC check (never written).
     pub corrupt: u64,
+    /// CRC-valid frames carrying a non-finite value (never written; they end a segment).
+    pub invalid: u64,
+    /// Times the sequence restarted (the board was reset).
+    pub restarts: u64,
+    /// Frames in segments too short to be a recording (fewer than 3), counted, not written.
+    pub short: u64,
     /// Files written (one per gap-free segment).
     pub files: Vec<PathBuf>,
 }
 
-fn segment_path(out: &Path, k: usize, segments: usize) -> PathBuf {
-    if segments <= 1 {
+/// The `k`-th segment's file (0-based): `out` itself, then `stem-2.csv`, `stem-3.csv`, …
+fn segment_path(out: &Path, k: usize) -> PathBuf {
+    if k == 0 {
         return out.to_path_buf();
     }
     let stem = out.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "record".into());
     out.with_file_name(format!("{stem}-{}.csv", k + 1))
 }
 
-fn csv(frames: &[Frame], tick_s: f64) -> String {
-    let mut s = String::from("time_s,command_V,current_A,displacement_um,reference_um,faults\n");
-    let t0 = frames.first().map(|f| f.seq).unwrap_or(0);
-    for f in frames {
-        let t = f.seq.wrapping_sub(t0) as f64 * tick_s;
-        s.push_str(&format!(
-            "{t:.7},{},{},{},{},{}\n",
-            f.command_v, f.current_a, f.displacement_um, f.reference_um, f.faults
-        ));
-    }
-    s
+/// The segment being written: a temporary file renamed into place when the segment ends, so an
+/// interrupted run never leaves a half-written CSV under the final name.
+struct Segment {
+    file: std::io::BufWriter<tempfile::NamedTempFile>,
+    first_seq: u32,
+    frames: u64,
 }
 
-/// Decodes `bytes` and writes the segments next to `out`.
-pub fn record(bytes: &[u8], out: &Path, tick_s: f64) -> Result<RecordSummary> {
+/// Streams `input` (COBS frames), writing gap-free segments next to `out`. Memory is bounded
+/// (one frame and one write buffer), so hours of telemetry need no more RAM than seconds.
+pub fn record<R: Read>(mut input: R, out: &Path, tick_s: f64) -> Result<RecordSummary> {
     if !(tick_s.is_finite() && tick_s > 0.0) {
         bail!("--tick-s must be > 0, got {tick_s}");
     }
+    let dir = out.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf();
     let mut d = Decoder::default();
-    let mut segments: Vec<Vec<Frame>> = Vec::new();
-    for &b in bytes {
-        if let Some(x) = d.push(b) {
-            if x.gap > 0 || segments.is_empty() {
-                segments.push(Vec::new());
+    let mut sum = RecordSummary::default();
+    let mut seg: Option<Segment> = None;
+    let finish = |seg: Option<Segment>, sum: &mut RecordSummary| -> Result<()> {
+        let Some(seg) = seg else { return Ok(()) };
+        if seg.frames < 3 {
+            sum.short += seg.frames;
+            return Ok(());
+        }
+        let path = segment_path(out, sum.files.len());
+        let tmp = seg
+            .file
+            .into_inner()
+            .map_err(|e| anyhow::anyhow!("writing {}: {}", path.display(), e.error()))?;
+        crate::recording::persist(tmp, &path)?;
+        sum.files.push(path);
+        Ok(())
+    };
+    let mut buf = vec![0u8; 1 << 16];
+    loop {
+        let n = match input.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(e).context("reading the telemetry stream"),
+        };
+        for &b in &buf[..n] {
+            let Some(x) = d.push(b) else { continue };
+            let f = x.frame;
+            let finite =
+                [f.reference_um, f.command_v, f.current_a, f.displacement_um].iter().all(|v| v.is_finite());
+            if x.gap > 0 || x.restart || !finite {
+                finish(seg.take(), &mut sum)?;
+                sum.restarts += x.restart as u64;
             }
-            segments.last_mut().expect("a segment").push(x.frame);
+            if !finite {
+                sum.invalid += 1;
+                continue;
+            }
+            let s = match &mut seg {
+                Some(s) => s,
+                None => {
+                    let tmp = crate::recording::partial_file(&dir)?;
+                    let mut file = std::io::BufWriter::new(tmp);
+                    file.write_all(b"time_s,command_V,current_A,displacement_um,reference_um,faults\n")?;
+                    seg.insert(Segment { file, first_seq: f.seq, frames: 0 })
+                }
+            };
+            let t = f.seq.wrapping_sub(s.first_seq) as f64 * tick_s;
+            writeln!(
+                s.file,
+                "{t:.7},{},{},{},{},{}",
+                f.command_v, f.current_a, f.displacement_um, f.reference_um, f.faults
+            )?;
+            s.frames += 1;
         }
     }
-    segments.retain(|s| s.len() >= 3);
-    if segments.is_empty() {
-        bail!("no telemetry frames in the stream ({} corrupt chunks)", d.corrupt);
+    finish(seg.take(), &mut sum)?;
+    (sum.frames, sum.lost, sum.corrupt) = (d.frames, d.lost, d.corrupt);
+    if sum.files.is_empty() {
+        bail!(
+            "no telemetry frames in the stream ({} frames, {} corrupt chunks, {} invalid frames); is it the drive's UART capture?",
+            d.frames,
+            d.corrupt,
+            sum.invalid
+        );
     }
-    let mut files = Vec::new();
-    for (k, seg) in segments.iter().enumerate() {
-        let path = segment_path(out, k, segments.len());
-        write_atomic(&path, csv(seg, tick_s).as_bytes())?;
-        files.push(path);
-    }
-    Ok(RecordSummary { frames: d.frames, lost: d.lost, corrupt: d.corrupt, files })
+    Ok(sum)
 }
 
-/// Reads the stream from a file, or stdin for `-`.
-pub fn read_stream(input: &Path) -> Result<Vec<u8>> {
+/// Opens the stream: a file, or stdin for `-`.
+pub fn open_stream(input: &Path) -> Result<Box<dyn Read>> {
     if input == Path::new("-") {
-        let mut v = Vec::new();
-        std::io::stdin().read_to_end(&mut v).context("reading stdin")?;
-        Ok(v)
+        Ok(Box::new(std::io::stdin().lock()))
     } else {
-        std::fs::read(input).with_context(|| format!("{}: cannot read", input.display()))
+        let f = std::fs::File::open(input).with_context(|| format!("{}: cannot read", input.display()))?;
+        Ok(Box::new(f))
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use gma_control::telemetry::MAX_ENCODED;
+    use gma_control::telemetry::{Frame, MAX_ENCODED};
 
     #[test]
     fn gaps_split_files_and_are_counted() {
@@ -107,7 +155,7 @@ mod tests {
         }
         bytes[500] ^= 0x10; // one corrupt frame in the first segment
         let dir = tempfile::tempdir().unwrap();
-        let s = record(&bytes, &dir.path().join("rig.csv"), 1e-4).unwrap();
+        let s = record(&bytes[..], &dir.path().join("rig.csv"), 1e-4).unwrap();
         assert_eq!(s.files.len(), 3, "{s:?}"); // corrupt frame and the 5-frame hole both split
         assert_eq!(s.lost, 6);
         assert_eq!(s.corrupt, 1);

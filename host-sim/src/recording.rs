@@ -2,7 +2,6 @@
 //! columns recognised by name, order free, extra columns ignored. Every problem is reported with
 //! the file, line and column, and nothing is dropped silently.
 
-use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -95,18 +94,32 @@ impl Recording {
         }
     }
 
-    /// Reads and validates a measurement CSV.
+    /// Reads and validates a measurement CSV, all of it.
     pub fn read(path: &Path) -> Result<Self> {
+        Ok(Self::read_window(path, usize::MAX)?.0)
+    }
+
+    /// Reads a measurement CSV as a stream (memory bounded by `max_samples`, not by the file):
+    /// every row is validated, the first `max_samples` are kept. Returns the recording and the
+    /// number of data rows in the file.
+    pub fn read_window(path: &Path, max_samples: usize) -> Result<(Self, u64)> {
         let file = path.display().to_string();
-        let text = std::fs::read(path).with_context(|| format!("{file}: cannot read"))?;
-        Self::parse(&file, &text)
+        let f = std::fs::File::open(path).with_context(|| format!("{file}: cannot read"))?;
+        Self::from_reader(&file, std::io::BufReader::with_capacity(1 << 16, f), max_samples)
     }
 
     /// Parses CSV text; `file` names it in messages.
     pub fn parse(file: &str, text: &[u8]) -> Result<Self> {
-        let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(false).from_reader(text);
-        let headers =
-            rdr.headers().with_context(|| format!("{file}:1: cannot read the header line"))?.clone();
+        Ok(Self::from_reader(file, text, usize::MAX)?.0)
+    }
+
+    /// The streaming reader behind [`Recording::read_window`] and [`Recording::parse`].
+    pub fn from_reader<R: std::io::Read>(file: &str, input: R, max_samples: usize) -> Result<(Self, u64)> {
+        let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(false).from_reader(input);
+        let headers = rdr.headers().map_err(|e| csv_error(file, e))?.clone();
+        if headers.iter().all(|h| h.trim().is_empty()) {
+            bail!("{file}:1: empty file (no header line); expected a header such as `time_s,current_A,displacement_um`");
+        }
         // Map recognised columns to their index; refuse duplicates.
         let mut index: [Option<usize>; COLUMNS.len()] = [None; COLUMNS.len()];
         for (col, h) in headers.iter().enumerate() {
@@ -129,43 +142,39 @@ impl Recording {
         if index[1].is_none() && index[2].is_none() {
             bail!("{file}:1: needs a drive column: `current_A` or `command_V`");
         }
+        let time_col = index[0].unwrap_or(0) + 1;
         let mut cols: [Vec<f64>; COLUMNS.len()] = Default::default();
-        for (row, rec) in rdr.records().enumerate() {
-            let line = row + 2;
-            let rec = rec.map_err(|e| match e.kind() {
-                csv::ErrorKind::UnequalLengths { expected_len, len, .. } => anyhow::anyhow!(
-                    "{file}:{line}: {len} fields, but the header has {expected_len} (a missing or extra comma?)"
-                ),
-                _ => anyhow::anyhow!("{file}:{line}: {e}"),
-            })?;
+        let mut time = TimeCheck::default();
+        let mut rows: u64 = 0;
+        let mut rec = csv::StringRecord::new();
+        let mut values = [0.0; COLUMNS.len()];
+        while rdr.read_record(&mut rec).map_err(|e| csv_error(file, e))? {
+            let line = rec.position().map(|p| p.line()).unwrap_or(rows + 2);
             for (k, idx) in index.iter().enumerate() {
                 let Some(c) = *idx else { continue };
                 let raw = rec.get(c).unwrap_or("").trim();
-                let v: f64 = raw.parse().map_err(|_| {
-                    if raw.is_empty() {
-                        anyhow::anyhow!("{file}:{line}:{}: column `{}` is empty", c + 1, COLUMNS[k])
-                    } else {
-                        anyhow::anyhow!(
-                            "{file}:{line}:{}: column `{}`: `{raw}` is not a number",
-                            c + 1,
-                            COLUMNS[k]
-                        )
-                    }
-                })?;
-                if !v.is_finite() {
-                    bail!("{file}:{line}:{}: column `{}`: `{raw}` is not a finite number", c + 1, COLUMNS[k]);
-                }
-                cols[k].push(v);
+                values[k] = cell(file, line, c + 1, k, raw)?;
             }
+            time.push(file, line, time_col, values[0])?;
+            if (rows as usize) < max_samples {
+                for (k, idx) in index.iter().enumerate() {
+                    if idx.is_some() {
+                        cols[k].push(values[k]);
+                    }
+                }
+            }
+            rows += 1;
         }
-        let n = cols[0].len();
-        if n < 3 {
-            bail!("{file}: {n} data rows; a recording needs at least 3");
+        if rows < 3 {
+            bail!(
+                "{file}: {rows} data row{}; a recording needs at least 3",
+                if rows == 1 { "" } else { "s" }
+            );
         }
-        check_time(file, &cols[0], index[0].unwrap_or(0) + 1)?;
+        time.finish(file, time_col)?;
         let take =
             |k: usize, cols: &mut [Vec<f64>; COLUMNS.len()]| index[k].map(|_| std::mem::take(&mut cols[k]));
-        Ok(Recording {
+        let r = Recording {
             name: file.to_string(),
             command_v: take(1, &mut cols),
             current_a: take(2, &mut cols),
@@ -173,33 +182,44 @@ impl Recording {
             force_n: take(4, &mut cols),
             temperature_c: take(5, &mut cols),
             time_s: std::mem::take(&mut cols[0]),
-        })
+        };
+        Ok((r, rows))
+    }
+
+    /// Writes the CSV (only the channels present) to `out`.
+    pub fn write_csv(&self, out: &mut impl std::io::Write) -> std::io::Result<()> {
+        let present: Vec<&str> = COLUMNS.iter().copied().filter(|c| self.column(c).is_some()).collect();
+        writeln!(out, "{}", present.join(","))?;
+        let cols: Vec<&Vec<f64>> = present.iter().filter_map(|c| self.column(c)).collect();
+        for k in 0..self.len() {
+            for (i, col) in cols.iter().enumerate() {
+                let v = col[k];
+                match i {
+                    0 => write!(out, "{v:.7}")?,
+                    _ => write!(out, ",{v:.6}")?,
+                }
+            }
+            writeln!(out)?;
+        }
+        Ok(())
     }
 
     /// The CSV text (only the channels present).
     pub fn to_csv(&self) -> String {
-        let present: Vec<&str> = COLUMNS.iter().copied().filter(|c| self.column(c).is_some()).collect();
-        let mut out = present.join(",");
-        out.push('\n');
-        for k in 0..self.len() {
-            for (i, c) in present.iter().enumerate() {
-                let v = self.column(c).map(|col| col[k]).unwrap_or(f64::NAN);
-                if i > 0 {
-                    out.push(',');
-                }
-                let _ = match *c {
-                    "time_s" => write!(out, "{v:.7}"),
-                    _ => write!(out, "{v:.6}"),
-                };
-            }
-            out.push('\n');
-        }
-        out
+        let mut out = Vec::new();
+        self.write_csv(&mut out).expect("writing to memory");
+        String::from_utf8(out).expect("ASCII")
     }
 
-    /// Writes the CSV atomically (temporary file in the same directory, then rename).
+    /// Writes the CSV atomically (temporary file in the same directory, then rename), streamed
+    /// through a buffer rather than built in memory.
     pub fn write(&self, path: &Path) -> Result<()> {
-        write_atomic(path, self.to_csv().as_bytes())
+        let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        let mut buf = std::io::BufWriter::with_capacity(1 << 16, partial_file(dir)?);
+        self.write_csv(&mut buf).with_context(|| format!("writing {}", path.display()))?;
+        let tmp =
+            buf.into_inner().map_err(|e| anyhow::anyhow!("writing {}: {}", path.display(), e.error()))?;
+        persist(tmp, path)
     }
 }
 
@@ -207,9 +227,23 @@ impl Recording {
 /// half-written file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let mut tmp = tempfile::NamedTempFile::new_in(dir)
-        .with_context(|| format!("cannot create a file in {}", dir.display()))?;
-    tmp.write_all(bytes)?;
+    let mut tmp = partial_file(dir)?;
+    tmp.write_all(bytes).with_context(|| format!("writing {}", path.display()))?;
+    persist(tmp, path)
+}
+
+/// A temporary file in `dir` for an output being written (`.gma-*.partial`: a run killed
+/// mid-write leaves one of these, never a truncated result under the final name).
+pub fn partial_file(dir: &Path) -> Result<tempfile::NamedTempFile> {
+    tempfile::Builder::new()
+        .prefix(".gma-")
+        .suffix(".partial")
+        .tempfile_in(dir)
+        .with_context(|| format!("cannot create a file in {}", dir.display()))
+}
+
+/// Moves a finished temporary file into place (synced, ordinary permissions, atomic rename).
+pub fn persist(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
     tmp.as_file().sync_all()?;
     // Temporary files are private (0600); results are ordinary files.
     #[cfg(unix)]
@@ -222,37 +256,117 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 }
 
 fn median_step(t: &[f64]) -> f64 {
-    let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    if steps.is_empty() {
-        return 0.0;
-    }
-    steps.sort_by(f64::total_cmp);
-    steps[steps.len() / 2]
+    median(t.windows(2).map(|w| w[1] - w[0]).collect())
 }
 
-/// Strictly increasing and uniform within [`MAX_JITTER`] of the median step.
-fn check_time(file: &str, t: &[f64], col: usize) -> Result<()> {
-    for (k, w) in t.windows(2).enumerate() {
-        if w[1] <= w[0] {
-            bail!(
-                "{file}:{}:{col}: time_s does not increase ({} s after {} s on the line before)",
-                k + 3,
-                w[1],
-                w[0]
-            );
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Largest plausible magnitude per column (same order as [`COLUMNS`]); a value beyond is a unit
+/// or export mistake, not a measurement. Time allows Unix-epoch seconds.
+const PLAUSIBLE: [(f64, &str); COLUMNS.len()] =
+    [(1e10, "s"), (1e4, "V"), (1e3, "A"), (1e6, "µm"), (1e7, "N"), (1e4, "°C")];
+
+/// One cell: a finite number within the column's plausible range.
+fn cell(file: &str, line: u64, col: usize, k: usize, raw: &str) -> Result<f64> {
+    let name = COLUMNS[k];
+    if raw.is_empty() {
+        bail!("{file}:{line}:{col}: column `{name}` is empty");
+    }
+    let Ok(v) = raw.parse::<f64>() else {
+        bail!("{file}:{line}:{col}: column `{name}`: `{raw}` is not a number");
+    };
+    if !v.is_finite() {
+        bail!("{file}:{line}:{col}: column `{name}`: `{raw}` is not a finite number");
+    }
+    let (limit, unit) = PLAUSIBLE[k];
+    if v.abs() > limit {
+        bail!(
+            "{file}:{line}:{col}: column `{name}`: {raw} is beyond ±{limit:e} {unit}, not a plausible value \
+             (wrong unit or a corrupt export?)"
+        );
+    }
+    Ok(v)
+}
+
+/// A csv error as `file:line: what`.
+fn csv_error(file: &str, e: csv::Error) -> anyhow::Error {
+    let line = e.position().map(|p| p.line()).unwrap_or(1);
+    match e.kind() {
+        csv::ErrorKind::UnequalLengths { expected_len, len, .. } => anyhow::anyhow!(
+            "{file}:{line}: {len} fields, but the header has {expected_len} (a missing or extra comma?)"
+        ),
+        csv::ErrorKind::Utf8 { err, .. } => anyhow::anyhow!(
+            "{file}:{line}:{}: not UTF-8 text (a binary file, or a text encoding other than UTF-8?)",
+            err.field() + 1
+        ),
+        csv::ErrorKind::Io(io) => anyhow::anyhow!("{file}: cannot read: {io}"),
+        _ => anyhow::anyhow!("{file}:{line}: {e}"),
+    }
+}
+
+/// Number of time steps whose median sets the reference step for the jitter check.
+const REFERENCE_STEPS: usize = 1024;
+
+/// Streaming time-axis check: strictly increasing, and every step within [`MAX_JITTER`] of the
+/// median of the first [`REFERENCE_STEPS`] steps.
+#[derive(Default)]
+struct TimeCheck {
+    last: Option<f64>,
+    /// Steps (line, step) held until the reference step is known.
+    pending: Vec<(u64, f64)>,
+    reference: Option<f64>,
+}
+
+impl TimeCheck {
+    fn push(&mut self, file: &str, line: u64, col: usize, t: f64) -> Result<()> {
+        let Some(last) = self.last.replace(t) else { return Ok(()) };
+        if t <= last {
+            bail!("{file}:{line}:{col}: time_s does not increase ({t} s after {last} s on the line before)");
+        }
+        let step = t - last;
+        match self.reference {
+            Some(dt) => jitter(file, line, col, step, dt),
+            None => {
+                self.pending.push((line, step));
+                if self.pending.len() == REFERENCE_STEPS {
+                    self.settle(file, col)?;
+                }
+                Ok(())
+            }
         }
     }
-    let dt = median_step(t);
-    for (k, w) in t.windows(2).enumerate() {
-        let step = w[1] - w[0];
-        if (step - dt).abs() > MAX_JITTER * dt {
-            bail!(
-                "{file}:{}:{col}: time step {step:.3e} s differs from the median step {dt:.3e} s by more \
-                 than {:.0} % (missing samples or jittered time; resample the recording uniformly)",
-                k + 3,
-                MAX_JITTER * 100.0
-            );
+
+    fn settle(&mut self, file: &str, col: usize) -> Result<()> {
+        let steps: Vec<f64> = self.pending.iter().map(|p| p.1).collect();
+        let dt = median(steps);
+        self.reference = Some(dt);
+        for (line, step) in std::mem::take(&mut self.pending) {
+            jitter(file, line, col, step, dt)?;
         }
+        Ok(())
+    }
+
+    fn finish(mut self, file: &str, col: usize) -> Result<()> {
+        if self.reference.is_none() {
+            self.settle(file, col)?;
+        }
+        Ok(())
+    }
+}
+
+fn jitter(file: &str, line: u64, col: usize, step: f64, dt: f64) -> Result<()> {
+    if (step - dt).abs() > MAX_JITTER * dt {
+        bail!(
+            "{file}:{line}:{col}: time step {step:.3e} s differs from the median step {dt:.3e} s by more \
+             than {:.0} % (missing samples or jittered time; resample the recording uniformly)",
+            MAX_JITTER * 100.0
+        );
     }
     Ok(())
 }

@@ -75,8 +75,7 @@ pub struct SimulateArgs {
 /// Runs the simulation and writes the CSV.
 pub fn run(a: &SimulateArgs) -> Result<()> {
     let spec = params::parse_spec(&a.model)?;
-    let p = params::load(a.params.as_deref())?;
-    model_core::Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("parameter set: {e}"))?;
+    let p = params::load(a.params.as_deref(), spec)?;
     for (name, v) in [("--freq-hz", a.freq_hz), ("--duration-s", a.duration_s)] {
         if !(v.is_finite() && v > 0.0) {
             bail!("{name} must be a positive number, got {v}");

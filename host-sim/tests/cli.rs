@@ -59,7 +59,7 @@ fn a_bad_parameter_file_is_refused_by_name() {
     ]);
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("ja.k_a_per_m") && err.contains("> 0"), "{err}");
+    assert!(err.contains("p.toml") && err.contains("ja.k_a_per_m") && err.contains("[1, 1e7]"), "{err}");
 }
 
 /// Simulated recordings for the CLI tests: a `ja+eddy` rig, fitted at 40 and 300 Hz (two

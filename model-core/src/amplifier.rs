@@ -11,6 +11,7 @@ use crate::mechanics::{MassSpringDamper, MechState, SecondOrderZoh};
 /// First-order amplifier parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct FirstOrderAmpParams {
     /// Transconductance g [A/V] (000: 2 A/V).
     pub gain_a_per_v: f32,
@@ -24,7 +25,7 @@ pub type FirstOrderAmp = FirstOrderLag;
 impl FirstOrderAmpParams {
     /// Discretises at `dt_s`.
     pub fn build(&self, dt_s: f32) -> Result<FirstOrderAmp, ParamError> {
-        positive("amp.gain_a_per_v", self.gain_a_per_v)?;
+        check("amp.gain_a_per_v", self.gain_a_per_v, |g| g > 0.0 && g <= 1e3, "in (0, 1e3] A/V")?;
         FirstOrderLag::new("amp.tau_s", self.tau_s, self.gain_a_per_v, dt_s)
     }
 }
@@ -32,6 +33,7 @@ impl FirstOrderAmpParams {
 /// Second-order amplifier parameters k_U (A s + 1)/(B s² + C s + 1) (002 eq. 1).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct SecondOrderAmpParams {
     /// DC gain k_U [A/V].
     pub k_u: f32,
@@ -68,7 +70,7 @@ pub struct SecondOrderAmp {
 impl SecondOrderAmp {
     /// Validates and discretises at `dt_s`.
     pub fn new(p: SecondOrderAmpParams, dt_s: f32) -> Result<Self, ParamError> {
-        check("amp2.k_u", p.k_u, |v| v > 0.0, "> 0")?;
+        check("amp2.k_u", p.k_u, |v| v > 0.0 && v <= 1e3, "in (0, 1e3] A/V")?;
         non_negative("amp2.a_s", p.a_s)?;
         positive("amp2.b_s2", p.b_s2)?;
         non_negative("amp2.c_s", p.c_s)?;

@@ -32,6 +32,7 @@ pub const MAX_INPUT: f32 = 1.0e4;
 /// Mechanics as the workbench identifies it: resonance and damping of y_free → y.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct ModalMechanics {
     /// Natural frequency f_n [Hz].
     pub natural_frequency_hz: f32,
@@ -56,6 +57,7 @@ impl ModalMechanics {
 /// One complete parameter set (every stage; the spec decides which are used).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct ActuatorParams {
     /// Sample period [s] the model is stepped at.
     pub dt_s: f32,
@@ -244,7 +246,7 @@ impl Actuator {
             None
         };
         let magnetostriction = QuadraticMagnetostriction::new(p.magnetostriction)?;
-        let rod_length_m = positive("rod_length_m", p.rod_length_m)?;
+        let rod_length_m = check("rod_length_m", p.rod_length_m, |l| l > 0.0 && l <= 10.0, "in (0, 10] m")?;
         let mech = if spec.has(Effect::MechanicalDynamics) {
             Some(SecondOrderZoh::new(p.mech.unit_gain()?, dt)?)
         } else {

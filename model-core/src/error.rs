@@ -46,6 +46,22 @@ pub(crate) fn positive(name: &'static str, value: f32) -> Result<f32, ParamError
     check(name, value, |v| v > 0.0, "> 0")
 }
 
+/// Largest saturation magnetization accepted [A/m] (iron: 1.7e6; Terfenol-D: about 7.6e5).
+pub(crate) const MS_MAX: f32 = 1.0e7;
+/// Smallest saturation magnetization accepted [A/m]: M/M_s must stay representable.
+pub(crate) const MS_MIN: f32 = 1.0e3;
+
+/// A saturation magnetization within [[`MS_MIN`], [`MS_MAX`]].
+pub(crate) fn saturation(name: &'static str, value: f32) -> Result<f32, ParamError> {
+    check(name, value, |v| (MS_MIN..=MS_MAX).contains(&v), "in [1e3, 1e7] A/m")
+}
+
+/// A characteristic field (J–A a and k, Langevin a, Preisach widths) within [1, 1e7] A/m:
+/// its inverse scales every slope, so it must not be subnormal or astronomically large.
+pub(crate) fn field_scale(name: &'static str, value: f32) -> Result<f32, ParamError> {
+    check(name, value, |v| (1.0..=1.0e7).contains(&v), "in [1, 1e7] A/m")
+}
+
 /// `value >= 0` and finite.
 pub(crate) fn non_negative(name: &'static str, value: f32) -> Result<f32, ParamError> {
     check(name, value, |v| v >= 0.0, ">= 0")

@@ -10,6 +10,7 @@ pub const MU0: f64 = 4.0e-7 * core::f64::consts::PI;
 /// Coil field H = N i / (k_f L) + H_bias (000 eq. 1).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct CoilField {
     /// Field per ampere N/(k_f L) [A/m per A] = [1/m].
     pub turns_per_m: f32,
@@ -28,8 +29,8 @@ impl CoilField {
 
     /// Validates the field gain (> 0) and the bias (finite).
     pub fn new(turns_per_m: f32, bias_a_per_m: f32) -> Result<Self, ParamError> {
-        positive("coil.turns_per_m", turns_per_m)?;
-        check("coil.bias_a_per_m", bias_a_per_m, |_| true, "finite")?;
+        check("coil.turns_per_m", turns_per_m, |n| n > 0.0 && n <= 1e7, "in (0, 1e7] 1/m")?;
+        check("coil.bias_a_per_m", bias_a_per_m, |b| b.abs() <= 1e7, "within ±1e7 A/m")?;
         Ok(Self { turns_per_m, bias_a_per_m })
     }
 

@@ -2,11 +2,12 @@
 //! magnetization M_b subtracted so that λ = 0 at the operating point, with the optional static
 //! preload factor of 002 eq. 3–4.
 
-use crate::error::{check, non_negative, positive, ParamError};
+use crate::error::{check, non_negative, positive, saturation, ParamError};
 
 /// Static mechanical preload on the rod (002 eq. 3–4).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct Preload {
     /// Preload force F [N].
     pub force_n: f32,
@@ -31,6 +32,7 @@ impl Preload {
 /// Parameters of the quadratic magnetostriction.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct QuadraticParams {
     /// Saturation magnetostriction λ_s (dimensionless, ~1e-3 for Terfenol-D).
     pub lambda_s: f32,
@@ -53,8 +55,15 @@ pub struct QuadraticMagnetostriction {
 impl QuadraticMagnetostriction {
     /// Validates and folds the constants into k_λ = (3/2) λ_s/M_s² × preload factor.
     pub fn new(p: QuadraticParams) -> Result<Self, ParamError> {
-        positive("magnetostriction.lambda_s", p.lambda_s)?;
-        let ms = positive("magnetostriction.ms_a_per_m", p.ms_a_per_m)?;
+        // A strain, not ppm (Terfenol-D: about 1e-3). Simplified models fitted to real strokes
+        // can need more than any material's λ_s, so the cap only keeps outputs finite.
+        check(
+            "magnetostriction.lambda_s",
+            p.lambda_s,
+            |v| v > 0.0 && v <= 1.0,
+            "in (0, 1] (a strain, not ppm)",
+        )?;
+        let ms = saturation("magnetostriction.ms_a_per_m", p.ms_a_per_m)?;
         check("magnetostriction.bias_m_a_per_m", p.bias_m_a_per_m, |b| b.abs() < ms, "|M_b| < M_s")?;
         let factor = match p.preload {
             Some(pl) => pl.factor()?,

@@ -14,6 +14,7 @@ pub use ndof::{ChainParams, ChainState, ChainZoh};
 /// Physical parameters of the single-degree-of-freedom actuator mechanics (SI units).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct MassSpringDamper {
     /// Moving mass m [kg] (rod share ρ A l / 3 plus load masses).
     pub mass_kg: f32,

@@ -68,6 +68,7 @@ pub fn kelvin_modulus_phase(x: f64) -> (f64, f64) {
 /// is the surface field divided by J_0(r √(−jωγμ)).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct RodEddy {
     /// Rod radius r_G [m].
     pub radius_m: f32,
@@ -121,6 +122,7 @@ impl RodEddy {
 /// The complex-permeability transducer model of 000 with its amplitude correction.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct ComplexPermeabilityParams {
     /// Coil field per ampere N/(k_f L_G) [A/m per A] (eq. 1).
     pub turns_per_m: f32,

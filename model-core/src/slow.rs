@@ -1,13 +1,14 @@
 //! Slow effects on top of the fast chain: magnetic aftereffect (creep), coil heating → thermal
 //! expansion of the rod, and the displacement sensor's transport delay.
 
-use crate::error::{check, non_negative, positive, ParamError};
+use crate::error::{check, ParamError};
 use crate::field::FirstOrderLag;
 
 /// Magnetic aftereffect: a fraction w of every magnetization change arrives with a slow time
 /// constant τ_a (magnetic viscosity): M_out = (1 − w) M + w M_slow, M_slow' = (M − M_slow)/τ_a.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct AftereffectParams {
     /// Slow fraction w, 0 ≤ w < 1.
     pub fraction: f32,
@@ -49,6 +50,7 @@ impl Aftereffect {
 /// Δy = α_T L θ (α_T = 12.9e-6 /°C for Terfenol-D, 002 §VII).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct ThermalParams {
     /// Coil resistance R [Ω].
     pub coil_resistance_ohm: f32,
@@ -77,10 +79,25 @@ pub struct ThermalDrift {
 impl ThermalDrift {
     /// Validates and discretises at `dt_s`.
     pub fn new(p: ThermalParams, dt_s: f32) -> Result<Self, ParamError> {
-        non_negative("thermal.coil_resistance_ohm", p.coil_resistance_ohm)?;
-        non_negative("thermal.thermal_resistance_c_per_w", p.thermal_resistance_c_per_w)?;
-        let l = positive("thermal.rod_length_m", p.rod_length_m)?;
-        let a = non_negative("thermal.expansion_per_c", p.expansion_per_c)?;
+        check(
+            "thermal.coil_resistance_ohm",
+            p.coil_resistance_ohm,
+            |r| (0.0..=1e4).contains(&r),
+            "in [0, 1e4] Ω",
+        )?;
+        check(
+            "thermal.thermal_resistance_c_per_w",
+            p.thermal_resistance_c_per_w,
+            |r| (0.0..=1e4).contains(&r),
+            "in [0, 1e4] °C/W",
+        )?;
+        let l = check("thermal.rod_length_m", p.rod_length_m, |l| l > 0.0 && l <= 10.0, "in (0, 10] m")?;
+        let a = check(
+            "thermal.expansion_per_c",
+            p.expansion_per_c,
+            |a| (0.0..=1e-3).contains(&a),
+            "in [0, 1e-3] 1/°C",
+        )?;
         let gain = p.coil_resistance_ohm * p.thermal_resistance_c_per_w;
         Ok(Self { lag: FirstOrderLag::new("thermal.tau_s", p.tau_s, gain, dt_s)?, metres_per_c: a * l })
     }

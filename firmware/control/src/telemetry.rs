@@ -126,8 +126,10 @@ impl Default for Decoder {
 pub struct Decoded {
     /// The frame.
     pub frame: Frame,
-    /// Frames missing just before this one (0 when contiguous).
+    /// Frames missing just before this one (0 when contiguous or after a restart).
     pub gap: u32,
+    /// The sequence went backwards or repeated: the sender restarted (a new time axis).
+    pub restart: bool,
 }
 
 impl Decoder {
@@ -157,14 +159,17 @@ impl Decoder {
             self.corrupt += 1;
             return None;
         };
-        let gap = match self.last_seq {
-            Some(prev) => frame.seq.wrapping_sub(prev).wrapping_sub(1),
-            None => 0,
+        let ahead = match self.last_seq {
+            Some(prev) => frame.seq.wrapping_sub(prev),
+            None => 1,
         };
+        // More than half the counter range ahead means behind: a reset, not 2³¹ lost frames.
+        let restart = ahead == 0 || ahead > u32::MAX / 2;
+        let gap = if restart { 0 } else { ahead - 1 };
         self.lost += gap as u64;
         self.last_seq = Some(frame.seq);
         self.frames += 1;
-        Some(Decoded { frame, gap })
+        Some(Decoded { frame, gap, restart })
     }
 }
 

@@ -2,12 +2,13 @@
 //! (the `saturation` effect). The mean-field coupling α of J–A is folded into `a` here: without
 //! hysteresis the two are not separately identifiable from a magnetization curve.
 
-use crate::error::{positive, ParamError};
+use crate::error::{field_scale, saturation, ParamError};
 use crate::math::{langevin, langevin_slope};
 
 /// Parameters of the Langevin anhysteretic curve.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct AnhystereticParams {
     /// Saturation magnetization M_s [A/m].
     pub ms_a_per_m: f32,
@@ -24,8 +25,8 @@ pub struct Anhysteretic {
 impl Anhysteretic {
     /// Validates M_s > 0 and a > 0.
     pub fn new(p: AnhystereticParams) -> Result<Self, ParamError> {
-        positive("anhysteretic.ms_a_per_m", p.ms_a_per_m)?;
-        positive("anhysteretic.a_a_per_m", p.a_a_per_m)?;
+        saturation("anhysteretic.ms_a_per_m", p.ms_a_per_m)?;
+        field_scale("anhysteretic.a_a_per_m", p.a_a_per_m)?;
         Ok(Self { p })
     }
 

@@ -21,7 +21,7 @@
 //! dH_e = dh / (1 − α dM/dH_e),  M_irr += χ_irr dH_e,  M = c M_an(h + dh + αM̂) + (1 − c) M_irr
 //! with M̂ = M + (dM/dH_e) dH_e.
 
-use crate::error::{check, positive, ParamError};
+use crate::error::{check, field_scale, saturation, ParamError};
 use crate::math::{at_least, langevin_with_slope, within};
 
 /// Most sub-steps one sample may take (bounds the worst-case time per sample).
@@ -32,6 +32,7 @@ const MIN_DENOMINATOR: f32 = 0.05;
 /// The five J–A parameters and the integration step.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct JaParams {
     /// Saturation magnetization M_s [A/m].
     pub ms_a_per_m: f32,
@@ -87,10 +88,10 @@ pub struct JaState {
 impl JilesAtherton {
     /// Validates the parameters; the sub-step is min(a, k)/4.
     pub fn new(p: JaParams) -> Result<Self, ParamError> {
-        positive("ja.ms_a_per_m", p.ms_a_per_m)?;
-        positive("ja.a_a_per_m", p.a_a_per_m)?;
+        saturation("ja.ms_a_per_m", p.ms_a_per_m)?;
+        field_scale("ja.a_a_per_m", p.a_a_per_m)?;
         check("ja.alpha", p.alpha, |v| v.abs() < 1.0, "in (-1, 1)")?;
-        positive("ja.k_a_per_m", p.k_a_per_m)?;
+        field_scale("ja.k_a_per_m", p.k_a_per_m)?;
         check("ja.c", p.c, |v| (0.0..1.0).contains(&v), "in [0, 1)")?;
         Ok(Self {
             p,
@@ -117,8 +118,8 @@ impl JilesAtherton {
     /// Sub-steps a field change of `dh` takes.
     #[inline]
     pub fn substeps_for(&self, dh: f32) -> u32 {
-        let n = (dh.abs() * self.inv_max_substep) as u32 + 1;
-        n.min(MAX_SUBSTEPS)
+        // Add in f32: `as` saturates at u32::MAX for huge steps, where an integer add would wrap to 0.
+        ((dh.abs() * self.inv_max_substep + 1.0) as u32).min(MAX_SUBSTEPS)
     }
 
     /// A consistent state at field `h` with the given magnetizations (M = c M_an + (1 − c) M_irr
@@ -191,6 +192,34 @@ impl JilesAtherton {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// Found by the model_step fuzz target: a field jump beyond u32::MAX sub-steps wrapped the
+    /// integer count to 0 sub-steps (a panic in debug builds).
+    #[test]
+    fn a_huge_field_step_takes_the_most_sub_steps_not_none() {
+        let ja = JilesAtherton::new(JaParams { a_a_per_m: 1.0, k_a_per_m: 1.0, ..JaParams::TSMA_ROD1_002 })
+            .unwrap();
+        assert_eq!(ja.substeps_for(f32::MAX), MAX_SUBSTEPS);
+        assert_eq!(ja.substeps_for(1e12), MAX_SUBSTEPS);
+        assert_eq!(ja.substeps_for(0.0), 1);
+    }
+
+    /// Found by the model_step fuzz target: a subnormal k made 1/k infinite and M NaN. The
+    /// characteristic fields are now bounded to [1, 1e7] A/m.
+    #[test]
+    fn subnormal_or_huge_field_scales_are_refused() {
+        for k in [1e-42, 0.5, 2e7] {
+            assert!(
+                JilesAtherton::new(JaParams { k_a_per_m: k, ..JaParams::TSMA_ROD1_002 }).is_err(),
+                "k = {k}"
+            );
+            assert!(
+                JilesAtherton::new(JaParams { a_a_per_m: k, ..JaParams::TSMA_ROD1_002 }).is_err(),
+                "a = {k}"
+            );
+        }
+        assert!(JilesAtherton::new(JaParams { ms_a_per_m: 3e10, ..JaParams::TSMA_ROD1_002 }).is_err());
+    }
 
     fn sine_drive(
         ja: &JilesAtherton,

@@ -6,6 +6,7 @@ use crate::error::{check, ParamError};
 /// M = a + bH, valid in the unsaturated range it was fitted on.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct LinearMagnetization {
     /// Offset a [A/m].
     pub offset_a_per_m: f32,
@@ -16,8 +17,8 @@ pub struct LinearMagnetization {
 impl LinearMagnetization {
     /// Validates: finite offset, finite susceptibility > 0 (M must rise with H for the inverse).
     pub fn new(offset_a_per_m: f32, susceptibility: f32) -> Result<Self, ParamError> {
-        check("linear.offset_a_per_m", offset_a_per_m, |_| true, "finite")?;
-        check("linear.susceptibility", susceptibility, |b| b > 0.0, "> 0")?;
+        check("linear.offset_a_per_m", offset_a_per_m, |a| a.abs() <= 1e7, "within ±1e7 A/m")?;
+        check("linear.susceptibility", susceptibility, |b| b > 0.0 && b <= 1e5, "in (0, 1e5]")?;
         Ok(Self { offset_a_per_m, susceptibility })
     }
 

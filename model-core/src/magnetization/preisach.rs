@@ -23,7 +23,7 @@
 // Triangular index loops over the Everett table read clearer than iterator chains.
 #![allow(clippy::needless_range_loop)]
 
-use crate::error::{positive, ParamError};
+use crate::error::{field_scale, positive, saturation, ParamError};
 
 /// Field levels of the Everett grid (the relay plane has LEVELS·(LEVELS−1)/2 cells).
 pub const PREISACH_LEVELS: usize = 32;
@@ -34,6 +34,7 @@ pub const PREISACH_MEMORY: usize = 16;
 /// ±h_c, spread σ) on the relay plane, normalised so that saturation is ±M_s at ±H_max.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct PreisachParams {
     /// Output at positive saturation M_s [A/m].
     pub ms_a_per_m: f32,
@@ -258,10 +259,10 @@ impl PreisachState {
 impl Preisach {
     /// From the parametric (factorised Lorentzian) density.
     pub fn new(p: PreisachParams) -> Result<Self, ParamError> {
-        let ms = positive("preisach.ms_a_per_m", p.ms_a_per_m)?;
-        let hc = positive("preisach.coercive_a_per_m", p.coercive_a_per_m)?;
-        let sigma = positive("preisach.spread_a_per_m", p.spread_a_per_m)?;
-        let h_max = positive("preisach.h_max_a_per_m", p.h_max_a_per_m)?;
+        let ms = saturation("preisach.ms_a_per_m", p.ms_a_per_m)?;
+        let hc = field_scale("preisach.coercive_a_per_m", p.coercive_a_per_m)?;
+        let sigma = field_scale("preisach.spread_a_per_m", p.spread_a_per_m)?;
+        let h_max = field_scale("preisach.h_max_a_per_m", p.h_max_a_per_m)?;
         if hc >= h_max {
             return Err(ParamError::OutOfRange("preisach.coercive_a_per_m", "below preisach.h_max_a_per_m"));
         }

@@ -1,0 +1,119 @@
+//! Outputs are written to a temporary file and renamed: a run killed at any moment leaves the
+//! previous file intact or the complete new one, never a truncated file under the final name.
+
+use std::process::{Command, Stdio};
+use std::time::Instant;
+
+const GMA: &str = env!("CARGO_BIN_EXE_gma");
+
+#[test]
+fn a_killed_simulate_never_leaves_a_truncated_csv() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("rig.csv");
+    let args = ["simulate", "--duration-s", "60", "--out", out.to_str().unwrap()];
+    // One full run to learn how long it takes (computing, then writing ~18 MB).
+    let t0 = Instant::now();
+    assert!(Command::new(GMA).args(args).stderr(Stdio::null()).status().unwrap().success());
+    let full = t0.elapsed();
+    let complete = std::fs::read(&out).unwrap();
+    let lines = complete.iter().filter(|b| **b == b'\n').count();
+    assert_eq!(lines, 600_001);
+    let old = b"time_s,current_A,displacement_um\n0,0,0\n0.0001,0,0\n0.0002,0,0\n";
+    let (mut kept_old, mut complete_new) = (0, 0);
+    // Kill it at 20 moments spread over (and a little beyond) a run.
+    for k in 0..20u32 {
+        std::fs::write(&out, old).unwrap();
+        let mut child = Command::new(GMA).args(args).stderr(Stdio::null()).spawn().unwrap();
+        std::thread::sleep(full.mul_f64(0.1 + 1.5 * k as f64 / 20.0));
+        let _ = child.kill(); // SIGKILL: no destructors, no cleanup
+        let _ = child.wait();
+        let now = std::fs::read(&out).unwrap();
+        if now == old {
+            kept_old += 1;
+        } else {
+            assert_eq!(now.len(), complete.len(), "kill {k}: a truncated file under the final name");
+            assert_eq!(now, complete, "kill {k}: a different file under the final name");
+            complete_new += 1;
+        }
+    }
+    println!(
+        "20 kills over {:.0} ms: {kept_old} left the old file, {complete_new} the complete new one",
+        full.as_secs_f64() * 1e3
+    );
+    // Leftovers of killed writes are hidden `.gma-*.partial` files, never the result's name.
+    for e in std::fs::read_dir(dir.path()).unwrap() {
+        let name = e.unwrap().file_name().to_string_lossy().to_string();
+        assert!(name == "rig.csv" || (name.starts_with(".gma-") && name.ends_with(".partial")), "{name}");
+    }
+}
+
+#[test]
+fn a_failed_run_leaves_the_previous_parameter_file_and_report_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("good.csv");
+    let o = Command::new(GMA)
+        .args(["simulate", "--model", "ja", "--duration-s", "0.04", "--out", good.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let bad = dir.path().join("bad.csv");
+    let mut text = std::fs::read_to_string(&good).unwrap();
+    text.push_str("0.0400,abc,1\n");
+    std::fs::write(&bad, text).unwrap();
+    let params = dir.path().join("p.toml");
+    let report = dir.path().join("r.html");
+    std::fs::write(&params, "# previous parameters\n").unwrap();
+    std::fs::write(&report, "<p>previous report</p>").unwrap();
+    for args in [
+        vec![
+            "fit",
+            "--model",
+            "ja",
+            "--params-out",
+            params.to_str().unwrap(),
+            good.to_str().unwrap(),
+            bad.to_str().unwrap(),
+        ],
+        vec![
+            "report",
+            "--model",
+            "ja",
+            "--out",
+            report.to_str().unwrap(),
+            good.to_str().unwrap(),
+            bad.to_str().unwrap(),
+        ],
+    ] {
+        let o = Command::new(GMA).args(&args).output().unwrap();
+        assert!(!o.status.success());
+    }
+    assert_eq!(std::fs::read_to_string(&params).unwrap(), "# previous parameters\n");
+    assert_eq!(std::fs::read_to_string(&report).unwrap(), "<p>previous report</p>");
+}
+
+/// Large files stream: reading is bounded by `--max-samples`, not by the file. A 60 MB CSV is
+/// read to its end with a small window; the old whole-file reader needed over 100 MB for it.
+/// (A 1.1 GB file: 31 MB with `--max-samples 200000`, 270 MB at the default 2 000 000.)
+#[test]
+fn a_large_csv_streams_in_bounded_memory() {
+    let dir = tempfile::tempdir().unwrap();
+    let big = dir.path().join("big.csv");
+    let o = Command::new(GMA)
+        .args(["simulate", "--duration-s", "200", "--out", big.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let size_mb = std::fs::metadata(&big).unwrap().len() as f64 / 1e6;
+    let o = Command::new("/usr/bin/time")
+        .args(["-f", "peak_rss_kb=%M", GMA, "compare", "--model", "ja+mech", "--max-samples", "20000"])
+        .args(["--out-dir", dir.path().join("plots").to_str().unwrap(), big.to_str().unwrap()])
+        .output()
+        .expect("GNU time (/usr/bin/time; scripts/setup-firmware-toolchain installs it)");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("2000000 samples; using the first 20000"), "{err}");
+    let kb: f64 = err.split("peak_rss_kb=").nth(1).and_then(|s| s.trim().parse().ok()).expect("peak RSS");
+    println!("compare on a {size_mb:.0} MB CSV, 20 000-sample window: peak RSS {:.1} MB", kb / 1e3);
+    assert!(size_mb > 55.0);
+    assert!(kb / 1e3 < 30.0, "peak RSS {:.1} MB", kb / 1e3);
+}

@@ -1,0 +1,465 @@
+//! Bad input, command by command: every case is a real file (or argument) given to the `gma`
+//! binary, and must end in a non-zero exit with a message naming the file and line (and column
+//! or parameter) — never a panic, never a silently dropped row, never an output file.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn gma(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_gma")).args(args).output().expect("run gma")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).to_string()
+}
+
+/// The command failed cleanly: exit code 1, a `gma: error:` line, every `expected` fragment in
+/// the message, and no panic.
+fn refused(o: &Output, expected: &[&str], what: &str) {
+    let err = stderr(o);
+    assert_eq!(o.status.code(), Some(1), "{what}: exit code {:?}\n{err}", o.status.code());
+    assert!(err.contains("gma: error: "), "{what}: no error line\n{err}");
+    assert!(!err.contains("panicked") && !err.contains("RUST_BACKTRACE"), "{what}: panic\n{err}");
+    for e in expected {
+        assert!(err.contains(e), "{what}: message lacks `{e}`\n{err}");
+    }
+}
+
+/// A 50 Hz, 40 ms sine recording (two cycles) as rows of `time_s,current_A,displacement_um`.
+fn good_rows() -> Vec<String> {
+    (0..400)
+        .map(|k| {
+            let t = k as f64 * 1e-4;
+            let i = 1.0 + (2.0 * std::f64::consts::PI * 50.0 * t).sin();
+            format!("{t:.4},{i:.6},{:.6}", 10.0 * i * i)
+        })
+        .collect()
+}
+
+fn csv(header: &str, rows: &[String]) -> Vec<u8> {
+    let mut s = format!("{header}\n");
+    for r in rows {
+        s.push_str(r);
+        s.push('\n');
+    }
+    s.into_bytes()
+}
+
+/// Replaces row `k` (0-based data row; the file line is k + 2).
+fn with_row(k: usize, row: &str) -> Vec<String> {
+    let mut rows = good_rows();
+    rows[k] = row.to_string();
+    rows
+}
+
+const HEADER: &str = "time_s,current_A,displacement_um";
+
+/// Every malformed measurement file, with the fragments its message must contain.
+fn bad_csvs() -> Vec<(&'static str, Vec<u8>, Vec<&'static str>)> {
+    let mut junk = vec![0xFF, 0xFE, 0x00, 0x81];
+    junk.extend((0..2000u32).map(|k| (k.wrapping_mul(2_654_435_761) >> 24) as u8));
+    vec![
+        ("empty.csv", Vec::new(), vec!["empty.csv:1:", "empty file"]),
+        ("header_only.csv", csv(HEADER, &[]), vec!["header_only.csv:", "0 data rows"]),
+        ("one_sample.csv", csv(HEADER, &good_rows()[..1]), vec!["one_sample.csv:", "1 data row;"]),
+        ("junk.csv", junk, vec!["junk.csv:1:", "not UTF-8"]),
+        (
+            "no_time.csv",
+            csv("t,current_A,displacement_um", &good_rows()),
+            vec!["no_time.csv:1:", "no `time_s` column"],
+        ),
+        (
+            "no_drive.csv",
+            csv("time_s,voltage,displacement_um", &good_rows()),
+            vec!["no_drive.csv:1:", "drive column"],
+        ),
+        (
+            "no_displacement.csv",
+            csv("time_s,current_A,x_um", &good_rows()),
+            vec!["no_displacement.csv", "no `displacement_um` column"],
+        ),
+        (
+            "duplicate.csv",
+            csv("time_s,current_A,current_A", &good_rows()),
+            vec!["duplicate.csv:1:", "`current_A` appears twice", "columns 2 and 3"],
+        ),
+        ("short_row.csv", csv(HEADER, &with_row(5, "0.0005,1.0")), vec!["short_row.csv:7:", "2 fields"]),
+        (
+            "long_row.csv",
+            csv(HEADER, &with_row(5, "0.0005,1.0,2.0,3.0")),
+            vec!["long_row.csv:7:", "4 fields"],
+        ),
+        (
+            "nan.csv",
+            csv(HEADER, &with_row(9, "0.0009,NaN,1.0")),
+            vec!["nan.csv:11:2:", "`NaN` is not a finite number"],
+        ),
+        (
+            "inf.csv",
+            csv(HEADER, &with_row(9, "0.0009,1.0,-inf")),
+            vec!["inf.csv:11:3:", "`-inf` is not a finite number"],
+        ),
+        (
+            "text.csv",
+            csv(HEADER, &with_row(9, "0.0009,1.0,abc")),
+            vec!["text.csv:11:3:", "`abc` is not a number"],
+        ),
+        (
+            "blank_cell.csv",
+            csv(HEADER, &with_row(9, "0.0009,,1.0")),
+            vec!["blank_cell.csv:11:2:", "is empty"],
+        ),
+        (
+            "backwards.csv",
+            csv(HEADER, &with_row(20, "0.0010,1.0,1.0")),
+            vec!["backwards.csv:22:1:", "time_s does not increase"],
+        ),
+        (
+            "jitter.csv",
+            csv(HEADER, &with_row(20, "0.00205,1.0,1.0")),
+            vec!["jitter.csv:22:1:", "median step"],
+        ),
+        (
+            "absurd_current.csv",
+            csv(HEADER, &with_row(30, "0.0030,2.5e7,1.0")),
+            vec!["absurd_current.csv:32:2:", "beyond ±1e3 A"],
+        ),
+        (
+            "absurd_displacement.csv",
+            csv(HEADER, &with_row(30, "0.0030,1.0,4e9")),
+            vec!["absurd_displacement.csv:32:3:", "beyond ±1e6 µm"],
+        ),
+        (
+            "constant_drive.csv",
+            csv(
+                HEADER,
+                &(0..400).map(|k| format!("{:.4},1.0,{}", k as f64 * 1e-4, k % 7)).collect::<Vec<_>>(),
+            ),
+            vec!["constant_drive.csv", "drive (current_A/command_V) is constant"],
+        ),
+        (
+            "zero_displacement.csv",
+            csv(
+                HEADER,
+                &good_rows()
+                    .iter()
+                    .map(|r| format!("{},0.0", r.rsplit_once(',').unwrap().0))
+                    .collect::<Vec<_>>(),
+            ),
+            vec!["zero_displacement.csv", "displacement never changes"],
+        ),
+    ]
+}
+
+fn write(dir: &Path, name: &str, bytes: &[u8]) -> String {
+    let p = dir.join(name);
+    std::fs::write(&p, bytes).unwrap();
+    p.to_str().unwrap().to_string()
+}
+
+/// The four commands that read recordings, each with its outputs inside `dir`.
+fn reading_commands(dir: &Path) -> Vec<Vec<String>> {
+    let d = |n: &str| dir.join(n).to_str().unwrap().to_string();
+    vec![
+        vec!["fit".into(), "--model".into(), "ja".into(), "--params-out".into(), d("out.toml")],
+        vec!["compare".into(), "--model".into(), "ja".into(), "--out-dir".into(), d("plots")],
+        vec!["diagnose".into(), "--model".into(), "ja".into()],
+        vec!["report".into(), "--model".into(), "ja".into(), "--out".into(), d("out.html")],
+    ]
+}
+
+fn no_outputs(dir: &Path, what: &str) {
+    for n in ["out.toml", "out.html"] {
+        assert!(!dir.join(n).exists(), "{what}: wrote {n} although it failed");
+    }
+    let plots = dir.join("plots");
+    let count = std::fs::read_dir(&plots).map(|d| d.count()).unwrap_or(0);
+    assert_eq!(count, 0, "{what}: wrote plots although it failed");
+}
+
+#[test]
+fn every_malformed_recording_is_refused_by_every_command_with_file_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(dir.path(), "good.csv", &csv(HEADER, &good_rows()));
+    for (name, bytes, expected) in bad_csvs() {
+        let bad = write(dir.path(), name, &bytes);
+        for cmd in reading_commands(dir.path()) {
+            let what = format!("{} on {name}", cmd[0]);
+            // As the only file, and after a good one (the bad one must still be named).
+            for files in [vec![bad.clone()], vec![good.clone(), bad.clone()]] {
+                let mut args: Vec<&str> = cmd.iter().map(String::as_str).collect();
+                args.extend(files.iter().map(String::as_str));
+                refused(&gma(&args), &expected, &what);
+                no_outputs(dir.path(), &what);
+            }
+        }
+        // As a validation file too.
+        let o = gma(&["fit", "--model", "ja", &good, "--val", &bad]);
+        refused(&o, &expected, &format!("fit --val {name}"));
+    }
+}
+
+#[test]
+fn less_than_one_period_is_refused_by_diagnose_instead_of_guessed() {
+    let dir = tempfile::tempdir().unwrap();
+    // 6 ms of a 50 Hz sine: not even one reversal.
+    let short = write(dir.path(), "short.csv", &csv(HEADER, &good_rows()[..60]));
+    let o = gma(&["diagnose", "--model", "ja", &short]);
+    refused(&o, &["short.csv", "less than one cycle", "0 reversals"], "diagnose on 6 ms");
+    let o = gma(&["report", "--model", "ja", "--out", dir.path().join("r.html").to_str().unwrap(), &short]);
+    refused(&o, &["short.csv", "less than one cycle"], "report on 6 ms");
+    assert!(!dir.path().join("r.html").exists());
+}
+
+#[test]
+fn model_spec_typos_are_named_with_the_nearest_effect_by_every_command() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(dir.path(), "good.csv", &csv(HEADER, &good_rows()));
+    let out = dir.path().join("x").to_str().unwrap().to_string();
+    for (spec, word, hint) in [
+        ("ja+mehc", "mehc", "`mech`"),
+        ("hysterisis", "hysterisis", "`hysteresis`"),
+        ("ja+eddy_curent", "eddy_curent", "`eddy_current`"),
+        ("saturation+termal", "termal", "`thermal`"),
+    ] {
+        let msg = [format!("unknown effect `{word}`"), format!("did you mean {hint}?")];
+        let exp: Vec<&str> = msg.iter().map(String::as_str).collect();
+        for args in [
+            vec!["fit", "--model", spec, &good],
+            vec!["compare", "--model", spec, "--out-dir", &out, &good],
+            vec!["diagnose", "--model", spec, &good],
+            vec!["report", "--model", spec, "--out", &out, &good],
+            vec!["simulate", "--model", spec, "--out", &out],
+        ] {
+            refused(&gma(&args), &exp, &format!("{} --model {spec}", args[0]));
+        }
+    }
+    for (spec, expected) in [("", "empty"), ("ja+preisach", "preisach"), ("ja++mech", "mech")] {
+        refused(&gma(&["simulate", "--model", spec, "--out", &out]), &[expected], spec);
+    }
+    assert!(!Path::new(&out).exists());
+}
+
+/// A valid parameter file (the demo set) with one line replaced.
+fn params_with(dir: &Path, name: &str, edit: impl Fn(&str) -> String) -> String {
+    let text = toml::to_string(&model_core::ActuatorParams::TERFENOL_DEMO).unwrap();
+    write(dir, name, edit(&text).as_bytes())
+}
+
+fn replace_line(text: &str, key: &str, new: &str) -> String {
+    let mut seen = false;
+    let out: Vec<String> = text
+        .lines()
+        .filter_map(|l| {
+            if !seen && l.starts_with(&format!("{key} =")) {
+                seen = true;
+                (!new.is_empty()).then(|| new.to_string())
+            } else {
+                Some(l.to_string())
+            }
+        })
+        .collect();
+    assert!(seen, "no `{key}` line");
+    out.join("\n")
+}
+
+#[test]
+fn bad_parameter_files_name_the_file_line_and_parameter_in_every_command() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(dir.path(), "good.csv", &csv(HEADER, &good_rows()));
+    let cases: Vec<(String, Vec<&str>)> = vec![
+        (
+            params_with(dir.path(), "missing.toml", |t| replace_line(t, "k_a_per_m", "")),
+            vec!["missing.toml:", "parameter `ja.k_a_per_m` is missing"],
+        ),
+        (
+            params_with(dir.path(), "negative.toml", |t| replace_line(t, "k_a_per_m", "k_a_per_m = -4000.0")),
+            vec!["negative.toml", "`ja.k_a_per_m` is out of range", "[1, 1e7]"],
+        ),
+        (
+            params_with(dir.path(), "ppm.toml", |t| replace_line(t, "lambda_s", "lambda_s = 1000.0")),
+            vec!["ppm.toml", "`magnetostriction.lambda_s` is out of range", "not ppm"],
+        ),
+        (
+            params_with(dir.path(), "nan.toml", |t| replace_line(t, "alpha", "alpha = nan")),
+            vec!["nan.toml", "`ja.alpha` is not a finite number"],
+        ),
+        (
+            params_with(dir.path(), "text.toml", |t| replace_line(t, "c", "c = \"0.2\"")),
+            vec!["text.toml:", "parameter `ja.c`", "invalid type"],
+        ),
+        (
+            params_with(dir.path(), "unknown.toml", |t| replace_line(t, "c", "c = 0.2\nk_a_perm = 3.0")),
+            vec!["unknown.toml:", "unknown field `k_a_perm`"],
+        ),
+        (params_with(dir.path(), "syntax.toml", |t| format!("{t}\n[ja\n")), vec!["syntax.toml:"]),
+        (
+            write(dir.path(), "binary.toml", &[0xFF, 0xD8, 0xFF, 0xE0, 0x00, 0x10]),
+            vec!["binary.toml:1:", "not UTF-8"],
+        ),
+        (write(dir.path(), "empty.toml", b""), vec!["empty.toml:", "is missing"]),
+    ];
+    let out = dir.path().join("x").to_str().unwrap().to_string();
+    for (p, expected) in &cases {
+        for args in [
+            vec!["fit", "--model", "ja", "--params", p, &good],
+            vec!["compare", "--model", "ja", "--params", p, "--out-dir", &out, &good],
+            vec!["diagnose", "--model", "ja", "--params", p, &good],
+            vec!["report", "--model", "ja", "--params", p, "--out", &out, &good],
+            vec!["simulate", "--model", "ja", "--params", p, "--out", &out],
+        ] {
+            refused(&gma(&args), expected, &format!("{} --params {p}", args[0]));
+        }
+    }
+    let missing = dir.path().join("nope.toml");
+    refused(
+        &gma(&["simulate", "--params", missing.to_str().unwrap(), "--out", &out]),
+        &["nope.toml: cannot read"],
+        "missing file",
+    );
+    assert!(!Path::new(&out).exists());
+}
+
+#[test]
+fn out_of_range_arguments_are_refused_with_the_option_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(dir.path(), "good.csv", &csv(HEADER, &good_rows()));
+    let out = dir.path().join("x.csv").to_str().unwrap().to_string();
+    for (args, expected) in [
+        (vec!["simulate", "--duration-s", "0", "--out", &out], "--duration-s"),
+        (vec!["simulate", "--freq-hz", "nan", "--out", &out], "--freq-hz"),
+        (vec!["simulate", "--noise-um", "-1", "--out", &out], "--noise-um"),
+        (vec!["simulate", "--amplitude", "1e9", "--out", &out], "--amplitude"),
+        (vec!["mechanics", "--sample-rate-hz", "0"], "--sample-rate-hz"),
+        (vec!["mechanics", "--mass-kg", "inf"], "--mass-kg"),
+        (vec!["fit", "--model", "ja", "--effort", "0", &good], "--effort"),
+        (vec!["fit", "--model", "ja", "--max-samples", "2", &good], "--max-samples"),
+        (vec!["record", "--input", &good, "--out", &out, "--tick-s", "-1"], "--tick-s"),
+    ] {
+        refused(&gma(&args), &[expected], &args.join(" "));
+    }
+    assert!(!Path::new(&out).exists());
+    // Missing files are named.
+    let nope = dir.path().join("nope.csv").to_str().unwrap().to_string();
+    for args in [vec!["fit", "--model", "ja", &nope], vec!["record", "--input", &nope, "--out", &out]] {
+        refused(&gma(&args), &["nope.csv: cannot read"], &args.join(" "));
+    }
+}
+
+#[test]
+fn a_file_longer_than_max_samples_is_checked_to_the_end_and_the_cut_is_announced() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows = good_rows();
+    let long = write(dir.path(), "long.csv", &csv(HEADER, &rows));
+    let o = gma(&[
+        "compare",
+        "--model",
+        "ja",
+        "--max-samples",
+        "250",
+        "--out-dir",
+        dir.path().join("p").to_str().unwrap(),
+        &long,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("long.csv: 400 samples; using the first 250"), "{}", stderr(&o));
+    // A bad row beyond the window is still found.
+    let bad = write(dir.path(), "bad_tail.csv", &csv(HEADER, &with_row(390, "0.0390,1.0,xyz")));
+    let o = gma(&[
+        "compare",
+        "--model",
+        "ja",
+        "--max-samples",
+        "250",
+        "--out-dir",
+        dir.path().join("p").to_str().unwrap(),
+        &bad,
+    ]);
+    refused(&o, &["bad_tail.csv:392:3:", "`xyz` is not a number"], "bad row after the window");
+}
+
+#[test]
+fn malformed_loop_files_are_refused_with_their_line() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, text, expected) in [
+        ("few.csv", "H [kA/m],B [T]\n1,0.1\n2,0.2\n", vec!["few.csv:", "at least 5"]),
+        ("units.csv", "H [furlong],B [T]\n1,0.1\n2,0.2\n", vec!["units.csv:1:", "expected H with a unit"]),
+        (
+            "nan.csv",
+            "H [kA/m],B [T]\n1,0.1\n2,nan\n3,0.3\n4,0.4\n5,0.5\n",
+            vec!["nan.csv:3:2:", "not a finite number"],
+        ),
+        ("ragged.csv", "H [kA/m],B [T]\n1,0.1\n2\n3,0.3\n4,0.4\n5,0.5\n", vec!["ragged.csv:3:", "1 fields"]),
+    ] {
+        let p = write(dir.path(), name, text.as_bytes());
+        refused(&gma(&["fit", "--model", "ja", &p]), &expected, name);
+    }
+}
+
+fn frame_bytes(seq: u32, displacement_um: f32) -> Vec<u8> {
+    use gma_control::telemetry::{Frame, MAX_ENCODED};
+    let f = Frame { seq, reference_um: 1.0, command_v: 2.0, current_a: 0.5, displacement_um, faults: 0 };
+    let mut buf = [0u8; MAX_ENCODED];
+    let n = f.encode(&mut buf);
+    buf[..n].to_vec()
+}
+
+#[test]
+fn record_counts_every_fault_in_the_stream_and_never_writes_a_bad_row() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut stream = Vec::new();
+    // 0..100 clean; 100..103 lost; one NaN frame at 150; a corrupted frame at 180; line noise;
+    // a board reset (sequence back to 0) after 250; a 2-frame segment at the end.
+    for seq in 0..250u32 {
+        if (100..103).contains(&seq) {
+            continue;
+        }
+        let mut b = frame_bytes(seq, if seq == 150 { f32::NAN } else { seq as f32 * 0.01 });
+        if seq == 180 {
+            b[3] ^= 0x40;
+        }
+        stream.extend(b);
+        if seq == 200 {
+            stream.extend([0x13, 0x37, 0xFF, 0x00]);
+        }
+    }
+    for seq in 0..50u32 {
+        stream.extend(frame_bytes(seq, 5.0));
+    }
+    stream.extend(frame_bytes(60, 5.0));
+    stream.extend(frame_bytes(61, 5.0));
+    let input = write(dir.path(), "stream.bin", &stream);
+    let out = dir.path().join("rig.csv");
+    let o = gma(&["record", "--input", &input, "--out", out.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["lost"], 3 + 1 + 10, "{j}"); // 100..103, the corrupted 180, 50..60 after the reset
+    assert_eq!(j["corrupt"], 2, "{j}"); // the flipped frame and the line noise
+    assert_eq!(j["invalid"], 1, "{j}");
+    assert_eq!(j["restarts"], 1, "{j}");
+    assert_eq!(j["short"], 2, "{j}");
+    let files: Vec<PathBuf> =
+        j["files"].as_array().unwrap().iter().map(|f| f.as_str().unwrap().into()).collect();
+    // Segments: 0..100, 103..150, 151..180, 181..250, the 50 after the reset.
+    assert_eq!(files.len(), 5, "{j}");
+    let mut rows = 0;
+    for f in &files {
+        let r = host_sim::recording::Recording::read(f).unwrap_or_else(|e| panic!("{e:#}"));
+        assert!((r.dt_s() - 1e-4).abs() < 1e-12);
+        assert!(r.displacement_um.as_ref().unwrap().iter().all(|v| v.is_finite()));
+        rows += r.len();
+    }
+    assert_eq!(rows, 100 + 47 + 29 + 69 + 50);
+    assert!(stderr(&o).contains("warning"), "{}", stderr(&o));
+    // Nothing but the segments (no temporary files) is left in the folder.
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+        .collect();
+    assert_eq!(names.len(), 1 + files.len(), "{names:?}");
+    // A stream without a single frame is an error, not an empty file.
+    let junk = write(dir.path(), "junk.bin", &[0x55; 4000]);
+    let o = gma(&["record", "--input", &junk, "--out", dir.path().join("none.csv").to_str().unwrap()]);
+    refused(&o, &["junk.bin", "no telemetry frames"], "record on junk");
+    assert!(!dir.path().join("none.csv").exists());
+}
