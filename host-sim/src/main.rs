@@ -257,6 +257,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Report(a) => run_report(&a),
         Command::Demo(a) => run_demo(&a),
         Command::Record(a) => {
+            host_sim::recording::check_output(&a.out)?;
             let stream = host_sim::record::open_stream(&a.input)?;
             let r = host_sim::record::record(stream, &a.out, a.tick_s)
                 .with_context(|| format!("{}", a.input.display()))?;
@@ -442,6 +443,9 @@ fn run_loop_fit(a: &FitArgs) -> Result<()> {
 }
 
 fn run_fit(a: &FitArgs) -> Result<()> {
+    if let Some(out) = &a.params_out {
+        host_sim::recording::check_output(out)?;
+    }
     if loop_files(&a.mf.files, &a.mf.val)? {
         return run_loop_fit(a);
     }
@@ -712,6 +716,7 @@ fn write_report(
 }
 
 fn run_report(a: &ReportArgs) -> Result<()> {
+    host_sim::recording::check_output(&a.out)?;
     if loop_files(&a.mf.files, &a.mf.val)? {
         let spec = params::parse_spec(&a.mf.model)?;
         let files = a.mf.files.iter().map(|p| loops::read(p)).collect::<Result<Vec<_>>>()?;

@@ -232,6 +232,19 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     persist(tmp, path)
 }
 
+/// Checks before any work that `path` can be written (its folder exists), so a long fit does
+/// not end in "cannot create a file".
+pub fn check_output(path: &Path) -> Result<()> {
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    if !dir.is_dir() {
+        bail!("cannot write {}: the folder {} does not exist", path.display(), dir.display());
+    }
+    if path.is_dir() {
+        bail!("cannot write {}: it is a folder", path.display());
+    }
+    Ok(())
+}
+
 /// A temporary file in `dir` for an output being written (`.gma-*.partial`: a run killed
 /// mid-write leaves one of these, never a truncated result under the final name).
 pub fn partial_file(dir: &Path) -> Result<tempfile::NamedTempFile> {

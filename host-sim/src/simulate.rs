@@ -74,6 +74,7 @@ pub struct SimulateArgs {
 
 /// Runs the simulation and writes the CSV.
 pub fn run(a: &SimulateArgs) -> Result<()> {
+    crate::recording::check_output(&a.out)?;
     let spec = params::parse_spec(&a.model)?;
     let p = params::load(a.params.as_deref(), spec)?;
     for (name, v) in [("--freq-hz", a.freq_hz), ("--duration-s", a.duration_s)] {

@@ -339,6 +339,19 @@ fn out_of_range_arguments_are_refused_with_the_option_named() {
         refused(&gma(&args), &[expected], &args.join(" "));
     }
     assert!(!Path::new(&out).exists());
+    // Outputs that cannot be written are refused before any work.
+    let nodir = dir.path().join("no/such/dir/p.toml").to_str().unwrap().to_string();
+    let a_file = good.clone();
+    for args in [
+        vec!["fit", "--model", "ja", "--params-out", &nodir, &good],
+        vec!["report", "--model", "ja", "--out", &nodir, &good],
+        vec!["simulate", "--out", &nodir],
+        vec!["record", "--input", &good, "--out", &nodir],
+        vec!["compare", "--model", "ja", "--out-dir", &a_file, &good],
+        vec!["demo", "--out-dir", &a_file],
+    ] {
+        refused(&gma(&args), &["cannot"], &args.join(" "));
+    }
     // Missing files are named.
     let nope = dir.path().join("nope.csv").to_str().unwrap().to_string();
     for args in [vec!["fit", "--model", "ja", &nope], vec!["record", "--input", &nope, "--out", &out]] {
@@ -462,4 +475,41 @@ fn record_counts_every_fault_in_the_stream_and_never_writes_a_bad_row() {
     let o = gma(&["record", "--input", &junk, "--out", dir.path().join("none.csv").to_str().unwrap()]);
     refused(&o, &["junk.bin", "no telemetry frames"], "record on junk");
     assert!(!dir.path().join("none.csv").exists());
+}
+
+#[test]
+fn fit_on_data_no_model_can_follow_gives_finite_parameters_or_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    // Displacement that falls when the current rises (a sign-inverted probe), and pure noise.
+    let inverted: Vec<String> = good_rows()
+        .iter()
+        .map(|r| {
+            let (head, y) = r.rsplit_once(',').unwrap();
+            format!("{head},{}", -y.parse::<f64>().unwrap())
+        })
+        .collect();
+    let noise: Vec<String> = good_rows()
+        .iter()
+        .enumerate()
+        .map(|(k, r)| format!("{},{}", r.rsplit_once(',').unwrap().0, ((k * 7919) % 101) as f64 * 0.01))
+        .collect();
+    for (name, rows) in [("inverted.csv", inverted), ("noise.csv", noise)] {
+        let f = write(dir.path(), name, &csv(HEADER, &rows));
+        let out = dir.path().join("p.toml");
+        let o = gma(&["fit", "--model", "ja", "--json", "--params-out", out.to_str().unwrap(), &f]);
+        let err = stderr(&o);
+        assert!(!err.contains("panicked"), "{name}: {err}");
+        if o.status.success() {
+            let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+            let params = j["params"].as_object().expect("params");
+            assert!(params.values().all(|v| v.as_f64().is_some_and(f64::is_finite)), "{name}: {j}");
+            let p: model_core::ActuatorParams =
+                toml::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+            model_core::Actuator::new(model_core::ModelSpec::parse("ja").unwrap(), &p).unwrap();
+        } else {
+            refused(&o, &["the fit"], name);
+            assert!(!out.exists());
+        }
+        println!("{name}: {}", if o.status.success() { "finite parameters".into() } else { err });
+    }
 }
