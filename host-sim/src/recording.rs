@@ -133,9 +133,14 @@ impl Recording {
         }
         if index[0].is_none() {
             let found: Vec<&str> = headers.iter().collect();
+            let joined = found.join(", ");
+            let hint = [(';', "`;`"), ('\t', "tabs")]
+                .iter()
+                .find(|(c, _)| joined.contains(*c) && joined.contains("time_s"))
+                .map(|(_, name)| format!(" — the file seems to separate columns with {name}; measurement files are comma-separated"))
+                .unwrap_or_default();
             bail!(
-                "{file}:1: no `time_s` column (header has: {}); recognised columns are {}",
-                found.join(", "),
+                "{file}:1: no `time_s` column (header has: {joined}); recognised columns are {}{hint}",
                 COLUMNS.join(", ")
             );
         }
@@ -428,6 +433,13 @@ mod tests {
         assert!(e.contains("drive column"), "{e}");
         let e = err("time_s,current_A,current_A\n0,1,1\n");
         assert!(e.contains("appears twice"), "{e}");
+    }
+
+    #[test]
+    fn spreadsheet_exports_with_a_byte_order_mark_and_crlf_are_read() {
+        let r = Recording::parse("rig.csv", b"\xEF\xBB\xBFtime_s,current_A\r\n0,1\r\n0.001,2\r\n0.002,3\r\n")
+            .unwrap();
+        assert_eq!(r.current_a.unwrap(), vec![1.0, 2.0, 3.0]);
     }
 
     #[test]
