@@ -104,13 +104,8 @@ pub fn looks_like_loop(text: &str) -> bool {
 
 /// Reads a loop file; errors name the file and line.
 pub fn read(path: &Path) -> Result<LoopFile> {
-    let name = path.display().to_string();
-    let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read"))?;
-    let text = std::str::from_utf8(&bytes).map_err(|e| {
-        let line = bytes[..e.valid_up_to()].iter().filter(|b| **b == b'\n').count() + 1;
-        anyhow::anyhow!("{name}:{line}: not UTF-8 text (a binary file, or a text encoding other than UTF-8?)")
-    })?;
-    parse(&name, text)
+    let (name, text) = crate::recording::read_text(path)?;
+    parse(&name, &text)
 }
 
 /// Parses loop text.

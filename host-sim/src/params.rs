@@ -109,13 +109,8 @@ pub fn load(path: Option<&Path>, spec: ModelSpec) -> Result<ActuatorParams> {
     match path {
         None => Ok(ActuatorParams::TERFENOL_DEMO),
         Some(p) => {
-            let name = p.display().to_string();
-            let bytes = std::fs::read(p).with_context(|| format!("{name}: cannot read"))?;
-            let text = std::str::from_utf8(&bytes).map_err(|e| {
-                let line = bytes[..e.valid_up_to()].iter().filter(|b| **b == b'\n').count() + 1;
-                anyhow::anyhow!("{name}:{line}: not UTF-8 text (not a parameter file?)")
-            })?;
-            parse(&name, text, spec)
+            let (name, text) = crate::recording::read_text(p)?;
+            parse(&name, &text, spec)
         }
     }
 }

@@ -51,7 +51,7 @@ pub fn record<R: Read>(mut input: R, out: &Path, tick_s: f64) -> Result<RecordSu
     if !(tick_s.is_finite() && tick_s > 0.0) {
         bail!("--tick-s must be > 0, got {tick_s}");
     }
-    let dir = out.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf();
+    let dir = crate::recording::output_dir(out);
     let mut d = Decoder::default();
     let mut sum = RecordSummary::default();
     let mut seg: Option<Segment> = None;
@@ -94,7 +94,7 @@ pub fn record<R: Read>(mut input: R, out: &Path, tick_s: f64) -> Result<RecordSu
             let s = match &mut seg {
                 Some(s) => s,
                 None => {
-                    let tmp = crate::recording::partial_file(&dir)?;
+                    let tmp = crate::recording::partial_file(dir)?;
                     let mut file = std::io::BufWriter::new(tmp);
                     file.write_all(b"time_s,command_V,current_A,displacement_um,reference_um,faults\n")?;
                     seg.insert(Segment { file, first_seq: f.seq, frames: 0 })

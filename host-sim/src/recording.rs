@@ -219,8 +219,7 @@ impl Recording {
     /// Writes the CSV atomically (temporary file in the same directory, then rename), streamed
     /// through a buffer rather than built in memory.
     pub fn write(&self, path: &Path) -> Result<()> {
-        let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-        let mut buf = std::io::BufWriter::with_capacity(1 << 16, partial_file(dir)?);
+        let mut buf = std::io::BufWriter::with_capacity(1 << 16, partial_file(output_dir(path))?);
         self.write_csv(&mut buf).with_context(|| format!("writing {}", path.display()))?;
         let tmp =
             buf.into_inner().map_err(|e| anyhow::anyhow!("writing {}: {}", path.display(), e.error()))?;
@@ -231,16 +230,36 @@ impl Recording {
 /// Writes `bytes` to `path` through a temporary file and a rename, so that readers never see a
 /// half-written file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let dir = output_dir(path);
     let mut tmp = partial_file(dir)?;
     tmp.write_all(bytes).with_context(|| format!("writing {}", path.display()))?;
     persist(tmp, path)
 }
 
+/// The folder `path` is written into (`.` for a bare file name).
+pub fn output_dir(path: &Path) -> &Path {
+    path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."))
+}
+
+/// Reads a text file (parameter or loop file); a non-UTF-8 file is an error naming its line.
+/// Returns the file's display name and its text.
+pub fn read_text(path: &Path) -> Result<(String, String)> {
+    let name = path.display().to_string();
+    let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read"))?;
+    match String::from_utf8(bytes) {
+        Ok(text) => Ok((name, text)),
+        Err(e) => {
+            let bytes = e.as_bytes();
+            let line = bytes[..e.utf8_error().valid_up_to()].iter().filter(|b| **b == b'\n').count() + 1;
+            bail!("{name}:{line}: not UTF-8 text (a binary file, or a text encoding other than UTF-8?)")
+        }
+    }
+}
+
 /// Checks before any work that `path` can be written (its folder exists), so a long fit does
 /// not end in "cannot create a file".
 pub fn check_output(path: &Path) -> Result<()> {
-    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let dir = output_dir(path);
     if !dir.is_dir() {
         bail!("cannot write {}: the folder {} does not exist", path.display(), dir.display());
     }

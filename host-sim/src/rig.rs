@@ -112,10 +112,12 @@ impl Rig {
     pub fn sample(&mut self) -> RawSample {
         let mut y = self.displacement_from_rest_um() + 20.0;
         let mut current = self.calibration.current_code(Amps(self.current_a() as f32));
-        let faults: Vec<Fault> = self.active().collect();
         let mut dropout = false;
-        for f in &faults {
-            match *f {
+        let t = self.tick;
+        // Fields borrowed apart: the injections are read while the noise generator advances.
+        let active = self.injections.iter().filter(|j| t >= j.from && t - j.from < j.ticks);
+        for j in active {
+            match j.fault {
                 Fault::DisplacementSaturation { offset_um } => y += offset_um,
                 Fault::NoiseBurst { rms_um } => {
                     y += Normal::new(0.0, rms_um).map(|n| n.sample(&mut self.rng)).unwrap_or(0.0)
@@ -134,7 +136,6 @@ impl Rig {
     pub fn apply(&mut self, out: &TickOutput) -> Result<()> {
         let bus = self.bus_now();
         let i = self.current_a();
-        let faults: Vec<Fault> = self.active().collect();
         let mut v = if !out.bridge_enabled {
             // Bridge off: the coil discharges into the bus through the body diodes. The plant's
             // coil stage cannot stop exactly at zero current, so the last 0.5 A decays through R.
@@ -143,13 +144,13 @@ impl Rig {
             } else {
                 0.0
             }
-        } else if faults.contains(&Fault::BridgeStuckOn) {
+        } else if self.active().any(|f| f == Fault::BridgeStuckOn) {
             bus
         } else {
             out.duty.clamp(-1.0, 1.0) as f64 * bus
         };
-        for f in &faults {
-            if let Fault::AmplifierSaturation { max_v } = *f {
+        for f in self.active() {
+            if let Fault::AmplifierSaturation { max_v } = f {
                 v = v.clamp(-max_v, max_v);
             }
         }
