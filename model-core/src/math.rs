@@ -2,21 +2,37 @@
 //! accuracy and cost on the target are measured and chosen per function (table in the crate
 //! README; `cargo test -p model-core --features math-audit --test f32_accuracy -- --nocapture`).
 //!
-//! - `exp`: our own single-precision range reduction and polynomial (≤ 2e-7 relative). libm's
-//!   `expf` works in f64 internally, which the Cortex-M4F's single-precision FPU emulates in
-//!   software — it was most of a J–A sub-step's instructions; micromath's is coarse.
+//! - `exp`: our own single precision, a 32-entry table of 2^(j/32) and a cubic (≤ 1.5e-7
+//!   relative), written for a short dependency chain. libm's `expf` works in f64 internally,
+//!   which the Cortex-M4F's single-precision FPU emulates in software — it was most of a J–A
+//!   sub-step's instructions; micromath's is coarse.
 //! - `sqrt`: libm (micromath's bit trick is off by percent).
 //! - `sin_cos`: libm (micromath's distorts reference waveforms).
 //!
 //! With the `math-audit` feature (host only) each function can be switched to an alternative
 //! at run time, which is how the table is measured.
 
-/// ln 2 split for an exact k·ln 2 (Cody–Waite): the high part has trailing zero bits.
-const LN2_HI: f32 = 0.693_145_75;
-const LN2_LO: f32 = 1.428_606_8e-6;
+/// 2^(j/32), j = 0..31, rounded to f32: e^x = 2^k · 2^(j/32) · e^r. (Entry 16 is √2, written out
+/// like its neighbours.)
+#[allow(clippy::approx_constant)]
+const EXP2_FRACTIONS: [f32; 32] = [
+    1.0, 1.0218972, 1.0442737, 1.0671405, 1.0905077, 1.1143868, 1.1387886, 1.1637249, 1.1892071, 1.2152474,
+    1.2418578, 1.269051, 1.2968396, 1.3252367, 1.3542556, 1.38391, 1.4142135, 1.4451808, 1.4768262,
+    1.5091645, 1.5422108, 1.5759809, 1.6104903, 1.6457555, 1.6817929, 1.7186193, 1.7562522, 1.7947091,
+    1.8340081, 1.8741677, 1.9152066, 1.9571441,
+];
+/// 32/ln 2.
+const INV_LN2_32: f32 = 46.16624;
+/// ln2/32 split for an exact n·ln2/32 (Cody–Waite): the high part has 12 significant bits, so
+/// n·LN2_32_HI is exact for every |n| < 4096 (the whole f32 range of exp).
+const LN2_32_HI: f32 = 0.021_659_851;
+const LN2_32_LO: f32 = 9.983182e-7;
+/// 1.5·2²³: adding it rounds an f32 of magnitude < 2²² to an integer, held in the low mantissa bits.
+const ROUNDING_SHIFTER: f32 = 12_582_912.0;
 
-/// e^x in f32: x = k ln 2 + r with |r| ≤ ln2/2, e^r by its degree-7 Taylor polynomial,
-/// scaled by 2^k through the exponent bits. 0 below −87.3, +∞ above 88.7.
+/// e^x in f32: x = n ln2/32 + r with |r| ≤ ln2/64 and n = 32k + j, so e^x = 2^k · 2^(j/32) · e^r
+/// with 2^(j/32) from a 32-entry table, e^r by its cubic Taylor polynomial (truncation below
+/// 1e-9) and 2^k through the exponent bits (≤ 1.5e-7 relative). 0 below −87.3, +∞ above 88.7.
 #[inline]
 pub fn exp(x: f32) -> f32 {
     if x < -87.3 {
@@ -30,22 +46,37 @@ pub fn exp(x: f32) -> f32 {
 }
 
 /// [`exp`] without the range checks, for callers whose argument is known to lie in
-/// [−87.3, 88.7] (the Langevin function's mid range: [−18, −1]).
+/// [−87.3, 88.7].
 #[inline]
 fn exp_in_range(x: f32) -> f32 {
+    exp_reduced(x, x * INV_LN2_32)
+}
+
+/// e^{−2a} for a in the Langevin function's mid range [0.5, 9]. The same as
+/// `exp_in_range(-2.0 * a)` bit for bit (scaling by −2 is exact), one multiplication shorter.
+#[inline]
+fn exp_minus_twice(a: f32) -> f32 {
+    exp_reduced(-2.0 * a, a * (-2.0 * INV_LN2_32))
+}
+
+/// e^x given x·32/ln 2. Written for latency (the J–A sub-step waits on it): n is rounded by the
+/// shifter instead of float→int→float conversions, and the table value is scaled by 2^k while
+/// the short polynomial is evaluated.
+#[inline]
+fn exp_reduced(x: f32, x_times_inv_ln2_32: f32) -> f32 {
     #[cfg(feature = "math-audit")]
     if let Some(y) = audit::exp(x) {
         return y;
     }
-    let k = (x * core::f32::consts::LOG2_E + 0.5f32.copysign(x)) as i32;
-    let kf = k as f32;
-    let r = x - kf * LN2_HI - kf * LN2_LO;
-    let p = 1.0
-        + r * (1.0
-            + r * (0.5
-                + r * (1.0 / 6.0
-                    + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r * (1.0 / 5040.0)))))));
-    p * f32::from_bits(((k + 127) as u32) << 23)
+    let shifted = x_times_inv_ln2_32 + ROUNDING_SHIFTER;
+    let n = (shifted.to_bits() as i32).wrapping_sub(ROUNDING_SHIFTER.to_bits() as i32);
+    let nf = shifted - ROUNDING_SHIFTER;
+    let r = x - nf * LN2_32_HI - nf * LN2_32_LO;
+    // 2^k · 2^(j/32): exact (a power-of-two scaling of a table value).
+    let base = EXP2_FRACTIONS[(n & 31) as usize] * f32::from_bits(((n >> 5).wrapping_add(127) as u32) << 23);
+    // e^r − 1 = r + r²(1/2 + r/6); adding it to the base last keeps its low bits.
+    let em1 = r + r * r * (0.5 + r * (1.0 / 6.0));
+    base + base * em1
 }
 
 /// √x (x ≥ 0; inverse magnetostriction).
@@ -149,7 +180,7 @@ pub fn langevin(x: f32) -> f32 {
         ax * (1.0 / 3.0
             + x2 * (-1.0 / 45.0 + x2 * (2.0 / 945.0 + x2 * (-1.0 / 4725.0 + x2 * (2.0 / 93555.0)))))
     } else if ax < 9.0 {
-        let e = exp_in_range(-2.0 * ax);
+        let e = exp_minus_twice(ax);
         (1.0 + e) / (1.0 - e) - 1.0 / ax
     } else {
         1.0 - 1.0 / ax
@@ -166,7 +197,7 @@ pub fn langevin_slope(x: f32) -> f32 {
         // 1/3 − x²/15 + 2x⁴/189 − x⁶/675 + 2x⁸/10395
         1.0 / 3.0 + x2 * (-1.0 / 15.0 + x2 * (2.0 / 189.0 + x2 * (-1.0 / 675.0 + x2 * (2.0 / 10395.0))))
     } else if ax < 9.0 {
-        let e = exp_in_range(-2.0 * ax);
+        let e = exp_minus_twice(ax);
         let d = 1.0 - e;
         1.0 / (ax * ax) - 4.0 * e / (d * d)
     } else {
@@ -188,7 +219,7 @@ pub fn langevin_with_slope(x: f32) -> (f32, f32) {
         )
     } else {
         if ax < 9.0 {
-            let e = exp_in_range(-2.0 * ax);
+            let e = exp_minus_twice(ax);
             // One division for both reciprocals 1/x and 1/(1 − e).
             let d = 1.0 - e;
             let r = 1.0 / (ax * d);
@@ -216,17 +247,36 @@ mod tests {
 
     #[test]
     fn exp_is_accurate_over_the_f32_range() {
-        let mut x = -87.0f32;
+        let mut x = -87.3f32;
         let mut worst = 0.0f64;
-        while x < 88.0 {
+        while x < 88.7 {
             let r = (x as f64).exp();
             worst = worst.max(((exp(x) as f64 - r) / r).abs());
-            x += 0.0137;
+            x += 0.00137;
         }
-        assert!(worst < 2.5e-7, "max relative error {worst:e}");
+        // Every argument in the Langevin mid range, where the J–A sub-step uses it.
+        let mut bits = (-18.0f32).to_bits();
+        while bits >= (-1.0f32).to_bits() {
+            let x = f32::from_bits(bits);
+            let r = (x as f64).exp();
+            worst = worst.max(((exp(x) as f64 - r) / r).abs());
+            bits -= 7;
+        }
+        assert!(worst < 1.5e-7, "max relative error {worst:e}");
         assert_eq!(exp(0.0), 1.0);
         assert_eq!(exp(-200.0), 0.0);
+        assert_eq!(exp(100.0), f32::INFINITY);
+        assert!(exp(88.7).is_finite() && exp(-87.3) > 0.0);
         assert!(exp(f32::NAN).is_nan());
+    }
+
+    #[test]
+    fn exp_table_holds_the_correctly_rounded_powers_of_two() {
+        for (j, &t) in EXP2_FRACTIONS.iter().enumerate() {
+            assert_eq!(t, 2.0f64.powf(j as f64 / 32.0) as f32, "2^({j}/32)");
+        }
+        assert_eq!((LN2_32_HI.to_bits() & 0xfff), 0, "n·LN2_32_HI must be exact for |n| < 4096");
+        assert!(((LN2_32_HI as f64 + LN2_32_LO as f64) - core::f64::consts::LN_2 / 32.0).abs() < 1e-13);
     }
 
     #[test]
