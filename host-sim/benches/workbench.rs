@@ -2,7 +2,8 @@
 //! (on 2 cores: `taskset -c 0,1 cargo bench …`). Wall-clock figures of whole jobs, each run once
 //! or a few times — too long for criterion's repeated sampling.
 //!
-//! - plant simulation speed, × real time (target ≥ 500×), on 2 s and 30 s records
+//! - plant simulation speed, × real time (target ≥ 500×), on 2 s and 30 s records, with distributed
+//!   (the default) and lumped eddy currents
 //!   (`cargo bench -p host-sim --bench workbench -- plant` runs this part alone);
 //! - `fit --model ja+mech` on 4 files of 30 000 samples (target ≤ 20 s);
 //! - a J–A fit to a 300-point magnetization loop (target ≤ 10 s);
@@ -12,28 +13,31 @@ use std::time::Instant;
 
 use host_sim::excitation::Excitation;
 use host_sim::fit::{fit, FitOptions};
-use host_sim::plant::Plant;
+use host_sim::plant::{EddyModel, Plant};
 use host_sim::{cases, diagnose};
 use model_core::{ActuatorParams, ModelSpec};
 
 fn main() {
     println!("rayon threads: {}", rayon::current_num_threads());
     // Plant: ja+eddy+mech+amp at 10 kHz, integrated at 20 kHz, a 100 Hz sine.
-    let plant = Plant::new(ModelSpec::parse("amp+eddy+ja+mech").unwrap(), ActuatorParams::TERFENOL_DEMO);
+    let mut plant = Plant::new(ModelSpec::parse("amp+eddy+ja+mech").unwrap(), ActuatorParams::TERFENOL_DEMO);
     let exc = Excitation::Sine { freq_hz: 100.0, amplitude: 1.0, bias: 0.0 };
-    for secs in [2.0, 30.0] {
-        let mut best = f64::MAX;
-        for seed in 0..5 {
-            let t = Instant::now();
-            let rec = plant.record("bench", &exc, secs, seed).unwrap();
-            assert_eq!(rec.len(), (secs * 1e4) as usize);
-            best = best.min(t.elapsed().as_secs_f64());
+    for eddy in [EddyModel::Distributed, EddyModel::Lumped] {
+        plant.eddy = eddy;
+        for secs in [2.0, 30.0] {
+            let mut best = f64::MAX;
+            for seed in 0..5 {
+                let t = Instant::now();
+                let rec = plant.record("bench", &exc, secs, seed).unwrap();
+                assert_eq!(rec.len(), (secs * 1e4) as usize);
+                best = best.min(t.elapsed().as_secs_f64());
+            }
+            println!(
+                "| plant amp+eddy+ja+mech ({eddy:?} eddy), {secs} s at 10 kHz (×2 oversampling) | {:.1} ms | {:.0}× real time |",
+                best * 1e3,
+                secs / best
+            );
         }
-        println!(
-            "| plant amp+eddy+ja+mech, {secs} s at 10 kHz (×2 oversampling) | {:.1} ms | {:.0}× real time |",
-            best * 1e3,
-            secs / best
-        );
     }
     if std::env::args().any(|a| a == "plant") {
         return; // `cargo bench -p host-sim --bench workbench -- plant`: the plant alone

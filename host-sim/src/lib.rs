@@ -14,5 +14,6 @@ pub mod record;
 pub mod recording;
 pub mod report;
 pub mod rig;
+pub mod rod_diffusion;
 pub mod search;
 pub mod simulate;

@@ -752,7 +752,11 @@ fn run_demo(a: &DemoArgs) -> Result<()> {
     let t = std::time::Instant::now();
     let case = cases::demo();
     std::fs::create_dir_all(&a.out_dir).with_context(|| format!("cannot create {}", a.out_dir.display()))?;
-    println!("gma demo: a SIMULATED Terfenol-D rig with `{}` (the engineer does not know); the engineer's model is `{}`.", case.plant.spec, case.model);
+    println!(
+        "gma demo: a SIMULATED Terfenol-D rig with {}, unknown to the engineer, whose model is `{}`.",
+        case.plant.describe(),
+        case.model
+    );
     let (fit_files, val_files) = case.recordings(a.seed)?;
     for r in fit_files.iter().chain(&val_files) {
         let p = a.out_dir.join(&r.name);
@@ -787,7 +791,7 @@ fn run_demo(a: &DemoArgs) -> Result<()> {
     }
     let html = a.out_dir.join("report.html");
     write_report(&html, "gma demo — finding the missing physics (SIMULATED rig)", &rungs, &fit_files, &val_files,
-        &format!("Simulated rig with {}; the engineer starts from `{}`. Every number below comes from the fits in this run.", case.plant.spec, case.model))?;
+        &format!("Simulated rig with {}; the engineer starts from `{}`. Every number below comes from the fits in this run.", case.plant.describe(), case.model))?;
     let first = rungs.first().map(|r| r.headline()).unwrap_or(f64::NAN);
     let last = rungs.last().map(|r| r.headline()).unwrap_or(f64::NAN);
     println!(

@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 
 use crate::excitation::Excitation;
 use crate::params;
-use crate::plant::Plant;
+use crate::plant::{EddyModel, Plant};
 
 /// Excitation waveforms.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -61,6 +61,10 @@ pub struct SimulateArgs {
     /// Integration steps per recorded sample (the plant runs faster than the recording).
     #[arg(long, default_value_t = 2)]
     pub oversample: u32,
+    /// Eddy currents of the simulated rod (with `eddy`): field diffusion into the rod, whose
+    /// low-frequency lag is `eddy_tau_s`, or the models' own first-order lag.
+    #[arg(long, value_enum, default_value = "distributed")]
+    pub eddy_model: EddyModel,
     /// Leave out the `current_A` column (a rig that logs the command only; needs `amp`).
     #[arg(long)]
     pub no_current: bool,
@@ -108,12 +112,14 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     plant.offset_um = a.offset_um;
     plant.oversample = a.oversample;
     plant.log_current = !a.no_current;
+    plant.eddy = a.eddy_model;
     let name = a.out.display().to_string();
     let rec = plant.record(&name, &exc, a.duration_s, a.seed)?;
     rec.write(&a.out).with_context(|| format!("writing {name}"))?;
     eprintln!(
-        "gma: wrote {} samples of SIMULATED data (plant `{spec}`, {}) to {name}",
+        "gma: wrote {} samples of SIMULATED data (plant {}, {}) to {name}",
         rec.len(),
+        plant.describe(),
         exc.describe()
     );
     Ok(())

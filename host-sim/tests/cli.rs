@@ -26,6 +26,31 @@ fn simulate_writes_the_csv_contract() {
     assert!(hi - lo > 5.0, "stroke {} µm", hi - lo);
 }
 
+/// The rod's eddy currents are distributed unless the lumped lag is asked for; stderr says which.
+#[test]
+fn simulate_names_its_eddy_current_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut columns = Vec::new();
+    for (flag, words) in [(None, "distributed eddy currents"), (Some("lumped"), "lumped eddy currents")] {
+        let out = dir.path().join(format!("{words}.csv"));
+        let mut args =
+            vec!["simulate", "--model", "eddy+ja", "--freq-hz", "800", "--out", out.to_str().unwrap()];
+        if let Some(f) = flag {
+            args.extend(["--eddy-model", f]);
+        }
+        let o = gma(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success() && err.contains(words), "{err}");
+        let text = std::fs::read_to_string(&out).unwrap();
+        columns.push(
+            text.lines().skip(1).map(|l| l.rsplit(',').next().unwrap().to_string()).collect::<Vec<_>>(),
+        );
+    }
+    assert_ne!(columns[0], columns[1], "the eddy model made no difference at 800 Hz");
+    let o = gma(&["simulate", "--model", "eddy+ja", "--eddy-model", "skin", "--out", "x.csv"]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("distributed, lumped"));
+}
+
 #[test]
 fn a_typo_in_the_model_spec_is_named_with_a_suggestion() {
     let dir = tempfile::tempdir().unwrap();

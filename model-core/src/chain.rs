@@ -321,6 +321,20 @@ impl Actuator {
     /// coil current [A].
     #[inline]
     pub fn step(&self, s: &mut ActuatorState, input: f32) -> Result<ActuatorOutput, StepError> {
+        self.step_with_field_stage(s, input, |h_coil| h_coil)
+    }
+
+    /// [`Actuator::step`] with one more stage between the coil field and the eddy lag:
+    /// `rod_field` maps the coil field [A/m] to the field the rod sees. The workbench's plant
+    /// simulator puts its distributed (radial diffusion) eddy-current model here; the board
+    /// does not use it.
+    #[inline]
+    pub fn step_with_field_stage(
+        &self,
+        s: &mut ActuatorState,
+        input: f32,
+        rod_field: impl FnOnce(f32) -> f32,
+    ) -> Result<ActuatorOutput, StepError> {
         if !input.is_finite() || input.abs() > MAX_INPUT {
             return Err(StepError::InputOutOfRange);
         }
@@ -331,7 +345,7 @@ impl Actuator {
                 input
             }
         };
-        let h_coil = self.coil.field(current);
+        let h_coil = rod_field(self.coil.field(current));
         let h = match &self.eddy {
             Some(lag) => lag.step(&mut s.rod_field_a_per_m, h_coil),
             None => {
