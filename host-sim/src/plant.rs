@@ -86,18 +86,16 @@ impl Plant {
         fine.dt_s = fine_dt as f32;
         let delay = self.params.delay_samples as u32 * self.oversample;
         fine.delay_samples = u16::try_from(delay).context("delay too long")?;
-        // Validates every stage the spec names, eddy_tau_s included, even when the rod replaces the lag.
-        let lumped = Actuator::new(self.spec, &fine).context("plant parameters")?;
-        let model = if self.spec.has(Effect::EddyCurrent) && self.eddy == EddyModel::Distributed {
-            // The chain without its lumped lag, the rod's diffusion in its place.
-            let chain =
-                Actuator::new(self.spec.without(Effect::EddyCurrent), &fine).context("plant parameters")?;
-            let rod = RodDiffusion::new(self.params.eddy_tau_s as f64, fine_dt)?;
-            FineModel { chain, rod: Some(rod) }
+        // Distributed: the chain without its lumped lag, the rod's diffusion in its place.
+        let distributed = self.spec.has(Effect::EddyCurrent) && self.eddy == EddyModel::Distributed;
+        let chain_spec = if distributed { self.spec.without(Effect::EddyCurrent) } else { self.spec };
+        let chain = Actuator::new(chain_spec, &fine).context("plant parameters")?;
+        let rod = if distributed {
+            Some(RodDiffusion::new(self.params.eddy_tau_s as f64, fine_dt).context("plant parameters")?)
         } else {
-            FineModel { chain: lumped, rod: None }
+            None
         };
-        Ok((model, fine_dt))
+        Ok((FineModel { chain, rod }, fine_dt))
     }
 
     /// The plant stepped one recording period at a time under a drive the caller holds over the
