@@ -16,12 +16,15 @@
 //!    the data cannot separate the effects: the diagnosis says so and names the stage nearest
 //!    the drive.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
+
 use anyhow::{bail, Result};
 use model_core::{Effect, ModelSpec};
 use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::fit::{self, evaluate, simulate, FitOptions, FitResult, Simulation};
+use crate::progress;
 use crate::recording::Recording;
 
 /// A candidate must cut the validation NRMSE at least this much to be the verdict.
@@ -31,6 +34,10 @@ pub const MIN_CUT: f64 = 1.5;
 pub const MIN_EVIDENCE_R2: f64 = 0.02;
 /// Two candidates whose refits end within this factor of each other are not separated.
 const SAME_CUT: f64 = 1.15;
+
+/// Fewest samples per fit file for a verdict: the refits have up to about ten parameters, and
+/// comparing them needs far more samples than parameters (20 per parameter).
+pub const MIN_SAMPLES: usize = 200;
 
 /// One candidate effect, as the JSON contract lists it.
 #[derive(Debug, Clone, Serialize)]
@@ -74,6 +81,9 @@ pub struct Diagnosis {
     /// The fit of the given structure.
     #[serde(skip)]
     pub baseline: Option<FitResult>,
+    /// `--time-limit` cut the work short: the baseline or some refits are the best found so
+    /// far, and candidates not refitted in time are left out.
+    pub time_limited: bool,
 }
 
 /// The effects worth trying on top of `spec` for these files.
@@ -282,8 +292,18 @@ pub fn diagnose(
                 rec.duration_s() * 1e3
             );
         }
+        if rec.len() < MIN_SAMPLES {
+            bail!(
+                "{}: {} samples; a diagnosis compares models with up to about ten parameters and needs at \
+                 least {MIN_SAMPLES} samples per file",
+                rec.name,
+                rec.len()
+            );
+        }
     }
+    progress::phase(opts.progress, &format!("diagnose: fitting the given model `{spec}`"));
     let base = fit::fit(spec, init, fit_files, opts)?;
+    let mut time_limited = base.time_limited;
     let score_files = if val_files.is_empty() { fit_files } else { val_files };
     let before = evaluate(spec, &base.params, score_files)?.mean_nrmse();
     let nrmse_val = if val_files.is_empty() { None } else { Some(before) };
@@ -338,20 +358,51 @@ pub fn diagnose(
     // Refit every candidate (in parallel), warm-started from the baseline.
     let cands = candidates_for(spec, fit_files);
     let refit_opts = FitOptions { progress: false, ..opts };
-    let results: Vec<(Effect, Result<(FitResult, f64)>)> = cands
+    progress::phase(
+        opts.progress,
+        &format!("diagnose: refitting `{spec}` plus each of {} candidate effects", cands.len()),
+    );
+    let done = AtomicUsize::new(0);
+    // Per candidate: its refit and validation NRMSE, or None when the time limit left it out.
+    type Refit = Option<Result<(FitResult, f64)>>;
+    let results: Vec<(Effect, Refit)> = cands
         .par_iter()
         .map(|&e| {
+            // Past the deadline a candidate is not refitted at all (and said so).
+            if fit::time_left(opts.deadline).is_some_and(|t| t.is_zero()) {
+                return (e, None);
+            }
             let s2 = spec.with(e);
             // Warm start from the baseline, and from the engineer's start values: a baseline that
             // bent its parameters to mimic the missing effect can be a poor start.
             let r = fit::fit_from(s2, &[base.params, *init], fit_files, refit_opts)
                 .and_then(|f| Ok((evaluate(s2, &f.params, score_files)?.mean_nrmse(), f)))
                 .map(|(after, f)| (f, after));
-            (e, r)
+            let k = done.fetch_add(1, Ordering::Relaxed) + 1;
+            if let Ok((_, after)) = &r {
+                progress::phase(
+                    opts.progress,
+                    &format!(
+                        "diagnose: refit {k}/{} done: `+{}` {:.2} %",
+                        cands.len(),
+                        e.name(),
+                        after * 100.0
+                    ),
+                );
+            }
+            (e, Some(r))
         })
         .collect();
     let mut candidates = Vec::new();
+    let mut skipped = Vec::new();
     for (e, r) in results {
+        let Some(r) = r else {
+            skipped.push(e.name());
+            continue;
+        };
+        if let Ok((f, _)) = &r {
+            time_limited |= f.time_limited;
+        }
         let r2 = evidence(e, &sigs);
         let (refit, after) = match r {
             Ok((f, after)) => (Some(f), after),
@@ -436,7 +487,15 @@ pub fn diagnose(
             ));
         }
     }
+    if !skipped.is_empty() {
+        time_limited = true;
+        findings.push(format!(
+            "--time-limit reached: `{}` not refitted; the verdict weighs only the candidates refitted in time",
+            skipped.join("`, `")
+        ));
+    }
     Ok(Diagnosis {
+        time_limited,
         model: spec.to_string(),
         nrmse_fit: base.fit.mean_nrmse(),
         nrmse_val,

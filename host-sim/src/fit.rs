@@ -6,19 +6,21 @@
 //! Nelder–Mead (argmin) from the best particle; a sensor delay is an integer searched by scanning.
 //! Deterministic for a given seed.
 
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::neldermead::NelderMead;
 use argmin::solver::particleswarm::ParticleSwarm;
-use indicatif::{ProgressBar, ProgressStyle};
 use model_core::{Actuator, ActuatorParams, Effect, ModelSpec};
 use rand::SeedableRng;
 use rayon::prelude::*;
 
 use crate::params::{free_params, FreeParam, MAX_DELAY_SEARCH};
+use crate::progress::Progress;
 use crate::recording::Recording;
+use crate::search::bounded;
 
 /// How a file drives the model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -31,6 +33,9 @@ pub enum Drive {
     CommandDynamic,
 }
 
+/// Smallest displacement span worth fitting [µm] (1 pm: below the best capacitive probes).
+pub const MIN_DISPLACEMENT_SPAN_UM: f64 = 1e-6;
+
 /// The drive `spec` uses for `rec`, or why it cannot be simulated.
 pub fn drive_for(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
     let Some(y) = rec.displacement_um.as_deref() else {
@@ -42,6 +47,14 @@ pub fn drive_for(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
         bail!(
             "{}: the displacement never changes: there is nothing to fit (sensor unplugged or stuck?)",
             rec.name
+        );
+    }
+    if span(y) < MIN_DISPLACEMENT_SPAN_UM {
+        bail!(
+            "{}: the displacement spans only {:.3e} µm, below any sensor's resolution ({MIN_DISPLACEMENT_SPAN_UM:e} µm): \
+             is `displacement_um` in micrometres?",
+            rec.name,
+            span(y)
         );
     }
     let drive = rec.current_a.as_deref().or(rec.command_v.as_deref()).unwrap_or_default();
@@ -275,16 +288,28 @@ pub fn evaluate_projected(
 pub struct FitOptions {
     /// Seed of the swarm's random initialisation.
     pub seed: u64,
-    /// Show a progress bar on stderr.
+    /// Show progress on stderr (a bar on a terminal, else a line every few seconds).
     pub progress: bool,
     /// Effort multiplier (1 = default; the swarm and the simplex iterations scale with it).
     pub effort: f64,
+    /// Stop searching at this instant and return the best point found so far.
+    pub deadline: Option<Instant>,
 }
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self { seed: 1, progress: false, effort: 1.0 }
+        Self { seed: 1, progress: false, effort: 1.0, deadline: None }
     }
+}
+
+/// Time left before `deadline` (none: unbounded); zero once it has passed.
+pub fn time_left(deadline: Option<Instant>) -> Option<Duration> {
+    deadline.map(|d| d.saturating_duration_since(Instant::now()))
+}
+
+/// Whether an argmin run ended on its time limit.
+fn ended_by_time<I: State>(state: &I) -> bool {
+    matches!(state.get_termination_reason(), Some(argmin::core::TerminationReason::Timeout))
 }
 
 /// What a fit produced.
@@ -300,6 +325,8 @@ pub struct FitResult {
     pub fit: Evaluation,
     /// Model evaluations (one evaluation = every fit file simulated once).
     pub evaluations: usize,
+    /// The search stopped at the deadline: the best point so far, not a converged fit.
+    pub time_limited: bool,
 }
 
 /// The fit problem in the unit cube.
@@ -309,7 +336,7 @@ struct Problem<'a> {
     free: &'a [FreeParam],
     files: &'a [Recording],
     evals: &'a AtomicUsize,
-    bar: &'a ProgressBar,
+    bar: &'a Progress,
 }
 
 impl Problem<'_> {
@@ -385,17 +412,8 @@ pub fn fit_from(
     let planned = particles as u64 * (swarm_iters + 1)
         + nm_iters * 8
         + if delay_scan { (starts.len() as u64 + 1) * 17 } else { 0 };
-    let bar = if opts.progress {
-        let b = ProgressBar::new(planned);
-        b.set_style(
-            ProgressStyle::with_template("fitting {msg} [{bar:30}] {pos}/{len} evaluations, {elapsed}")
-                .unwrap_or_else(|_| ProgressStyle::default_bar()),
-        );
-        b.set_message(spec.to_string());
-        b
-    } else {
-        ProgressBar::hidden()
-    };
+    let bar = Progress::new(&format!("fitting {spec}"), planned, opts.progress);
+    let timed_out = AtomicBool::new(false);
     let evals = AtomicUsize::new(0);
     let problem = |base: ActuatorParams| Problem { spec, base, free: &free, files, evals: &evals, bar: &bar };
 
@@ -440,10 +458,11 @@ pub fn fit_from(
         .with_rng_generator(rand::rngs::StdRng::seed_from_u64(opts.seed));
     let swarm_problem =
         Problem { spec, base: bases[0], free: &free, files: &heads, evals: &evals, bar: &bar };
-    let res = Executor::new(swarm_problem, pso)
+    let res = bounded(Executor::new(swarm_problem, pso), opts.deadline)
         .configure(|s| s.max_iters(swarm_iters))
         .run()
         .map_err(|e| anyhow::anyhow!("particle swarm: {e}"))?;
+    timed_out.fetch_or(ended_by_time(res.state()), Ordering::Relaxed);
     let mut seeds: Vec<(ActuatorParams, Vec<f64>, f64)> =
         bases.iter().map(|b| (*b, unit(b), problem(*b).cost_at(&unit(b)))).collect();
     if let Some(p) = res.state().get_best_param() {
@@ -462,6 +481,10 @@ pub fn fit_from(
         |(base, start, _): &(ActuatorParams, Vec<f64>, f64)| -> Result<(ActuatorParams, Vec<f64>, f64)> {
             let mut best = start.clone();
             for (step, data) in [(0.05, &halves[..]), (0.01, files)] {
+                if time_left(opts.deadline).is_some_and(|t| t.is_zero()) {
+                    timed_out.store(true, Ordering::Relaxed);
+                    break;
+                }
                 let problem = |base: ActuatorParams| Problem {
                     spec,
                     base,
@@ -480,10 +503,11 @@ pub fn fit_from(
                 let tol = (1e-6 * problem(*base).cost_at(&best)).max(1e-18);
                 let nm =
                     NelderMead::new(simplex).with_sd_tolerance(tol).map_err(|e| anyhow::anyhow!("{e}"))?;
-                let res = Executor::new(problem(*base), nm)
+                let res = bounded(Executor::new(problem(*base), nm), opts.deadline)
                     .configure(|s| s.max_iters(nm_iters))
                     .run()
                     .map_err(|e| anyhow::anyhow!("Nelder–Mead: {e}"))?;
+                timed_out.fetch_or(ended_by_time(res.state()), Ordering::Relaxed);
                 best = res.state().get_best_param().cloned().unwrap_or(best);
             }
             let c = problem(*base).cost_at(&best);
@@ -512,5 +536,12 @@ pub fn fit_from(
     if delay_scan {
         identified.push(("delay_samples", params.delay_samples as f64));
     }
-    Ok(FitResult { spec, params, identified, fit, evaluations: evals.load(Ordering::Relaxed) })
+    Ok(FitResult {
+        spec,
+        params,
+        identified,
+        fit,
+        evaluations: evals.load(Ordering::Relaxed),
+        time_limited: timed_out.load(Ordering::Relaxed),
+    })
 }

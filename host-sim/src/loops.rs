@@ -1,10 +1,10 @@
-//! Magnetization loops (shared/docs/contracts.md): B–H or M–H points in field order — full
+//! Magnetization loops (docs/formats.md): B–H or M–H points in field order — full
 //! loops, minor loops or single branches, unevenly spaced — and fitting the magnetization
 //! models of model-core (the same code the firmware runs) along the file's own field path.
 
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use model_core::field::MU0;
 use model_core::magnetization::{
     Anhysteretic, AnhystereticParams, JaParams, JaState, JilesAtherton, LinearMagnetization, Preisach,
@@ -12,6 +12,8 @@ use model_core::magnetization::{
 };
 use model_core::{ActuatorParams, Effect, ModelSpec};
 
+use crate::files::{echo, Input};
+use crate::located;
 use crate::search::{minimize, Bound, SearchOptions};
 
 /// Which quantity the file gives.
@@ -102,23 +104,43 @@ pub fn looks_like_loop(text: &str) -> bool {
         && (fields.iter().all(|f| f.trim().parse::<f64>().is_ok()) || first.trim_start().starts_with('h'))
 }
 
-/// Reads a loop file; errors name the file and line.
+/// Largest loop file read [bytes] (a loop has hundreds to a few hundred thousand points).
+const MAX_LOOP_BYTES: u64 = 256 << 20;
+
+/// Reads a loop file (`-` is standard input); errors name the file and line.
 pub fn read(path: &Path) -> Result<LoopFile> {
-    let (name, text) = crate::recording::read_text(path)?;
-    parse(&name, &text)
+    read_input(Input::open(path)?, usize::MAX)
+}
+
+/// Reads an opened loop file, keeping at most `max_points` points (with a warning).
+pub fn read_input(input: Input, max_points: usize) -> Result<LoopFile> {
+    let name = input.name.clone();
+    let text = input.into_text(MAX_LOOP_BYTES)?;
+    let mut f = parse(&name, &text)?;
+    if f.h.len() > max_points {
+        eprintln!(
+            "gma: warning: {name}: {} points; using the first {max_points} (raise --max-samples to use more)",
+            f.h.len()
+        );
+        f.h.truncate(max_points);
+        f.value.truncate(max_points);
+    }
+    Ok(f)
 }
 
 /// Parses loop text.
 pub fn parse(name: &str, text: &str) -> Result<LoopFile> {
+    // A spreadsheet's "CSV UTF-8" export starts with a byte order mark.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()).peekable();
-    let Some(&(_, first)) = lines.peek() else { bail!("{name}: empty file") };
+    let Some(&(_, first)) = lines.peek() else { located!(name; "empty file") };
     let sep = if first.contains('\t') { '\t' } else { ',' };
     let cells: Vec<&str> = first.split(sep).map(str::trim).collect();
     let numeric = cells.iter().all(|c| c.parse::<f64>().is_ok());
     // Column indices and unit factors for H and the value.
     let (hi, vi, hf, vf, channel) = if numeric {
         if cells.len() != 2 {
-            bail!("{name}:1: {} unnamed columns; an unnamed loop file has two: H [A/m], B [T]", cells.len());
+            located!(name, Some(1), None; "{} unnamed columns; an unnamed loop file has two: H [A/m], B [T]", cells.len());
         }
         (0, 1, 1.0, 1.0, LoopChannel::FluxDensity)
     } else {
@@ -128,24 +150,24 @@ pub fn parse(name: &str, text: &str) -> Result<LoopFile> {
             match (find("flux_density_T"), find("magnetization_A_per_m")) {
                 (Some(b), _) => (h, b, 1.0, 1.0, LoopChannel::FluxDensity),
                 (None, Some(m)) => (h, m, 1.0, 1.0, LoopChannel::Magnetization),
-                _ => bail!(
-                    "{name}:1: `field_A_per_m` needs `flux_density_T` or `magnetization_A_per_m` beside it"
+                _ => located!(name, Some(1), None;
+                    "`field_A_per_m` needs `flux_density_T` or `magnetization_A_per_m` beside it"
                 ),
             }
         } else if cells.len() == 2 {
-            let (q0, f0) = unit_factor(cells[0]).with_context(|| {
-                format!("{name}:1: header `{}`: expected H with a unit (A/m, kA/m, Oe)", cells[0])
-            })?;
-            let (q1, f1) = unit_factor(cells[1]).with_context(|| {
-                format!("{name}:1: header `{}`: expected B (T, mT, G) or M (A/m, kA/m)", cells[1])
-            })?;
+            let Some((q0, f0)) = unit_factor(cells[0]) else {
+                located!(name, Some(1), Some(1); "header `{}`: expected H with a unit (A/m, kA/m, Oe)", echo(cells[0]))
+            };
+            let Some((q1, f1)) = unit_factor(cells[1]) else {
+                located!(name, Some(1), Some(2); "header `{}`: expected B (T, mT, G) or M (A/m, kA/m)", echo(cells[1]))
+            };
             if q0 != 'H' || !(q1 == 'B' || q1 == 'M') {
-                bail!("{name}:1: header `{first}`: expected H then B or M");
+                located!(name, Some(1), None; "header `{}`: expected H then B or M", echo(first));
             }
             let ch = if q1 == 'B' { LoopChannel::FluxDensity } else { LoopChannel::Magnetization };
             (0, 1, f0, f1, ch)
         } else {
-            bail!("{name}:1: not a loop file: expected `field_A_per_m` and `flux_density_T` or `magnetization_A_per_m` columns, or two columns H, B");
+            located!(name, Some(1), None; "not a loop file: expected `field_A_per_m` and `flux_density_T` or `magnetization_A_per_m` columns, or two columns H, B");
         }
     };
     let ncols = cells.len();
@@ -154,14 +176,15 @@ pub fn parse(name: &str, text: &str) -> Result<LoopFile> {
         let lineno = idx + 1;
         let f: Vec<&str> = line.split(sep).map(str::trim).collect();
         if f.len() != ncols {
-            bail!("{name}:{lineno}: {} fields, but the first line has {ncols}", f.len());
+            located!(name, Some(lineno as u64), None; "{} fields, but the first line has {ncols}", f.len());
         }
         let num = |col: usize| -> Result<f64> {
-            let x: f64 = f[col]
-                .parse()
-                .map_err(|_| anyhow::anyhow!("{name}:{lineno}:{}: `{}` is not a number", col + 1, f[col]))?;
+            let at = (Some(lineno as u64), Some(col as u64 + 1));
+            let Ok(x) = f[col].parse::<f64>() else {
+                located!(name, at.0, at.1; "`{}` is not a number", echo(f[col]))
+            };
             if !x.is_finite() {
-                bail!("{name}:{lineno}:{}: `{}` is not a finite number", col + 1, f[col]);
+                located!(name, at.0, at.1; "`{}` is not a finite number", echo(f[col]));
             }
             Ok(x)
         };
@@ -169,7 +192,7 @@ pub fn parse(name: &str, text: &str) -> Result<LoopFile> {
         v.push(num(vi)? * vf);
     }
     if h.len() < 5 {
-        bail!("{name}: {} points; a loop fit needs at least 5", h.len());
+        located!(name; "{} points; a loop fit needs at least 5", h.len());
     }
     Ok(LoopFile { name: name.to_string(), h, value: v, channel })
 }
@@ -248,6 +271,23 @@ impl LoopModel {
         } else {
             LoopModel::Linear
         })
+    }
+
+    /// This model's parameters in a parameter set, in the order of its bounds (the inverse of
+    /// [`LoopFit::apply_to`]).
+    pub fn values_of(self, p: &ActuatorParams) -> Vec<f64> {
+        let v: Vec<f32> = match self {
+            LoopModel::Linear => vec![p.linear.offset_a_per_m, p.linear.susceptibility],
+            LoopModel::Anhysteretic => vec![p.anhysteretic.ms_a_per_m, p.anhysteretic.a_a_per_m],
+            LoopModel::JilesAtherton => {
+                let j = p.ja;
+                vec![j.ms_a_per_m, j.a_a_per_m, j.alpha, j.k_a_per_m, j.c]
+            }
+            LoopModel::Preisach => {
+                vec![p.preisach.ms_a_per_m, p.preisach.coercive_a_per_m, p.preisach.spread_a_per_m]
+            }
+        };
+        v.into_iter().map(f64::from).collect()
     }
 
     /// Parameter names, bounds (given the loop's field and magnetization scale).
@@ -346,8 +386,12 @@ pub struct LoopFit {
     pub nrmse: Vec<f64>,
     /// Objective evaluations.
     pub evaluations: usize,
-    /// Problems that make the result untrustworthy (empty: valid).
+    /// Problems that make the result invalid: no parameter file may be written from it.
+    pub failures: Vec<String>,
+    /// Doubts about a valid result (a parameter on the edge of its range).
     pub warnings: Vec<String>,
+    /// The search stopped at `--time-limit`: the best point so far.
+    pub time_limited: bool,
 }
 
 impl LoopFit {
@@ -414,14 +458,16 @@ pub fn fit(model: LoopModel, files: &[LoopFile], opts: SearchOptions) -> Result<
         }
         sum / files.len() as f64
     };
-    let (best, evaluations) = minimize(&bounds, &cost, opts);
+    let found = minimize(&bounds, &cost, opts);
+    let (best, evaluations) = (found.best, found.evaluations);
     let mut warnings = Vec::new();
+    let mut failures = Vec::new();
     let mut per_file = Vec::new();
     for f in files {
         match run(model, &best, &f.h, h_max) {
             Ok(m) => per_file.push(nrmse(&f.value, &f.channel_from_m(&m))),
             Err(RunError(e)) => {
-                warnings
+                failures
                     .push(format!("{}: the model integration failed at the best parameters: {e}", f.name));
                 per_file.push(f64::NAN);
             }
@@ -439,14 +485,22 @@ pub fn fit(model: LoopModel, files: &[LoopFile], opts: SearchOptions) -> Result<
     if model == LoopModel::JilesAtherton {
         let (ms, a, alpha) = (best[0], best[1], best[2]);
         if alpha * ms / (3.0 * a) >= 1.0 {
-            warnings.push(format!(
+            failures.push(format!(
                 "J–A region α·M_s/(3a) = {:.2} ≥ 1: the mean field makes the anhysteretic curve multivalued; \
                  the loop there is an artefact of the integration limits, not physics",
                 alpha * ms / (3.0 * a)
             ));
         }
     }
-    Ok(LoopFit { model, params, nrmse: per_file, evaluations, warnings })
+    Ok(LoopFit {
+        model,
+        params,
+        nrmse: per_file,
+        evaluations,
+        failures,
+        warnings,
+        time_limited: found.time_limited,
+    })
 }
 
 /// The loop chart of one file: measured and modelled, H in kA/m.
@@ -494,7 +548,7 @@ pub fn html(spec: &str, fit: &LoopFit, files: &[LoopFile]) -> Result<String> {
         let _ = write!(h, "<tr><td class=l>{n}</td><td>{v:.5e}</td></tr>");
     }
     h.push_str("</table>");
-    for w in &fit.warnings {
+    for w in fit.failures.iter().chain(&fit.warnings) {
         let _ = write!(h, "<p class=w>warning: {}</p>", w.replace('<', "&lt;"));
     }
     for (f, e) in files.iter().zip(&fit.nrmse) {

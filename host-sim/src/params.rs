@@ -11,6 +11,8 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use model_core::{Actuator, ActuatorParams, Effect, ModelSpec};
 
+use crate::error::Located;
+use crate::files::{echo, Input};
 use crate::search::Bound;
 
 /// One identified parameter: its bounds and scale ([`Bound`], named as in parameter files,
@@ -106,39 +108,50 @@ pub const MAX_DELAY_SEARCH: u16 = 16;
 /// Loads a parameter file (TOML as `--params-out` writes), or the built-in demo set, and checks
 /// it for `spec` (every stage the spec uses must be valid).
 pub fn load(path: Option<&Path>, spec: ModelSpec) -> Result<ActuatorParams> {
-    match path {
+    load_input(path.map(Input::open).transpose()?, spec)
+}
+
+/// As [`load`], from an opened input.
+pub fn load_input(input: Option<Input>, spec: ModelSpec) -> Result<ActuatorParams> {
+    match input {
         None => Ok(ActuatorParams::TERFENOL_DEMO),
-        Some(p) => {
-            let (name, text) = crate::recording::read_text(p)?;
-            parse(&name, &text, spec)
+        Some(input) => {
+            let name = input.name.clone();
+            parse(&name, &input.into_text(MAX_PARAM_FILE_BYTES)?, spec)
         }
     }
 }
 
+/// Largest parameter file read [bytes] (they are a few KB).
+const MAX_PARAM_FILE_BYTES: u64 = 1 << 20;
+
 /// Parses and checks parameter-file text; errors name the file, line and parameter.
 pub fn parse(file: &str, text: &str, spec: ModelSpec) -> Result<ActuatorParams> {
     let p: ActuatorParams = toml::from_str(text).map_err(|e| toml_error(file, text, &e))?;
-    Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("{file}: {e} (checked for model `{spec}`)"))?;
+    Actuator::new(spec, &p).map_err(|e| Located::file(file, format!("{e} (checked for model `{spec}`)")))?;
     Ok(p)
 }
 
 /// `file:line:column: message`, naming the parameter a missing field belongs to.
 fn toml_error(file: &str, text: &str, e: &toml::de::Error) -> anyhow::Error {
     let msg = e.message().trim();
-    let Some(span) = e.span() else { return anyhow::anyhow!("{file}: not a valid parameter file: {msg}") };
+    let Some(span) = e.span() else {
+        return Located::file(file, format!("not a valid parameter file: {msg}")).into();
+    };
     let before = &text[..span.start.min(text.len())];
     let line = before.matches('\n').count() + 1;
     let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
-    let at = text.get(span.clone()).unwrap_or("").trim();
+    let at = echo(text.get(span.clone()).unwrap_or("").trim());
+    let here = |m: String| -> anyhow::Error { Located::at(file, line as u64, Some(col as u64), m).into() };
     // A missing field is reported at its table's header: name it as `table.field`.
     if let Some(field) = msg.strip_prefix("missing field `").and_then(|m| m.strip_suffix('`')) {
         let table = at.strip_prefix('[').and_then(|t| t.strip_suffix(']'));
         let full = table.map_or(field.to_string(), |t| format!("{t}.{field}"));
-        return anyhow::anyhow!("{file}:{line}: parameter `{full}` is missing");
+        return Located::at(file, line as u64, None, format!("parameter `{full}` is missing")).into();
     }
     match key_at(before) {
-        Some(key) => anyhow::anyhow!("{file}:{line}:{col}: parameter `{key}`: {msg} (found `{at}`)"),
-        None => anyhow::anyhow!("{file}:{line}:{col}: {msg} (at `{at}`)"),
+        Some(key) => here(format!("parameter `{}`: {msg} (found `{at}`)", echo(&key))),
+        None => here(format!("{msg} (at `{at}`)")),
     }
 }
 

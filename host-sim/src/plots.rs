@@ -122,19 +122,17 @@ pub fn write(path: &Path, chart: &Chart) -> Result<()> {
         Some("svg") => {
             let mut text = String::new();
             draw(&SVGBackend::with_string(&mut text, size).into_drawing_area(), chart)?;
-            crate::recording::write_atomic(path, text.as_bytes())
+            crate::files::write_atomic(path, text.as_bytes())
         }
         Some("png") => {
-            // Draw next to the target (the encoder needs a .png name), then rename into place.
-            let tmp = path.with_file_name(format!(
-                ".{}.partial.png",
-                path.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default()
-            ));
+            // The encoder picks the format from the name: draw into a unique `.png` temporary
+            // file beside the target (concurrent runs never share one), then rename it into place.
+            let tmp = crate::files::partial_file_with_suffix(crate::files::output_dir(path), ".partial.png")?;
             {
-                let area = BitMapBackend::new(&tmp, size).into_drawing_area();
+                let area = BitMapBackend::new(tmp.path(), size).into_drawing_area();
                 draw(&area, chart)?;
             }
-            std::fs::rename(&tmp, path).map_err(|e| anyhow!("cannot write {}: {e}", path.display()))
+            crate::files::persist(tmp, path)
         }
         _ => bail!("{}: plots are written as .svg or .png", path.display()),
     }

@@ -5,6 +5,10 @@
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError};
+use std::sync::Arc;
+use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
 use gma_control::telemetry::Decoder;
@@ -26,6 +30,8 @@ pub struct RecordSummary {
     pub short: u64,
     /// Files written (one per gap-free segment).
     pub files: Vec<PathBuf>,
+    /// Why the recording ended.
+    pub ending: Ending,
 }
 
 /// The `k`-th segment's file (0-based): `out` itself, then `stem-2.csv`, `stem-3.csv`, …
@@ -45,13 +51,32 @@ struct Segment {
     frames: u64,
 }
 
-/// Streams `input` (COBS frames), writing gap-free segments next to `out`. Memory is bounded
-/// (one frame and one write buffer), so hours of telemetry need no more RAM than seconds.
-pub fn record<R: Read>(mut input: R, out: &Path, tick_s: f64) -> Result<RecordSummary> {
-    if !(tick_s.is_finite() && tick_s > 0.0) {
-        bail!("--tick-s must be > 0, got {tick_s}");
+/// Why a recording ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Ending {
+    /// The stream ended.
+    #[default]
+    EndOfStream,
+    /// SIGINT or SIGTERM: what was received is written, files and summary complete.
+    Stopped,
+}
+
+/// Streams `input` (COBS frames), writing gap-free segments next to `out`, until the input ends
+/// or `stop` is set (a signal handler sets it; the stream is read on its own thread so a quiet
+/// serial line cannot keep the command from finishing). Memory is bounded (a few read buffers
+/// and one write buffer), so hours of telemetry need no more RAM than seconds.
+pub fn record(
+    input: Box<dyn Read + Send>,
+    out: &Path,
+    tick_s: f64,
+    stop: Arc<AtomicBool>,
+) -> Result<RecordSummary> {
+    let (lo, hi) = (model_core::DT_MIN_S as f64, model_core::DT_MAX_S as f64);
+    if !(tick_s.is_finite() && (lo..=hi).contains(&tick_s)) {
+        bail!("--tick-s must be in [{lo:e}, {hi:e}] s, got {tick_s}");
     }
-    let dir = crate::recording::output_dir(out);
+    let decimals = crate::recording::time_decimals(tick_s);
+    let dir = crate::files::output_dir(out);
     let mut d = Decoder::default();
     let mut sum = RecordSummary::default();
     let mut seg: Option<Segment> = None;
@@ -65,36 +90,43 @@ pub fn record<R: Read>(mut input: R, out: &Path, tick_s: f64) -> Result<RecordSu
         let tmp = seg
             .file
             .into_inner()
-            .map_err(|e| anyhow::anyhow!("writing {}: {}", path.display(), e.error()))?;
-        crate::recording::persist(tmp, &path)?;
+            .map_err(|e| anyhow::anyhow!("writing {}: {}", crate::files::display(&path), e.error()))?;
+        crate::files::persist(tmp, &path)?;
         sum.files.push(path);
         Ok(())
     };
-    let mut buf = vec![0u8; 1 << 16];
+    let chunks = read_on_a_thread(input);
     loop {
-        let n = match input.read(&mut buf) {
-            Ok(0) => break,
-            Ok(n) => n,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-            Err(e) => return Err(e).context("reading the telemetry stream"),
+        if stop.load(Ordering::SeqCst) {
+            sum.ending = Ending::Stopped;
+            break;
+        }
+        let chunk = match chunks.recv_timeout(Duration::from_millis(50)) {
+            Ok(Ok(c)) => c,
+            Ok(Err(e)) => return Err(e).context("reading the telemetry stream"),
+            Err(RecvTimeoutError::Timeout) => continue,
+            Err(RecvTimeoutError::Disconnected) => break,
         };
-        for &b in &buf[..n] {
+        for &b in &chunk {
             let Some(x) = d.push(b) else { continue };
             let f = x.frame;
-            let finite =
-                [f.reference_um, f.command_v, f.current_a, f.displacement_um].iter().all(|v| v.is_finite());
-            if x.gap > 0 || x.restart || !finite {
+            // A CRC-valid frame can still carry a value no file may hold (a firmware fault):
+            // it is counted as invalid and ends the segment, like a gap.
+            let valid = [(1, f.command_v), (2, f.current_a), (3, f.displacement_um), (3, f.reference_um)]
+                .iter()
+                .all(|&(k, v)| crate::recording::plausible(k, v as f64).is_ok());
+            if x.gap > 0 || x.restart || !valid {
                 finish(seg.take(), &mut sum)?;
                 sum.restarts += x.restart as u64;
             }
-            if !finite {
+            if !valid {
                 sum.invalid += 1;
                 continue;
             }
             let s = match &mut seg {
                 Some(s) => s,
                 None => {
-                    let tmp = crate::recording::partial_file(dir)?;
+                    let tmp = crate::files::partial_file(dir)?;
                     let mut file = std::io::BufWriter::new(tmp);
                     file.write_all(b"time_s,command_V,current_A,displacement_um,reference_um,faults\n")?;
                     seg.insert(Segment { file, first_seq: f.seq, frames: 0 })
@@ -103,7 +135,7 @@ pub fn record<R: Read>(mut input: R, out: &Path, tick_s: f64) -> Result<RecordSu
             let t = f.seq.wrapping_sub(s.first_seq) as f64 * tick_s;
             writeln!(
                 s.file,
-                "{t:.7},{},{},{},{},{}",
+                "{t:.decimals$},{:?},{:?},{:?},{:?},{}",
                 f.command_v, f.current_a, f.displacement_um, f.reference_um, f.faults
             )?;
             s.frames += 1;
@@ -113,23 +145,62 @@ pub fn record<R: Read>(mut input: R, out: &Path, tick_s: f64) -> Result<RecordSu
     (sum.frames, sum.lost, sum.corrupt) = (d.frames, d.lost, d.corrupt);
     if sum.files.is_empty() {
         bail!(
-            "no telemetry frames in the stream ({} frames, {} corrupt chunks, {} invalid frames); is it the drive's UART capture?",
+            "no telemetry frames in the stream ({} frames, {} corrupt chunks, {} invalid frames){}; is it the drive's UART capture?",
             d.frames,
             d.corrupt,
-            sum.invalid
+            sum.invalid,
+            if sum.ending == Ending::Stopped { ", stopped by a signal" } else { "" }
         );
     }
     Ok(sum)
 }
 
+/// Reads `input` in chunks on a detached thread (a blocked read must not hold up a stop).
+fn read_on_a_thread(mut input: Box<dyn Read + Send>) -> Receiver<std::io::Result<Vec<u8>>> {
+    let (tx, rx) = sync_channel(8);
+    std::thread::spawn(move || {
+        let mut buf = vec![0u8; 1 << 16];
+        loop {
+            match input.read(&mut buf) {
+                Ok(0) => break,
+                Ok(n) => {
+                    if tx.send(Ok(buf[..n].to_vec())).is_err() {
+                        break;
+                    }
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => {
+                    let _ = tx.send(Err(e));
+                    break;
+                }
+            }
+        }
+    });
+    rx
+}
+
 /// Opens the stream: a file, or stdin for `-`.
-pub fn open_stream(input: &Path) -> Result<Box<dyn Read>> {
+pub fn open_stream(input: &Path) -> Result<Box<dyn Read + Send>> {
     if input == Path::new("-") {
-        Ok(Box::new(std::io::stdin().lock()))
+        Ok(Box::new(std::io::stdin()))
     } else {
-        let f = std::fs::File::open(input).with_context(|| format!("{}: cannot read", input.display()))?;
+        let name = crate::files::display(input);
+        if input.is_dir() {
+            bail!("{name}: is a folder, not a telemetry capture");
+        }
+        let f = std::fs::File::open(input).with_context(|| format!("{name}: cannot read"))?;
         Ok(Box::new(f))
     }
+}
+
+/// A flag that SIGINT and SIGTERM set (instead of killing the process), so a live recording
+/// can be ended with Ctrl-C and still write its last file and summary.
+pub fn stop_on_signals() -> Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(sig, Arc::clone(&stop)).context("installing the signal handler")?;
+    }
+    Ok(stop)
 }
 
 #[cfg(test)]
@@ -155,7 +226,10 @@ mod tests {
         }
         bytes[500] ^= 0x10; // one corrupt frame in the first segment
         let dir = tempfile::tempdir().unwrap();
-        let s = record(&bytes[..], &dir.path().join("rig.csv"), 1e-4).unwrap();
+        let stop = Arc::new(AtomicBool::new(false));
+        let s =
+            record(Box::new(std::io::Cursor::new(bytes)), &dir.path().join("rig.csv"), 1e-4, stop).unwrap();
+        assert_eq!(s.ending, Ending::EndOfStream);
         assert_eq!(s.files.len(), 3, "{s:?}"); // corrupt frame and the 5-frame hole both split
         assert_eq!(s.lost, 6);
         assert_eq!(s.corrupt, 1);

@@ -1,11 +1,14 @@
-//! Measurement files (shared/docs/contracts.md): one header line, then one row per sample;
+//! Measurement files (docs/formats.md): one header line, then one row per sample;
 //! columns recognised by name, order free, extra columns ignored. Every problem is reported with
 //! the file, line and column, and nothing is dropped silently.
 
-use std::io::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
+
+use crate::error::Located;
+use crate::files::{echo, output_dir, partial_file, persist, Input};
+use crate::located;
 
 /// The recognised columns, in the order the workbench writes them.
 pub const COLUMNS: [&str; 6] =
@@ -94,18 +97,17 @@ impl Recording {
         }
     }
 
-    /// Reads and validates a measurement CSV, all of it.
+    /// Reads and validates a measurement CSV, all of it (`-` is standard input).
     pub fn read(path: &Path) -> Result<Self> {
-        Ok(Self::read_window(path, usize::MAX)?.0)
+        Ok(Self::read_input(Input::open(path)?, usize::MAX)?.0)
     }
 
-    /// Reads a measurement CSV as a stream (memory bounded by `max_samples`, not by the file):
+    /// Reads an opened input as a stream (memory bounded by `max_samples`, not by the file):
     /// every row is validated, the first `max_samples` are kept. Returns the recording and the
     /// number of data rows in the file.
-    pub fn read_window(path: &Path, max_samples: usize) -> Result<(Self, u64)> {
-        let file = path.display().to_string();
-        let f = std::fs::File::open(path).with_context(|| format!("{file}: cannot read"))?;
-        Self::from_reader(&file, std::io::BufReader::with_capacity(1 << 16, f), max_samples)
+    pub fn read_input(input: Input, max_samples: usize) -> Result<(Self, u64)> {
+        let name = input.name.clone();
+        Self::from_reader(&name, input.into_reader(), max_samples)
     }
 
     /// Parses CSV text; `file` names it in messages.
@@ -118,7 +120,7 @@ impl Recording {
         let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(false).from_reader(input);
         let headers = rdr.headers().map_err(|e| csv_error(file, e))?.clone();
         if headers.iter().all(|h| h.trim().is_empty()) {
-            bail!("{file}:1: empty file (no header line); expected a header such as `time_s,current_A,displacement_um`");
+            located!(file, Some(1), None; "empty file (no header line); expected a header such as `time_s,current_A,displacement_um`");
         }
         // Map recognised columns to their index; refuse duplicates.
         let mut index: [Option<usize>; COLUMNS.len()] = [None; COLUMNS.len()];
@@ -126,7 +128,7 @@ impl Recording {
             let h = h.trim();
             if let Some(k) = COLUMNS.iter().position(|c| *c == h) {
                 if let Some(first) = index[k] {
-                    bail!("{file}:1: column `{h}` appears twice (columns {} and {})", first + 1, col + 1);
+                    located!(file, Some(1), Some(col as u64 + 1); "column `{}` appears twice (columns {} and {})", echo(h), first + 1, col + 1);
                 }
                 index[k] = Some(col);
             }
@@ -139,13 +141,14 @@ impl Recording {
                 .find(|(c, _)| joined.contains(*c) && joined.contains("time_s"))
                 .map(|(_, name)| format!(" — the file seems to separate columns with {name}; measurement files are comma-separated"))
                 .unwrap_or_default();
-            bail!(
-                "{file}:1: no `time_s` column (header has: {joined}); recognised columns are {}{hint}",
+            located!(file, Some(1), None;
+                "no `time_s` column (header has: {}); recognised columns are {}{hint}",
+                echo(&joined),
                 COLUMNS.join(", ")
             );
         }
         if index[1].is_none() && index[2].is_none() {
-            bail!("{file}:1: needs a drive column: `current_A` or `command_V`");
+            located!(file, Some(1), None; "needs a drive column: `current_A` or `command_V`");
         }
         let time_col = index[0].unwrap_or(0) + 1;
         let mut cols: [Vec<f64>; COLUMNS.len()] = Default::default();
@@ -171,8 +174,8 @@ impl Recording {
             rows += 1;
         }
         if rows < 3 {
-            bail!(
-                "{file}: {rows} data row{}; a recording needs at least 3",
+            located!(file;
+                "{rows} data row{}; a recording needs at least 3",
                 if rows == 1 { "" } else { "s" }
             );
         }
@@ -191,18 +194,34 @@ impl Recording {
         Ok((r, rows))
     }
 
+    /// Checks every value against the reader's plausible ranges (what this workbench writes, it
+    /// must read back).
+    pub fn check_plausible(&self) -> Result<()> {
+        for (k, name) in COLUMNS.iter().enumerate() {
+            let Some(col) = self.column(name) else { continue };
+            if let Some((i, v)) = col.iter().enumerate().find(|(_, v)| plausible(k, **v).is_err()) {
+                anyhow::bail!(
+                    "{}: sample {i}: `{name}` = {v:e} {}",
+                    self.name,
+                    plausible(k, *v).unwrap_err()
+                );
+            }
+        }
+        Ok(())
+    }
+
     /// Writes the CSV (only the channels present) to `out`.
     pub fn write_csv(&self, out: &mut impl std::io::Write) -> std::io::Result<()> {
         let present: Vec<&str> = COLUMNS.iter().copied().filter(|c| self.column(c).is_some()).collect();
         writeln!(out, "{}", present.join(","))?;
         let cols: Vec<&Vec<f64>> = present.iter().filter_map(|c| self.column(c)).collect();
+        let decimals = time_decimals(self.dt_s());
         for k in 0..self.len() {
-            for (i, col) in cols.iter().enumerate() {
-                let v = col[k];
-                match i {
-                    0 => write!(out, "{v:.7}")?,
-                    _ => write!(out, ",{v:.6}")?,
-                }
+            write!(out, "{:.*}", decimals, self.time_s[k])?;
+            // Channels to single precision, shortest form that reads back to the same f32 (`{:?}`
+            // switches to an exponent for very small or large values).
+            for col in &cols[1..] {
+                write!(out, ",{:?}", col[k] as f32)?;
             }
             writeln!(out)?;
         }
@@ -220,76 +239,22 @@ impl Recording {
     /// through a buffer rather than built in memory.
     pub fn write(&self, path: &Path) -> Result<()> {
         let mut buf = std::io::BufWriter::with_capacity(1 << 16, partial_file(output_dir(path))?);
-        self.write_csv(&mut buf).with_context(|| format!("writing {}", path.display()))?;
-        let tmp =
-            buf.into_inner().map_err(|e| anyhow::anyhow!("writing {}: {}", path.display(), e.error()))?;
+        self.write_csv(&mut buf).with_context(|| format!("writing {}", crate::files::display(path)))?;
+        let tmp = buf
+            .into_inner()
+            .map_err(|e| anyhow::anyhow!("writing {}: {}", crate::files::display(path), e.error()))?;
         persist(tmp, path)
     }
 }
 
-/// Writes `bytes` to `path` through a temporary file and a rename, so that readers never see a
-/// half-written file.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = output_dir(path);
-    let mut tmp = partial_file(dir)?;
-    tmp.write_all(bytes).with_context(|| format!("writing {}", path.display()))?;
-    persist(tmp, path)
-}
-
-/// The folder `path` is written into (`.` for a bare file name).
-pub fn output_dir(path: &Path) -> &Path {
-    path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."))
-}
-
-/// Reads a text file (parameter or loop file); a non-UTF-8 file is an error naming its line.
-/// Returns the file's display name and its text.
-pub fn read_text(path: &Path) -> Result<(String, String)> {
-    let name = path.display().to_string();
-    let bytes = std::fs::read(path).with_context(|| format!("{name}: cannot read"))?;
-    match String::from_utf8(bytes) {
-        Ok(text) => Ok((name, text)),
-        Err(e) => {
-            let bytes = e.as_bytes();
-            let line = bytes[..e.utf8_error().valid_up_to()].iter().filter(|b| **b == b'\n').count() + 1;
-            bail!("{name}:{line}: not UTF-8 text (a binary file, or a text encoding other than UTF-8?)")
-        }
+/// Decimals that resolve a time step `dt` to 0.1 % (so a file we write passes our own jitter
+/// check at any sample rate): 7 at 10 kHz.
+pub fn time_decimals(dt: f64) -> usize {
+    if dt.is_finite() && dt > 0.0 {
+        ((-dt.log10()).ceil() + 3.0).clamp(1.0, 15.0) as usize
+    } else {
+        7
     }
-}
-
-/// Checks before any work that `path` can be written (its folder exists), so a long fit does
-/// not end in "cannot create a file".
-pub fn check_output(path: &Path) -> Result<()> {
-    let dir = output_dir(path);
-    if !dir.is_dir() {
-        bail!("cannot write {}: the folder {} does not exist", path.display(), dir.display());
-    }
-    if path.is_dir() {
-        bail!("cannot write {}: it is a folder", path.display());
-    }
-    Ok(())
-}
-
-/// A temporary file in `dir` for an output being written (`.gma-*.partial`: a run killed
-/// mid-write leaves one of these, never a truncated result under the final name).
-pub fn partial_file(dir: &Path) -> Result<tempfile::NamedTempFile> {
-    tempfile::Builder::new()
-        .prefix(".gma-")
-        .suffix(".partial")
-        .tempfile_in(dir)
-        .with_context(|| format!("cannot create a file in {}", dir.display()))
-}
-
-/// Moves a finished temporary file into place (synced, ordinary permissions, atomic rename).
-pub fn persist(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
-    tmp.as_file().sync_all()?;
-    // Temporary files are private (0600); results are ordinary files.
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        tmp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
-    }
-    tmp.persist(path).with_context(|| format!("cannot write {}", path.display()))?;
-    Ok(())
 }
 
 fn median_step(t: &[f64]) -> f64 {
@@ -312,38 +277,52 @@ const PLAUSIBLE: [(f64, &str); COLUMNS.len()] =
 /// One cell: a finite number within the column's plausible range.
 fn cell(file: &str, line: u64, col: usize, k: usize, raw: &str) -> Result<f64> {
     let name = COLUMNS[k];
+    let at = (Some(line), Some(col as u64));
     if raw.is_empty() {
-        bail!("{file}:{line}:{col}: column `{name}` is empty");
+        located!(file, at.0, at.1; "column `{name}` is empty");
     }
     let Ok(v) = raw.parse::<f64>() else {
-        bail!("{file}:{line}:{col}: column `{name}`: `{raw}` is not a number");
+        located!(file, at.0, at.1; "column `{name}`: `{}` is not a number", echo(raw));
     };
     if !v.is_finite() {
-        bail!("{file}:{line}:{col}: column `{name}`: `{raw}` is not a finite number");
+        located!(file, at.0, at.1; "column `{name}`: `{}` is not a finite number", echo(raw));
     }
-    let (limit, unit) = PLAUSIBLE[k];
-    if v.abs() > limit {
-        bail!(
-            "{file}:{line}:{col}: column `{name}`: {raw} is beyond ±{limit:e} {unit}, not a plausible value \
-             (wrong unit or a corrupt export?)"
-        );
+    if let Err(why) = plausible(k, v) {
+        located!(file, at.0, at.1; "column `{name}`: {} {why}", echo(raw));
     }
     Ok(v)
+}
+
+/// Whether `v` is a plausible value of column `k` (of [`COLUMNS`]); the error says why not.
+pub fn plausible(k: usize, v: f64) -> std::result::Result<(), String> {
+    let (limit, unit) = PLAUSIBLE[k];
+    if v.is_finite() && v.abs() <= limit {
+        Ok(())
+    } else {
+        Err(format!("is beyond ±{limit:e} {unit}, not a plausible value (wrong unit or a corrupt export?)"))
+    }
 }
 
 /// A csv error as `file:line: what`.
 fn csv_error(file: &str, e: csv::Error) -> anyhow::Error {
     let line = e.position().map(|p| p.line()).unwrap_or(1);
-    match e.kind() {
-        csv::ErrorKind::UnequalLengths { expected_len, len, .. } => anyhow::anyhow!(
-            "{file}:{line}: {len} fields, but the header has {expected_len} (a missing or extra comma?)"
-        ),
-        csv::ErrorKind::Utf8 { err, .. } => anyhow::anyhow!(
-            "{file}:{line}:{}: not UTF-8 text (a binary file, or a text encoding other than UTF-8?)",
-            err.field() + 1
-        ),
-        csv::ErrorKind::Io(io) => anyhow::anyhow!("{file}: cannot read: {io}"),
-        _ => anyhow::anyhow!("{file}:{line}: {e}"),
+    match e.into_kind() {
+        csv::ErrorKind::UnequalLengths { expected_len, len, .. } => Located::at(
+            file,
+            line,
+            None,
+            format!("{len} fields, but the header has {expected_len} (a missing or extra comma?)"),
+        )
+        .into(),
+        csv::ErrorKind::Utf8 { err, .. } => Located::at(
+            file,
+            line,
+            Some(err.field() as u64 + 1),
+            "not UTF-8 text (a binary file, or a text encoding other than UTF-8?)",
+        )
+        .into(),
+        csv::ErrorKind::Io(io) => crate::files::read_error(file, io),
+        other => Located::at(file, line, None, format!("{:?}", other)).into(),
     }
 }
 
@@ -364,7 +343,7 @@ impl TimeCheck {
     fn push(&mut self, file: &str, line: u64, col: usize, t: f64) -> Result<()> {
         let Some(last) = self.last.replace(t) else { return Ok(()) };
         if t <= last {
-            bail!("{file}:{line}:{col}: time_s does not increase ({t} s after {last} s on the line before)");
+            located!(file, Some(line), Some(col as u64); "time_s does not increase ({t} s after {last} s on the line before)");
         }
         let step = t - last;
         match self.reference {
@@ -382,6 +361,11 @@ impl TimeCheck {
     fn settle(&mut self, file: &str, col: usize) -> Result<()> {
         let steps: Vec<f64> = self.pending.iter().map(|p| p.1).collect();
         let dt = median(steps);
+        let (lo, hi) = (model_core::DT_MIN_S as f64, model_core::DT_MAX_S as f64);
+        if !(lo..=hi).contains(&dt) {
+            located!(file, self.pending.first().map(|p| p.0), Some(col as u64);
+                "sample period {dt:.3e} s is outside [{lo:e}, {hi:e}] s (is time_s in seconds?)");
+        }
         self.reference = Some(dt);
         for (line, step) in std::mem::take(&mut self.pending) {
             jitter(file, line, col, step, dt)?;
@@ -399,18 +383,13 @@ impl TimeCheck {
 
 fn jitter(file: &str, line: u64, col: usize, step: f64, dt: f64) -> Result<()> {
     if (step - dt).abs() > MAX_JITTER * dt {
-        bail!(
-            "{file}:{line}:{col}: time step {step:.3e} s differs from the median step {dt:.3e} s by more \
+        located!(file, Some(line), Some(col as u64);
+            "time step {step:.3e} s differs from the median step {dt:.3e} s by more \
              than {:.0} % (missing samples or jittered time; resample the recording uniformly)",
             MAX_JITTER * 100.0
         );
     }
     Ok(())
-}
-
-/// A path list as the CLI prints it.
-pub fn names(paths: &[PathBuf]) -> String {
-    paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
 }
 
 #[cfg(test)]

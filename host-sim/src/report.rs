@@ -8,7 +8,7 @@ use anyhow::Result;
 use model_core::{ActuatorParams, ModelSpec};
 
 use crate::diagnose::{diagnose, Diagnosis};
-use crate::fit::{evaluate, simulate, FitOptions};
+use crate::fit::{evaluate, simulate, FitOptions, Simulation};
 use crate::params::parse_spec;
 use crate::plots::{self, Chart, Series};
 use crate::recording::Recording;
@@ -53,7 +53,11 @@ pub fn ladder(
     let mut rungs: Vec<Rung> = Vec::new();
     let mut spec = spec;
     let mut start = *init;
-    for _ in 0..MAX_RUNGS {
+    for k in 0..MAX_RUNGS {
+        crate::progress::phase(
+            opts.progress,
+            &format!("report: rung {} of at most {MAX_RUNGS}, model `{spec}`", k + 1),
+        );
         let d = diagnose(spec, &start, fit_files, val_files, opts)?;
         let base = d.baseline.clone().expect("diagnose keeps its baseline fit");
         let val =
@@ -69,6 +73,9 @@ pub fn ladder(
         on_rung(&rung);
         rungs.push(rung);
         let Some(v) = d.verdict else { break };
+        if d.time_limited {
+            break; // the next rung would start from a search cut short
+        }
         spec = parse_spec(&format!("{spec}+{v}"))?;
         // Start the next rung from the verdict's refit.
         if let Some(c) = d.candidates.iter().find(|c| c.effect == v) {
@@ -84,8 +91,8 @@ fn esc(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 
-/// Loop chart (drive → displacement) of one file: measured and every rung's model.
-pub fn loop_chart(rec: &Recording, rungs: &[Rung]) -> Result<Chart> {
+/// Loop chart (drive → displacement) of one file: measured and each model's.
+pub fn loop_chart(rec: &Recording, models: &[(ModelSpec, ActuatorParams)]) -> Result<Chart> {
     let (drive, unit) = match (&rec.current_a, &rec.command_v) {
         (Some(i), _) => (i.clone(), "coil current [A]"),
         (None, Some(u)) => (u.clone(), "command [V]"),
@@ -97,16 +104,12 @@ pub fn loop_chart(rec: &Recording, rungs: &[Rung]) -> Result<Chart> {
         points: plots::thin(&drive.iter().copied().zip(meas.iter().copied()).collect::<Vec<_>>(), 4000),
         color: 0,
     }];
-    for (k, r) in rungs.iter().enumerate() {
-        let sim = simulate(r.spec, &r.params, rec)?;
-        let off = crate::fit::score(r.spec, rec, &sim).offset_um;
+    for (k, (spec, params)) in models.iter().enumerate() {
+        let sim = simulate(*spec, params, rec)?;
+        let off = crate::fit::score(*spec, rec, &sim).offset_um;
         let pts: Vec<(f64, f64)> =
             drive.iter().zip(&sim.displacement_um).map(|(x, y)| (*x, y + off)).collect();
-        series.push(Series {
-            label: format!("model {}", r.spec),
-            points: plots::thin(&pts, 4000),
-            color: k + 1,
-        });
+        series.push(Series { label: format!("model {spec}"), points: plots::thin(&pts, 4000), color: k + 1 });
     }
     Ok(Chart {
         title: format!("{} — loop", rec.name),
@@ -116,20 +119,20 @@ pub fn loop_chart(rec: &Recording, rungs: &[Rung]) -> Result<Chart> {
     })
 }
 
-/// Residual chart (measured − model against time) of one file for every rung.
-pub fn residual_chart(rec: &Recording, rungs: &[Rung]) -> Result<Chart> {
+/// Residual chart (measured − model against time) of one file for each model.
+pub fn residual_chart(rec: &Recording, models: &[(ModelSpec, ActuatorParams)]) -> Result<Chart> {
     let meas = rec.displacement_um.clone().unwrap_or_default();
     let mut series = Vec::new();
-    for (k, r) in rungs.iter().enumerate() {
-        let sim = simulate(r.spec, &r.params, rec)?;
-        let off = crate::fit::score(r.spec, rec, &sim).offset_um;
+    for (k, (spec, params)) in models.iter().enumerate() {
+        let sim = simulate(*spec, params, rec)?;
+        let off = crate::fit::score(*spec, rec, &sim).offset_um;
         let pts: Vec<(f64, f64)> = rec
             .time_s
             .iter()
             .zip(meas.iter().zip(&sim.displacement_um))
             .map(|(t, (m, y))| (*t, m - y - off))
             .collect();
-        series.push(Series { label: format!("{}", r.spec), points: plots::thin(&pts, 4000), color: k + 1 });
+        series.push(Series { label: format!("{spec}"), points: plots::thin(&pts, 4000), color: k + 1 });
     }
     Ok(Chart {
         title: format!("{} — residual", rec.name),
@@ -137,6 +140,23 @@ pub fn residual_chart(rec: &Recording, rungs: &[Rung]) -> Result<Chart> {
         y_label: "measured − model [µm]".into(),
         series,
     })
+}
+
+/// Time-series chart of one file: measured displacement and the model's (`label`), offset added.
+pub fn time_chart(rec: &Recording, sim: &Simulation, offset_um: f64, label: &str) -> Chart {
+    let meas = rec.displacement_um.as_deref().unwrap_or_default();
+    let measured: Vec<(f64, f64)> = rec.time_s.iter().copied().zip(meas.iter().copied()).collect();
+    let model: Vec<(f64, f64)> =
+        rec.time_s.iter().zip(&sim.displacement_um).map(|(t, y)| (*t, y + offset_um)).collect();
+    Chart {
+        title: format!("{} — time series", rec.name),
+        x_label: "time [s]".into(),
+        y_label: "displacement [µm]".into(),
+        series: vec![
+            Series { label: "measured".into(), points: plots::thin(&measured, 4000), color: 0 },
+            Series { label: format!("model {label}"), points: plots::thin(&model, 4000), color: 1 },
+        ],
+    }
 }
 
 /// The self-contained HTML page.
@@ -147,6 +167,7 @@ pub fn html(
     val_files: &[Recording],
     note: &str,
 ) -> Result<String> {
+    let models: Vec<(ModelSpec, ActuatorParams)> = rungs.iter().map(|r| (r.spec, r.params)).collect();
     let mut h = String::new();
     let _ = write!(
         h,
@@ -248,8 +269,8 @@ pub fn html(
     // Loops and residuals per file.
     h.push_str("<h2>Loops and residuals</h2>");
     for rec in val_files.iter().chain(fit_files) {
-        let _ = write!(h, "<div class=fig>{}</div>", plots::svg(&loop_chart(rec, rungs)?, (900, 420))?);
-        let _ = write!(h, "<div class=fig>{}</div>", plots::svg(&residual_chart(rec, rungs)?, (900, 300))?);
+        let _ = write!(h, "<div class=fig>{}</div>", plots::svg(&loop_chart(rec, &models)?, (900, 420))?);
+        let _ = write!(h, "<div class=fig>{}</div>", plots::svg(&residual_chart(rec, &models)?, (900, 300))?);
     }
     h.push_str("<p><small>Generated by gma (host-sim). NRMSE = rms(measured − model) / (max − min of measured), offset fitted per file.</small></p></body></html>");
     Ok(h)

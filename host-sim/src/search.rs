@@ -3,7 +3,8 @@
 //! (log scale where a parameter spans decades), then Nelder–Mead (argmin) from the swarm's best,
 //! restarted once with a smaller simplex. Deterministic for a seed.
 
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::time::Instant;
 
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::neldermead::NelderMead;
@@ -77,12 +78,25 @@ pub struct SearchOptions {
     pub seed: u64,
     /// Effort multiplier (1 = default).
     pub effort: f64,
+    /// Stop at this instant with the best point so far.
+    pub deadline: Option<Instant>,
 }
 
 impl Default for SearchOptions {
     fn default() -> Self {
-        Self { seed: 1, effort: 1.0 }
+        Self { seed: 1, effort: 1.0, deadline: None }
     }
+}
+
+/// What a search found.
+#[derive(Debug, Clone)]
+pub struct Found {
+    /// The best values.
+    pub best: Vec<f64>,
+    /// Cost evaluations.
+    pub evaluations: usize,
+    /// Stopped by the deadline.
+    pub time_limited: bool,
 }
 
 struct Unit<'a> {
@@ -117,38 +131,57 @@ impl CostFunction for Unit<'_> {
 }
 
 /// Minimises `cost` over `bounds`: two independent swarm + simplex searches (seeds `seed` and
-/// `seed + 1`, run in parallel), the better one kept. Returns the best values and the number of
-/// evaluations.
-pub fn minimize(
-    bounds: &[Bound],
-    cost: &(dyn Fn(&[f64]) -> f64 + Sync),
-    opts: SearchOptions,
-) -> (Vec<f64>, usize) {
+/// `seed + 1`, run in parallel), the better one kept.
+pub fn minimize(bounds: &[Bound], cost: &(dyn Fn(&[f64]) -> f64 + Sync), opts: SearchOptions) -> Found {
     let evals = AtomicUsize::new(0);
+    let timed_out = AtomicBool::new(false);
+    let second = SearchOptions { seed: opts.seed.wrapping_add(1), ..opts };
     let ((a, ca), (b, cb)) = rayon::join(
-        || search_once(bounds, cost, opts.seed, opts.effort, &evals),
-        || search_once(bounds, cost, opts.seed.wrapping_add(1), opts.effort, &evals),
+        || search_once(bounds, cost, opts, &evals, &timed_out),
+        || search_once(bounds, cost, second, &evals, &timed_out),
     );
     let best = if ca <= cb { a } else { b };
-    (best, evals.load(Ordering::Relaxed))
+    Found {
+        best,
+        evaluations: evals.load(Ordering::Relaxed),
+        time_limited: timed_out.load(Ordering::Relaxed),
+    }
+}
+
+/// `ex` bounded by the deadline.
+pub fn bounded<O, S: argmin::core::Solver<O, I>, I: State>(
+    ex: Executor<O, S, I>,
+    deadline: Option<Instant>,
+) -> Executor<O, S, I> {
+    match deadline {
+        Some(d) => ex.timeout(d.saturating_duration_since(Instant::now())),
+        None => ex,
+    }
 }
 
 fn search_once(
     bounds: &[Bound],
     cost: &(dyn Fn(&[f64]) -> f64 + Sync),
-    seed: u64,
-    effort: f64,
+    opts: SearchOptions,
     evals: &AtomicUsize,
+    timed_out: &AtomicBool,
 ) -> (Vec<f64>, f64) {
     let d = bounds.len();
-    let opts = SearchOptions { seed, effort };
+    let ended_by_time = |reason: Option<&argmin::core::TerminationReason>| {
+        if matches!(reason, Some(argmin::core::TerminationReason::Timeout)) {
+            timed_out.store(true, Ordering::Relaxed);
+        }
+    };
     let unit = || Unit { bounds, cost, evals };
     let particles = 10 + 4 * d;
     let iters = ((25.0 * opts.effort).round() as u64).max(2);
     let pso = ParticleSwarm::new((vec![0.0; d], vec![1.0; d]), particles)
         .with_rng_generator(rand::rngs::StdRng::seed_from_u64(opts.seed));
     let mut best = vec![0.5; d];
-    if let Ok(res) = Executor::new(unit(), pso).configure(|s| s.max_iters(iters)).run() {
+    if let Ok(res) =
+        bounded(Executor::new(unit(), pso), opts.deadline).configure(|s| s.max_iters(iters)).run()
+    {
+        ended_by_time(res.state().get_termination_reason());
         if let Some(p) = res.state().get_best_param() {
             best = p.position.clone();
         }
@@ -163,7 +196,14 @@ fn search_once(
         }
         let tol = (1e-7 * unit().eval(&best)).max(1e-20);
         let Ok(nm) = NelderMead::new(simplex).with_sd_tolerance(tol) else { break };
-        if let Ok(res) = Executor::new(unit(), nm).configure(|s| s.max_iters(nm_iters)).run() {
+        if opts.deadline.is_some_and(|d| Instant::now() >= d) {
+            timed_out.store(true, Ordering::Relaxed);
+            break;
+        }
+        if let Ok(res) =
+            bounded(Executor::new(unit(), nm), opts.deadline).configure(|s| s.max_iters(nm_iters)).run()
+        {
+            ended_by_time(res.state().get_termination_reason());
             if let Some(p) = res.state().get_best_param() {
                 best = p.clone();
             }

@@ -196,7 +196,14 @@ fn a_lossy_telemetry_link_loses_frames_but_record_never_writes_a_wrong_row() {
         }
     }
     let dir = tempfile::tempdir().unwrap();
-    let s = host_sim::record::record(&stream[..], &dir.path().join("rig.csv"), 1e-4).unwrap();
+    let no_stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let s = host_sim::record::record(
+        Box::new(std::io::Cursor::new(stream)),
+        &dir.path().join("rig.csv"),
+        1e-4,
+        no_stop,
+    )
+    .unwrap();
     println!(
         "telemetry: {} frames sent, {dropped} dropped, {flipped} corrupted → decoded {}, lost {}, corrupt {}, {} files",
         sent.len(),

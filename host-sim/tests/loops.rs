@@ -73,10 +73,13 @@ fn jiles_atherton_is_recovered_from_loops_of_three_materials() {
                     .map(|(n, e)| format!("{n} {:.1} %", e * 100.0))
                     .collect::<Vec<_>>()
                     .join(", "),
-                if fit.warnings.is_empty() {
+                if fit.failures.is_empty() && fit.warnings.is_empty() {
                     String::new()
                 } else {
-                    format!(" — {}", fit.warnings.join("; "))
+                    format!(
+                        " — {}",
+                        fit.failures.iter().chain(&fit.warnings).cloned().collect::<Vec<_>>().join("; ")
+                    )
                 }
             );
             if fit.nrmse[0] > 0.01 {

@@ -156,7 +156,7 @@ mod tests {
         }
     }
 
-    /// physics.md: |G(j2π·500 Hz)| ≈ 0.84 with 002's identified A, B, C.
+    /// |G(j2π·500 Hz)| ≈ 0.84 with the A, B, C identified in 002 (docs/references.md).
     #[test]
     fn tsma_amplifier_gain_at_500_hz() {
         let g = SecondOrderAmpParams::TSMA_002.gain_at_hz(500.0);

@@ -29,6 +29,12 @@ pub const MAX_DELAY_SAMPLES: usize = 64;
 /// a drive signal, and would only push the models towards overflow.
 pub const MAX_INPUT: f32 = 1.0e4;
 
+/// Shortest sample period accepted [s] (10 MHz): below it the discretisations' exponentials of
+/// −dt/τ round to 1 and a recording would need more samples than fit in memory.
+pub const DT_MIN_S: f32 = 1.0e-7;
+/// Longest sample period accepted [s] (0.1 Hz).
+pub const DT_MAX_S: f32 = 10.0;
+
 /// Mechanics as the workbench identifies it: resonance and damping of y_free → y.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -219,7 +225,7 @@ impl core::error::Error for StepError {}
 impl Actuator {
     /// Builds the model for `spec`, validating only the stages it uses.
     pub fn new(spec: ModelSpec, p: &ActuatorParams) -> Result<Self, ParamError> {
-        let dt = positive("dt_s", p.dt_s)?;
+        let dt = check("dt_s", p.dt_s, |v| (DT_MIN_S..=DT_MAX_S).contains(&v), "in [1e-7, 10] s")?;
         let coil = CoilField::new(p.coil.turns_per_m, p.coil.bias_a_per_m)?;
         let amp = match (spec.has(Effect::AmplifierDynamics), p.amp_second_order) {
             (false, _) => None,

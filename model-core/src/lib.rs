@@ -15,7 +15,7 @@ pub mod sinusoidal;
 pub mod slow;
 pub mod spec;
 
-pub use chain::{Actuator, ActuatorOutput, ActuatorParams, ActuatorState, StepError};
+pub use chain::{Actuator, ActuatorOutput, ActuatorParams, ActuatorState, StepError, DT_MAX_S, DT_MIN_S};
 pub use error::ParamError;
 pub use inverse::{Compensator, CompensatorState};
 pub use spec::{Effect, ModelSpec, SpecError};

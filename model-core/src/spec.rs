@@ -1,6 +1,6 @@
 //! Model specifications: a `+`-joined list of effects on top of the minimal model (linear
 //! magnetization, quadratic magnetostriction, static mechanics, ideal amplifier, no eddy
-//! currents), with the names of `shared/docs/contracts.md`. `linear` is the minimal model.
+//! currents), with the names of `docs/cli.md` (the model specification). `linear` is the minimal model.
 
 use core::fmt;
 

@@ -1,8 +1,8 @@
 //! Instruction-count benches of model-core on the Cortex-M4F (QEMU netduinoplus2): one case per
 //! run, chosen by `-append "qemu-bench CASE"`. Each measured step sits between calls to the
 //! marker functions `bench_start` and `bench_end`, which `scripts/fw bench` hands to the
-//! shared QEMU instruction-count plugin; the `empty` case measures the markers alone so that
-//! the script can subtract them. Instructions, not cycles (see toolchain.md).
+//! in-tree QEMU instruction-count plugin (`firmware/qemu-insncount`); the `empty` case measures
+//! the markers alone so that the script can subtract them. Instructions, not cycles.
 #![no_std]
 #![no_main]
 

@@ -7,8 +7,20 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 
 use crate::excitation::Excitation;
+use crate::files::{check_outputs, display, Input};
 use crate::params;
 use crate::plant::{EddyModel, Plant};
+
+/// Most samples one run writes (about 1 GB of CSV).
+pub const MAX_SAMPLES: f64 = 2.0e7;
+/// Lowest excitation frequency [Hz].
+const MIN_FREQ_HZ: f64 = 1e-3;
+/// Largest amplitude or bias [A or V] (the reader's plausible current is ±1e3 A).
+const MAX_DRIVE: f64 = 1e3;
+/// Most integration steps per recorded sample.
+pub const MAX_OVERSAMPLE: u32 = 64;
+/// Largest displacement sensor offset, noise or quantum [µm] (the reader's plausible range is ±1e6 µm).
+const MAX_SENSOR_UM: f64 = 1e5;
 
 /// Excitation waveforms.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -28,7 +40,7 @@ pub enum Waveform {
 /// Options of `gma simulate`.
 #[derive(Debug, clap::Args)]
 pub struct SimulateArgs {
-    /// Effects present in the simulated actuator, e.g. `ja+mech+eddy` (names: shared/docs/contracts.md).
+    /// Effects present in the simulated actuator, e.g. `ja+mech+eddy` (names: `gma --help`).
     #[arg(long, default_value = "ja+mech")]
     pub model: String,
     /// Parameter file (TOML, as `gma fit --params-out` writes); default: a Terfenol-D demo set.
@@ -46,7 +58,7 @@ pub struct SimulateArgs {
     /// DC bias added to the excitation [A] or [V].
     #[arg(long, default_value_t = 1.0)]
     pub bias: f64,
-    /// Duration [s].
+    /// Duration [s]; at most 20 million samples at the parameter set's `dt_s` (2000 s at 10 kHz).
     #[arg(long, default_value_t = 0.2)]
     pub duration_s: f64,
     /// Displacement sensor noise, standard deviation [µm].
@@ -58,7 +70,7 @@ pub struct SimulateArgs {
     /// Displacement sensor offset [µm].
     #[arg(long, default_value_t = 0.0)]
     pub offset_um: f64,
-    /// Integration steps per recorded sample (the plant runs faster than the recording).
+    /// Integration steps per recorded sample (the plant runs faster than the recording), 1 to 64.
     #[arg(long, default_value_t = 2)]
     pub oversample: u32,
     /// Eddy currents of the simulated rod (with `eddy`): field diffusion into the rod, whose
@@ -78,18 +90,55 @@ pub struct SimulateArgs {
 
 /// Runs the simulation and writes the CSV.
 pub fn run(a: &SimulateArgs) -> Result<()> {
-    crate::recording::check_output(&a.out)?;
     let spec = params::parse_spec(&a.model)?;
-    let p = params::load(a.params.as_deref(), spec)?;
+    let params_input = a.params.as_deref().map(Input::open).transpose()?;
+    check_outputs(&[a.out.as_path()], &params_input.iter().map(Input::id).collect::<Vec<_>>())?;
+    let p = params::load_input(params_input, spec)?;
+    let (dt, dt32) = (p.dt_s as f64, p.dt_s);
     for (name, v) in [("--freq-hz", a.freq_hz), ("--duration-s", a.duration_s)] {
         if !(v.is_finite() && v > 0.0) {
             bail!("{name} must be a positive number, got {v}");
         }
     }
-    for (name, v) in [("--noise-um", a.noise_um), ("--quantum-um", a.quantum_um)] {
-        if !(v.is_finite() && v >= 0.0) {
-            bail!("{name} must be ≥ 0, got {v}");
+    if a.freq_hz < MIN_FREQ_HZ {
+        bail!("--freq-hz must be at least {MIN_FREQ_HZ} Hz (one cycle in 1000 s), got {}", a.freq_hz);
+    }
+    for (name, v) in [("--amplitude", a.amplitude), ("--bias", a.bias)] {
+        if !(v.is_finite() && v.abs() <= MAX_DRIVE) {
+            bail!("{name} must be within ±{MAX_DRIVE:e} (A, or V with `amp`), got {v}");
         }
+    }
+    if a.freq_hz > 0.5 / dt {
+        bail!(
+            "--freq-hz {} is above the Nyquist frequency {} Hz of the sample period dt_s = {dt:e} s",
+            a.freq_hz,
+            0.5 / dt
+        );
+    }
+    let samples = (a.duration_s / dt).round();
+    if samples < 3.0 {
+        bail!(
+            "--duration-s {} gives {samples} samples at dt_s = {dt:e} s; a recording needs at least 3",
+            a.duration_s
+        );
+    }
+    if samples > MAX_SAMPLES {
+        bail!(
+            "--duration-s {} gives {samples:.3e} samples at dt_s = {dt32:e} s; at most {MAX_SAMPLES:e} ({} s) per run",
+            a.duration_s,
+            MAX_SAMPLES as f32 * dt32
+        );
+    }
+    if !(1..=MAX_OVERSAMPLE).contains(&a.oversample) {
+        bail!("--oversample must be in [1, {MAX_OVERSAMPLE}], got {}", a.oversample);
+    }
+    for (name, v) in [("--noise-um", a.noise_um), ("--quantum-um", a.quantum_um)] {
+        if !(v.is_finite() && (0.0..=MAX_SENSOR_UM).contains(&v)) {
+            bail!("{name} must be in [0, {MAX_SENSOR_UM:e}] µm, got {v}");
+        }
+    }
+    if !(a.offset_um.is_finite() && a.offset_um.abs() <= MAX_SENSOR_UM) {
+        bail!("--offset-um must be within ±{MAX_SENSOR_UM:e} µm, got {}", a.offset_um);
     }
     if a.no_current && !spec.has(model_core::Effect::AmplifierDynamics) {
         bail!("--no-current needs a model with `amp` (without it the current is the drive)");
@@ -113,8 +162,11 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     plant.oversample = a.oversample;
     plant.log_current = !a.no_current;
     plant.eddy = a.eddy_model;
-    let name = a.out.display().to_string();
+    let name = display(&a.out);
     let rec = plant.record(&name, &exc, a.duration_s, a.seed)?;
+    // Write only what the reader accepts (gma fit must read back every file gma writes).
+    rec.check_plausible()
+        .context("the simulated rig left the plausible range (lower --amplitude or --bias?)")?;
     rec.write(&a.out).with_context(|| format!("writing {name}"))?;
     eprintln!(
         "gma: wrote {} samples of SIMULATED data (plant {}, {}) to {name}",

@@ -1,0 +1,171 @@
+//! What fit, diagnose and report share: the model, the files, the search settings, and reading
+//! the inputs once (recordings or magnetization loops, sniffed from each file's first line).
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Result};
+use clap::Args;
+use model_core::{ActuatorParams, ModelSpec};
+
+use crate::files::{check_outputs, open_all, Input};
+use crate::fit::{self, FitOptions};
+use crate::loops::{self, LoopFile};
+use crate::params;
+use crate::recording::Recording;
+use crate::search::SearchOptions;
+
+/// 200 s at the board's 10 kHz: about 100 MB for a recording with every column.
+pub const DEFAULT_MAX_SAMPLES: usize = 2_000_000;
+
+/// Longest `--time-limit` accepted [s] (a week).
+const MAX_TIME_LIMIT_S: f64 = 7.0 * 24.0 * 3600.0;
+
+/// Model, files and fit settings shared by fit, diagnose and report.
+#[derive(Args)]
+pub struct ModelFiles {
+    /// Model spec, e.g. `ja+mech` (effects joined by `+`; see `gma --help`).
+    #[arg(long)]
+    pub model: String,
+    /// Recordings (CSV) or magnetization-loop files to fit; `-` reads standard input.
+    #[arg(required = true, value_name = "FILE")]
+    pub files: Vec<PathBuf>,
+    /// A validation recording: scored, never fitted (repeat `--val` for several files).
+    #[arg(long, value_name = "FILE")]
+    pub val: Vec<PathBuf>,
+    /// Start values and fixed parameters (TOML as `--params-out` writes, e.g. from a loop fit);
+    /// default: a Terfenol-D demo set.
+    #[arg(long, visible_alias = "init", value_name = "P.toml")]
+    pub params: Option<PathBuf>,
+    /// Seed of the global search (same seed, same result).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Search effort (1 = default; 2 doubles the swarm iterations and simplex steps).
+    #[arg(long, default_value_t = 1.0)]
+    pub effort: f64,
+    /// Stop searching after this many seconds and use the best result found so far (said so in
+    /// the output and the JSON's `time_limit_reached`).
+    #[arg(long, value_name = "SECONDS")]
+    pub time_limit: Option<f64>,
+    /// Print exactly one JSON object on stdout (human text goes to stderr).
+    #[arg(long)]
+    pub json: bool,
+    /// Samples (or loop points) kept per file (memory ≈ 50 bytes per sample); longer files are
+    /// still read and checked to the end, and the first this many samples are used, with a warning.
+    #[arg(long, default_value_t = DEFAULT_MAX_SAMPLES, value_name = "N")]
+    pub max_samples: usize,
+}
+
+/// The inputs, read: displacement recordings or magnetization loops (never a mix).
+pub enum Data {
+    /// Displacement recordings: fit files and validation files.
+    Recordings(Vec<Recording>, Vec<Recording>),
+    /// Magnetization loops: fit files and validation files.
+    Loops(Vec<LoopFile>, Vec<LoopFile>),
+}
+
+/// Everything a fitting command needs, checked before any work.
+pub struct Prepared {
+    /// The model.
+    pub spec: ModelSpec,
+    /// Start values (and fixed parameters).
+    pub init: ActuatorParams,
+    /// The files.
+    pub data: Data,
+    /// Search settings (the deadline runs from when the inputs were read).
+    pub opts: FitOptions,
+}
+
+impl Prepared {
+    /// The same settings for the loop search.
+    pub fn search_options(&self) -> SearchOptions {
+        SearchOptions { seed: self.opts.seed, effort: self.opts.effort, deadline: self.opts.deadline }
+    }
+}
+
+impl ModelFiles {
+    /// Parses the spec, opens every input once (files, `-`, pipes), checks the `outputs` (none
+    /// may be an input, a link or a device; their folders must take files), then reads the data.
+    pub fn prepare(&self, outputs: &[&Path]) -> Result<Prepared> {
+        let spec = params::parse_spec(&self.model)?;
+        check_max_samples(self.max_samples)?;
+        if !(self.effort.is_finite() && self.effort > 0.0 && self.effort <= 20.0) {
+            bail!("--effort must be in (0, 20], got {}", self.effort);
+        }
+        let time_limit = self.time_limit.map(time_limit).transpose()?;
+        let params_input = self.params.as_deref().map(Input::open).transpose()?;
+        let (fit_in, val_in) = (open_all(&self.files)?, open_all(&self.val)?);
+        let all: Vec<_> = fit_in.iter().chain(&val_in).chain(params_input.as_ref()).map(Input::id).collect();
+        check_outputs(outputs, &all)?;
+        let init = params::load_input(params_input, spec)?;
+        let data = read_data(fit_in, val_in, self.max_samples)?;
+        if let Data::Recordings(fit_files, val_files) = &data {
+            for r in fit_files.iter().chain(val_files) {
+                fit::drive_for(spec, r)?;
+            }
+        }
+        let deadline = time_limit.map(|t| Instant::now() + t);
+        let opts = FitOptions { seed: self.seed, progress: true, effort: self.effort, deadline };
+        Ok(Prepared { spec, init, data, opts })
+    }
+}
+
+/// A `--time-limit` value as a duration, or why it is not one.
+pub fn time_limit(seconds: f64) -> Result<Duration> {
+    if !(seconds.is_finite() && seconds > 0.0 && seconds <= MAX_TIME_LIMIT_S) {
+        bail!("--time-limit must be in (0, {MAX_TIME_LIMIT_S}] s, got {seconds}");
+    }
+    Ok(Duration::from_secs_f64(seconds))
+}
+
+/// `--max-samples` must leave a recording (3 samples) and a loop (5 points).
+pub fn check_max_samples(n: usize) -> Result<()> {
+    if n < 5 {
+        bail!("--max-samples must be at least 5, got {n}");
+    }
+    Ok(())
+}
+
+/// Reads opened inputs: all recordings or all loop files (decided by each first line).
+pub fn read_data(fit_in: Vec<Input>, val_in: Vec<Input>, max_samples: usize) -> Result<Data> {
+    let kinds: Vec<bool> =
+        fit_in.iter().chain(&val_in).map(|i| loops::looks_like_loop(&i.first_line())).collect();
+    if kinds.iter().any(|k| *k) && !kinds.iter().all(|k| *k) {
+        bail!(
+            "mixing magnetization-loop files and displacement recordings in one fit: fit them separately \
+             (a loop fit's --params-out can seed the displacement fit via --params)"
+        );
+    }
+    if kinds.first().copied().unwrap_or(false) {
+        let read = |v: Vec<Input>| {
+            v.into_iter().map(|i| loops::read_input(i, max_samples)).collect::<Result<Vec<_>>>()
+        };
+        Ok(Data::Loops(read(fit_in)?, read(val_in)?))
+    } else {
+        let read =
+            |v: Vec<Input>| v.into_iter().map(|i| read_recording(i, max_samples)).collect::<Result<Vec<_>>>();
+        Ok(Data::Recordings(read(fit_in)?, read(val_in)?))
+    }
+}
+
+/// Reads one recording as a stream, keeping at most `max_samples` and saying so.
+pub fn read_recording(input: Input, max_samples: usize) -> Result<Recording> {
+    let (r, rows) = Recording::read_input(input, max_samples)?;
+    if rows > r.len() as u64 {
+        eprintln!(
+            "gma: warning: {}: {rows} samples; using the first {} ({:.1} s); raise --max-samples to use more",
+            r.name,
+            r.len(),
+            r.duration_s()
+        );
+    }
+    Ok(r)
+}
+
+/// The warning printed when `--time-limit` cut a search short.
+pub fn warn_time_limited(limit: Option<f64>) {
+    eprintln!(
+        "gma: warning: --time-limit {} s reached: the result is the best found so far, not a converged fit",
+        limit.unwrap_or(f64::NAN)
+    );
+}

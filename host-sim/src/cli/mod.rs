@@ -1,0 +1,184 @@
+//! The `gma` command line: this file parses the arguments, dispatches to one file per
+//! subcommand and reports errors — as `gma: error: …` on stderr, and with `--json` also as one
+//! `{"error": {…}}` object on stdout, so a script always gets exactly one JSON object.
+
+use std::process::ExitCode;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use serde_json::json;
+
+use crate::error::Located;
+use crate::files::escape_control;
+
+/// A line on stdout. A reader that goes away (`gma … | head`) ends the command quietly instead
+/// of a panic on the broken pipe.
+macro_rules! out {
+    ($($t:tt)*) => {
+        $crate::cli::print_line(format_args!($($t)*))
+    };
+}
+
+/// Human text goes to stdout, or to stderr in `--json` mode (stdout then holds only the JSON).
+macro_rules! say {
+    ($json:expr, $($t:tt)*) => {
+        if $json { eprintln!($($t)*) } else { out!($($t)*) }
+    };
+}
+
+mod common;
+mod compare;
+mod demo;
+mod diagnose;
+mod fit;
+mod mechanics;
+mod record;
+mod report;
+pub mod simulate;
+
+/// Exit status of a command that failed (bad input, a model that cannot follow the data, …).
+const EXIT_FAILURE: u8 = 1;
+/// Exit status of a command line that cannot be parsed (clap's usage code).
+const EXIT_USAGE: u8 = 2;
+
+#[derive(Parser)]
+#[command(
+    name = "gma",
+    version,
+    about = "Model workbench for giant-magnetostrictive (Terfenol-D) actuators",
+    long_about = "Model workbench for giant-magnetostrictive (Terfenol-D) actuators: compare a model \
+                  with measurements, see where it fails, learn which physical effect is missing, add it \
+                  and watch the error fall.\n\nMeasurement CSV columns (by name): time_s [s], command_V, \
+                  current_A, displacement_um, force_N, temperature_C. Model specs are `+`-joined effects: \
+                  linear, saturation|anhysteretic, hysteresis|ja, preisach, eddy_current|eddy, \
+                  mechanical_dynamics|mech, amplifier_dynamics|amp, magnetic_aftereffect|aftereffect, \
+                  thermal_drift|thermal, sensor_delay|delay. File formats, model specs and the JSON \
+                  output: docs/formats.md and docs/cli.md in the source repository."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// The main job on SIMULATED data, in under a minute: a rig with hidden effects, a diagnosis
+    /// from a baseline model, the named effects added one by one, the error falling, an HTML report.
+    #[command(allow_negative_numbers = true)]
+    Demo(demo::DemoArgs),
+    /// Identify a model's parameters from one or more recordings jointly.
+    #[command(allow_negative_numbers = true)]
+    Fit(fit::FitArgs),
+    /// Per-file error and plots (loops, time series, residuals) of a model against recordings.
+    #[command(allow_negative_numbers = true)]
+    Compare(compare::CompareArgs),
+    /// Fit a model, analyse what it leaves unexplained and name the missing effect.
+    #[command(allow_negative_numbers = true)]
+    Diagnose(diagnose::DiagnoseArgs),
+    /// Climb the model ladder (diagnose, add the named effect, refit, repeat) and write one
+    /// self-contained HTML page.
+    #[command(allow_negative_numbers = true)]
+    Report(report::ReportArgs),
+    /// Turn the drive's telemetry stream (COBS frames captured from its UART) into measurement
+    /// CSVs; lost and corrupt frames are counted, and every gap starts a new file. Ctrl-C (or
+    /// SIGTERM) ends a live recording with its files and summary complete.
+    #[command(allow_negative_numbers = true)]
+    Record(record::RecordArgs),
+    /// Simulate a rig (plant simulator) and write a measurement CSV. SIMULATED data, for tests
+    /// and demos.
+    #[command(allow_negative_numbers = true)]
+    Simulate(simulate::SimulateArgs),
+    /// Natural frequency, damping ratio and step response of the actuator mechanics
+    /// (m ÿ + c ẏ + k y = F, 001 eq. 14–15), discretised exactly at the loop rate.
+    #[command(allow_negative_numbers = true)]
+    Mechanics(mechanics::MechanicsArgs),
+}
+
+impl Command {
+    /// Whether the command was asked for JSON output.
+    fn json(&self) -> bool {
+        match self {
+            Command::Fit(a) => a.mf.json,
+            Command::Diagnose(a) => a.mf.json,
+            Command::Report(a) => a.mf.json,
+            Command::Compare(a) => a.json,
+            Command::Record(a) => a.json,
+            Command::Demo(_) | Command::Simulate(_) | Command::Mechanics(_) => false,
+        }
+    }
+}
+
+/// Runs `gma` with the process's arguments; the exit status says how it went.
+pub fn main() -> ExitCode {
+    let json_asked = std::env::args_os().any(|a| a == "--json");
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            // --help and --version are not errors.
+            if !e.use_stderr() {
+                let _ = e.print();
+                return ExitCode::SUCCESS;
+            }
+            if json_asked {
+                let first =
+                    e.to_string().lines().next().unwrap_or("").trim_start_matches("error: ").to_string();
+                print_json_error(&first, None, EXIT_USAGE);
+            }
+            let _ = e.print();
+            return ExitCode::from(EXIT_USAGE);
+        }
+    };
+    let json = cli.command.json();
+    match run(cli.command) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            let message = escape_control(&format!("{e:#}"));
+            eprintln!("gma: error: {message}");
+            if json {
+                let at = e.chain().find_map(|c| c.downcast_ref::<Located>());
+                print_json_error(&message, at, EXIT_FAILURE);
+            }
+            ExitCode::from(EXIT_FAILURE)
+        }
+    }
+}
+
+/// Writes one line to stdout; exits at once (status 0) when the reader has closed the pipe.
+pub fn print_line(line: std::fmt::Arguments) {
+    use std::io::Write as _;
+    let mut stdout = std::io::stdout().lock();
+    if let Err(e) = stdout.write_fmt(line).and_then(|()| stdout.write_all(b"\n")) {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("gma: error: writing to standard output: {e}");
+        std::process::exit(EXIT_FAILURE as i32);
+    }
+}
+
+/// The `--json` error object: the message as printed on stderr, where it points, the exit status.
+fn print_json_error(message: &str, at: Option<&Located>, exit_code: u8) {
+    out!(
+        "{}",
+        json!({"error": {
+            "message": message,
+            "file": at.map(|l| escape_control(&l.file)),
+            "line": at.and_then(|l| l.line),
+            "column": at.and_then(|l| l.column),
+            "exit_code": exit_code,
+        }})
+    );
+}
+
+fn run(command: Command) -> Result<()> {
+    match command {
+        Command::Demo(a) => demo::run(&a),
+        Command::Fit(a) => fit::run(&a),
+        Command::Compare(a) => compare::run(&a),
+        Command::Diagnose(a) => diagnose::run(&a),
+        Command::Report(a) => report::run(&a),
+        Command::Record(a) => record::run(&a),
+        Command::Simulate(a) => simulate::run(&a),
+        Command::Mechanics(a) => mechanics::run(&a),
+    }
+}

@@ -1,0 +1,395 @@
+//! Inputs and outputs of the workbench, in one place so every command treats them alike.
+//!
+//! Inputs are opened once and read once, as streams: a file, standard input (`-`), a pipe or a
+//! FIFO give the same result. Lines are bounded ([`MAX_LINE_BYTES`]), so a file without newlines
+//! (`/dev/zero`, a one-row gigabyte) is refused instead of read into memory.
+//!
+//! Outputs are checked before any work ([`check_outputs`]): the folder exists and is writable,
+//! the path is a regular file or new, and it is not one of the inputs. They are written to a
+//! unique hidden temporary file beside the target and renamed into place ([`write_atomic`]), so
+//! a reader, a crash or a concurrent run never sees a half-written result, and a command that
+//! fails never replaces an existing output.
+
+use std::io::{BufRead, Read, Write as _};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use anyhow::{bail, Context, Result};
+
+use crate::error::Located;
+
+/// Longest line accepted in any text input [bytes]: measurement rows have a handful of numbers,
+/// parameter files short assignments.
+pub const MAX_LINE_BYTES: usize = 64 * 1024;
+
+/// Longest cell echoed back in a message [characters]; longer ones are cut with `…`.
+const MAX_ECHO_CHARS: usize = 40;
+
+/// Whether standard input has been handed out (it can be read only once).
+static STDIN_TAKEN: AtomicBool = AtomicBool::new(false);
+
+/// What identifies an input once it has been consumed: its name and (for a regular file) its
+/// device and inode, so that no output replaces it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct InputId {
+    /// As in messages.
+    pub name: String,
+    /// (device, inode) of a regular file.
+    pub identity: Option<(u64, u64)>,
+}
+
+/// An opened input: its name for messages and a reader that yields its bytes once.
+pub struct Input {
+    /// `path` as given, or `<stdin>` for `-`.
+    pub name: String,
+    /// The first line, already read (the format is sniffed from it), then the rest.
+    head: Vec<u8>,
+    rest: Box<dyn Read + Send>,
+    /// Identity of a regular file (device, inode), to refuse writing over an input.
+    pub identity: Option<(u64, u64)>,
+}
+
+impl Input {
+    /// Opens `path` (`-` is standard input) and reads its first line.
+    pub fn open(path: &Path) -> Result<Self> {
+        let (name, reader, identity): (String, Box<dyn Read + Send>, _) = if path == Path::new("-") {
+            if STDIN_TAKEN.swap(true, Ordering::SeqCst) {
+                bail!("`-` (standard input) is given more than once; it can be read only once");
+            }
+            ("<stdin>".into(), Box::new(std::io::stdin()), None)
+        } else {
+            let name = display(path);
+            let meta = std::fs::metadata(path).with_context(|| format!("{name}: cannot read"))?;
+            if meta.is_dir() {
+                bail!("{name}: is a folder, not a file");
+            }
+            let f = std::fs::File::open(path).with_context(|| format!("{name}: cannot read"))?;
+            (name, Box::new(f), identity(&meta))
+        };
+        let mut rest = LineBounded::new(reader);
+        let mut head = Vec::new();
+        // The first line (with its newline), bounded like every other line.
+        let mut byte = [0u8; 1];
+        loop {
+            match rest.read(&mut byte) {
+                Ok(0) => break,
+                Ok(_) => {
+                    head.push(byte[0]);
+                    if byte[0] == b'\n' {
+                        break;
+                    }
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => return Err(read_error(&name, e)),
+            }
+        }
+        Ok(Self { name, head, rest: Box::new(rest), identity })
+    }
+
+    /// Its name and identity, kept after the input is read.
+    pub fn id(&self) -> InputId {
+        InputId { name: self.name.clone(), identity: self.identity }
+    }
+
+    /// The first line as text (lossy; for sniffing the format).
+    pub fn first_line(&self) -> String {
+        let line = self.head.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&self.head);
+        String::from_utf8_lossy(line).trim_end_matches(['\r', '\n']).to_string()
+    }
+
+    /// The whole input as a byte stream (the first line included), buffered.
+    pub fn into_reader(self) -> impl BufRead + Send {
+        std::io::BufReader::with_capacity(1 << 16, std::io::Cursor::new(self.head).chain(self.rest))
+    }
+
+    /// The whole input as UTF-8 text, at most `max_bytes` of it (parameter files, loop files).
+    pub fn into_text(self, max_bytes: u64) -> Result<String> {
+        let name = self.name.clone();
+        let mut bytes = Vec::new();
+        self.into_reader().take(max_bytes + 1).read_to_end(&mut bytes).map_err(|e| read_error(&name, e))?;
+        if bytes.len() as u64 > max_bytes {
+            bail!("{name}: larger than {} MB; this is not a file of this kind", max_bytes >> 20);
+        }
+        let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").map(<[u8]>::to_vec).unwrap_or(bytes);
+        String::from_utf8(bytes).map_err(|e| {
+            let line =
+                e.as_bytes()[..e.utf8_error().valid_up_to()].iter().filter(|b| **b == b'\n').count() + 1;
+            Located::at(
+                &name,
+                line as u64,
+                None,
+                "not UTF-8 text (a binary file, or a text encoding other than UTF-8?)",
+            )
+            .into()
+        })
+    }
+}
+
+/// The (device, inode) pair of a file.
+#[cfg(unix)]
+fn identity(meta: &std::fs::Metadata) -> Option<(u64, u64)> {
+    use std::os::unix::fs::MetadataExt;
+    meta.is_file().then(|| (meta.dev(), meta.ino()))
+}
+
+#[cfg(not(unix))]
+fn identity(_meta: &std::fs::Metadata) -> Option<(u64, u64)> {
+    None
+}
+
+/// A read error as a message naming the input (a too-long line keeps its line number).
+pub fn read_error(name: &str, e: std::io::Error) -> anyhow::Error {
+    match e.get_ref().and_then(|inner| inner.downcast_ref::<LineTooLong>()) {
+        Some(l) => Located::at(
+            name,
+            l.line,
+            None,
+            format!(
+                "line longer than {} KiB (no line breaks: a binary file, or not a text export?)",
+                MAX_LINE_BYTES / 1024
+            ),
+        )
+        .into(),
+        None => anyhow::anyhow!("{name}: cannot read: {e}"),
+    }
+}
+
+/// A line over [`MAX_LINE_BYTES`], carried inside an `io::Error`.
+#[derive(Debug)]
+struct LineTooLong {
+    line: u64,
+}
+
+impl std::fmt::Display for LineTooLong {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "line {} is longer than {} bytes", self.line, MAX_LINE_BYTES)
+    }
+}
+
+impl std::error::Error for LineTooLong {}
+
+/// A reader that fails as soon as one line exceeds [`MAX_LINE_BYTES`].
+struct LineBounded<R> {
+    inner: R,
+    line: u64,
+    in_line: usize,
+}
+
+impl<R> LineBounded<R> {
+    fn new(inner: R) -> Self {
+        Self { inner, line: 1, in_line: 0 }
+    }
+}
+
+impl<R: Read> Read for LineBounded<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        for &b in &buf[..n] {
+            if b == b'\n' {
+                self.line += 1;
+                self.in_line = 0;
+            } else {
+                self.in_line += 1;
+                if self.in_line > MAX_LINE_BYTES {
+                    return Err(std::io::Error::new(
+                        std::io::ErrorKind::InvalidData,
+                        LineTooLong { line: self.line },
+                    ));
+                }
+            }
+        }
+        Ok(n)
+    }
+}
+
+/// Opens every path, in order.
+pub fn open_all(paths: &[PathBuf]) -> Result<Vec<Input>> {
+    paths.iter().map(|p| Input::open(p)).collect()
+}
+
+/// A path as messages print it (control characters escaped).
+pub fn display(path: &Path) -> String {
+    escape_control(&path.display().to_string())
+}
+
+/// `s` with control characters (ESC, BEL, CR, …; not newlines) written as escapes, so nothing
+/// from an input can drive the terminal.
+pub fn escape_control(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        if c.is_control() && c != '\n' {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// A cell from an input as a message quotes it: control characters escaped, cut to
+/// [`MAX_ECHO_CHARS`].
+pub fn echo(cell: &str) -> String {
+    let mut s: String = cell.chars().take(MAX_ECHO_CHARS).collect();
+    if cell.chars().nth(MAX_ECHO_CHARS).is_some() {
+        s.push('…');
+    }
+    escape_control(&s)
+}
+
+/// Checks, before any work, that every output can be written and loses nothing: its folder
+/// exists and takes a new file, it is new or a regular file (not a link, a device, a FIFO or a
+/// folder: outputs are replaced by a rename, which would swap such a thing for a file), and it
+/// is not one of `inputs`.
+pub fn check_outputs(outputs: &[&Path], inputs: &[InputId]) -> Result<()> {
+    let mut seen: Vec<PathBuf> = Vec::new();
+    for &path in outputs {
+        let name = display(path);
+        let dir = output_dir(path);
+        if !dir.is_dir() {
+            bail!("cannot write {name}: the folder {} does not exist", display(dir));
+        }
+        match std::fs::symlink_metadata(path) {
+            Ok(meta) => {
+                let kind = meta.file_type();
+                if kind.is_dir() {
+                    bail!("cannot write {name}: it is a folder");
+                }
+                if !kind.is_file() {
+                    let what = if kind.is_symlink() {
+                        "a symbolic link"
+                    } else {
+                        "not a regular file (a device, FIFO or socket)"
+                    };
+                    bail!(
+                        "cannot write {name}: it is {what}; gma writes results as new regular files \
+                         (temporary file, then rename), which would replace it — give the path of a regular file"
+                    );
+                }
+                if let Some(id) = identity(&meta) {
+                    if let Some(input) = inputs.iter().find(|i| i.identity == Some(id)) {
+                        bail!(
+                            "cannot write {name}: it is the input {}; choose another output path",
+                            input.name
+                        );
+                    }
+                }
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => bail!("cannot write {name}: {e}"),
+        }
+        // The same output twice in one command would lose the first.
+        let key = dir
+            .canonicalize()
+            .unwrap_or_else(|_| dir.to_path_buf())
+            .join(path.file_name().unwrap_or_default());
+        if seen.contains(&key) {
+            bail!("{name} is named as an output twice");
+        }
+        seen.push(key);
+        // Writable: a temporary file can be created beside it.
+        drop(partial_file(dir)?);
+    }
+    Ok(())
+}
+
+/// Creates `dir` (and its parents) for outputs, and checks that it takes new files.
+pub fn output_folder(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create the folder {}", display(dir)))?;
+    drop(partial_file(dir)?);
+    Ok(())
+}
+
+/// Writes `bytes` to `path` through a temporary file and a rename, so that readers never see a
+/// half-written file.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let mut tmp = partial_file(output_dir(path))?;
+    tmp.write_all(bytes).with_context(|| format!("writing {}", display(path)))?;
+    persist(tmp, path)
+}
+
+/// The folder `path` is written into (`.` for a bare file name).
+pub fn output_dir(path: &Path) -> &Path {
+    path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."))
+}
+
+/// A temporary file in `dir` for an output being written (`.gma-*.partial`, a unique name: a
+/// run killed mid-write leaves one of these, never a truncated result under the final name, and
+/// concurrent runs never share one).
+pub fn partial_file(dir: &Path) -> Result<tempfile::NamedTempFile> {
+    partial_file_with_suffix(dir, ".partial")
+}
+
+/// As [`partial_file`], with a suffix (an encoder may need the target's extension).
+pub fn partial_file_with_suffix(dir: &Path, suffix: &str) -> Result<tempfile::NamedTempFile> {
+    tempfile::Builder::new().prefix(".gma-").suffix(suffix).tempfile_in(dir).with_context(|| {
+        format!("cannot create a file in {} (does it exist, and may it be written?)", display(dir))
+    })
+}
+
+/// Moves a finished temporary file into place (synced, ordinary permissions, atomic rename).
+pub fn persist(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
+    tmp.as_file().sync_all()?;
+    // Temporary files are private (0600); results are ordinary files.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        tmp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
+    }
+    tmp.persist(path).with_context(|| format!("cannot write {}", display(path)))?;
+    Ok(())
+}
+
+/// File stems for per-input outputs (plots), unique even when two inputs share a name in
+/// different folders (`x`, `x-2`, …), and `input` for standard input.
+pub fn unique_stems(paths: &[PathBuf]) -> Vec<String> {
+    let mut out: Vec<String> = Vec::with_capacity(paths.len());
+    for p in paths {
+        let stem = if p == Path::new("-") {
+            "stdin".to_string()
+        } else {
+            p.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "file".into())
+        };
+        let mut candidate = stem.clone();
+        let mut k = 2;
+        while out.contains(&candidate) {
+            candidate = format!("{stem}-{k}");
+            k += 1;
+        }
+        out.push(candidate);
+    }
+    out
+}
+
+/// A path list as the CLI prints it.
+pub fn names(paths: &[PathBuf]) -> String {
+    paths.iter().map(|p| display(p)).collect::<Vec<_>>().join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_line_without_end_is_refused_with_its_line_number() {
+        let mut r = LineBounded::new(std::io::repeat(b'7').take(10 * MAX_LINE_BYTES as u64));
+        let mut sink = Vec::new();
+        let e = r.read_to_end(&mut sink).unwrap_err();
+        let msg = read_error("zeros", e).to_string();
+        assert!(msg.starts_with("zeros:1: line longer than 64 KiB"), "{msg}");
+        assert!(sink.len() <= 2 * MAX_LINE_BYTES, "read {} bytes before refusing", sink.len());
+    }
+
+    #[test]
+    fn control_characters_are_escaped_and_long_cells_cut() {
+        assert_eq!(escape_control("a\u{1b}[31mb\u{7}"), "a\\u{1b}[31mb\\u{7}");
+        let long = "x".repeat(100);
+        assert_eq!(echo(&long).chars().count(), MAX_ECHO_CHARS + 1);
+    }
+
+    #[test]
+    fn stems_are_unique_per_input() {
+        let p = |s: &str| PathBuf::from(s);
+        let stems = unique_stems(&[p("a/x.csv"), p("b/x.csv"), p("x-2.csv"), p("-")]);
+        assert_eq!(stems, ["x", "x-2", "x-2-2", "stdin"]);
+    }
+}
