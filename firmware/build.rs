@@ -32,23 +32,30 @@ fn main() {
 }
 
 /// The drive's model: `GMA_MODEL` (spec, default `ja+eddy+mech`) and `GMA_PARAMS` (a TOML file
-/// from `gma fit --params-out`; default: the demo set), compiled in as postcard bytes that the
-/// firmware decodes and validates at start-up.
+/// from `gma fit --params-out`; default: the demo set), validated here as the firmware would
+/// validate them at start-up, and compiled in as postcard bytes.
 fn write_drive_params(out: &std::path::Path) {
     println!("cargo:rerun-if-env-changed=GMA_MODEL");
     println!("cargo:rerun-if-env-changed=GMA_PARAMS");
     let spec = env::var("GMA_MODEL").unwrap_or_else(|_| "ja+eddy+mech".to_string());
-    if let Err(e) = model_core::ModelSpec::parse(&spec) {
-        panic!("GMA_MODEL=`{spec}`: {e}");
-    }
-    let params: model_core::ActuatorParams = match env::var("GMA_PARAMS") {
+    let model = model_core::ModelSpec::parse(&spec).unwrap_or_else(|e| panic!("GMA_MODEL=`{spec}`: {e}"));
+    let (source, params): (String, model_core::ActuatorParams) = match env::var("GMA_PARAMS") {
         Ok(path) => {
             println!("cargo:rerun-if-changed={path}");
             let text = fs::read_to_string(&path).unwrap_or_else(|e| panic!("GMA_PARAMS={path}: {e}"));
-            toml::from_str(&text).unwrap_or_else(|e| panic!("GMA_PARAMS={path}: not a parameter file: {e}"))
+            (format!("GMA_PARAMS={path}"), read_params(&path, &text))
         }
-        Err(_) => model_core::ActuatorParams::TERFENOL_DEMO,
+        Err(_) => ("the demo parameter set".to_string(), model_core::ActuatorParams::TERFENOL_DEMO),
     };
+    // Refused here rather than on the board (bridge never enabled): the set against its model,
+    // and the compensator's model that gma-drive's controller builds from it.
+    if let Err(e) = model_core::Actuator::new(model, &params) {
+        panic!("{source} for model `{spec}`: {e}");
+    }
+    let tick_s = gma_control::ControlConfig::REFERENCE.current_loop.tick_s;
+    if let Err(e) = gma_control::compensator_model(model, &params, tick_s) {
+        panic!("{source}: the compensator for model `{spec}` at the {tick_s} s tick: {e}");
+    }
     let bytes = postcard::to_stdvec(&params).expect("serialise parameters");
     let body = format!(
         "/// Model spec of the drive (GMA_MODEL at build time).\npub const MODEL_SPEC: &str = {spec:?};\n\
@@ -56,6 +63,29 @@ fn write_drive_params(out: &std::path::Path) {
          pub const PARAMS_POSTCARD: &[u8] = &{bytes:?};\n"
     );
     fs::write(out.join("drive_params.rs"), body).expect("write drive_params.rs");
+}
+
+/// A parameter file as `gma` reads it: any format up to model-core's, the tables of effects and
+/// laws it leaves out taken from the demo set (said as a build warning).
+fn read_params(path: &str, text: &str) -> model_core::ActuatorParams {
+    use model_core::effects::{parameter_tables, PARAMETER_FILE_FORMAT};
+    let mut table: toml::Table =
+        toml::from_str(text).unwrap_or_else(|e| panic!("GMA_PARAMS={path}: not a parameter file: {e}"));
+    match table.remove("format_version") {
+        None => {}
+        Some(toml::Value::Integer(v)) if (1..=PARAMETER_FILE_FORMAT).contains(&v) => {}
+        Some(v) => panic!(
+            "GMA_PARAMS={path}: format_version = {v}: this build reads formats 1 to {PARAMETER_FILE_FORMAT}"
+        ),
+    }
+    let demo =
+        toml::Table::try_from(model_core::ActuatorParams::TERFENOL_DEMO).expect("serialise the demo set");
+    let missing: Vec<&str> = parameter_tables().filter(|t| !table.contains_key(*t)).collect();
+    for t in missing {
+        println!("cargo:warning=GMA_PARAMS={path} has no `{t}`: the demo set's value stands in");
+        table.insert(t.to_string(), demo[t].clone());
+    }
+    table.try_into().unwrap_or_else(|e| panic!("GMA_PARAMS={path}: not a parameter file: {e}"))
 }
 
 /// Host-side expected values for the QEMU smoke test, from the very same workload code.

@@ -93,8 +93,9 @@ pub fn demo() -> Case {
 /// The suite: one case per contract effect, and the complete case.
 pub fn all() -> Vec<Case> {
     let base = rig();
-    let case = |name, hidden: Option<Effect>, model: &str, params: ActuatorParams, fit, val| {
-        let model = spec(model);
+    // A case is named after the effect it hides.
+    let case = |hidden: Option<Effect>, model: ModelSpec, params: ActuatorParams, fit, val| {
+        let name = hidden.map_or("complete", |e| e.name());
         let plant_spec = match hidden {
             Some(e) => model.with(e),
             None => model,
@@ -102,55 +103,40 @@ pub fn all() -> Vec<Case> {
         let init = ActuatorParams::TERFENOL_DEMO;
         Case { name, hidden, model, init, plant: Plant::new(plant_spec, params), fit, val }
     };
+    let anhysteretic = ModelSpec::LINEAR.with(Effect::Saturation);
+    let ja = ModelSpec::LINEAR.with(Effect::Hysteresis);
     let quasi_static_fit = vec![(sine(5.0, 2.0, 0.0), 0.4), (sine(20.0, 1.0, 0.5), 0.2)];
     let quasi_static_val = vec![(sine(10.0, 1.5, 0.0), 0.3), (sine(30.0, 2.5, 0.5), 0.2)];
     let dynamic_fit = vec![(sine(60.0, 1.5, 0.0), 0.1), (sine(250.0, 1.0, 0.3), 0.06)];
     let dynamic_val = vec![(sine(130.0, 1.2, 0.0), 0.08), (sine(400.0, 1.0, 0.3), 0.05)];
     let mut v = Vec::new();
     v.push(case(
-        "saturation",
         Some(Effect::Saturation),
-        "linear",
+        ModelSpec::LINEAR,
         base,
         quasi_static_fit.clone(),
         quasi_static_val.clone(),
     ));
     v.push(case(
-        "hysteresis",
         Some(Effect::Hysteresis),
-        "anhysteretic",
+        anhysteretic,
         base,
         quasi_static_fit.clone(),
         quasi_static_val.clone(),
     ));
     let mut p = base;
     p.eddy_tau_s = 3e-4;
+    v.push(case(Some(Effect::EddyCurrent), ja, p, dynamic_fit.clone(), dynamic_val.clone()));
     v.push(case(
-        "eddy_current",
-        Some(Effect::EddyCurrent),
-        "ja",
-        p,
-        dynamic_fit.clone(),
-        dynamic_val.clone(),
-    ));
-    v.push(case(
-        "mechanical_dynamics",
         Some(Effect::MechanicalDynamics),
-        "ja",
+        ja,
         base,
         vec![(sine(100.0, 1.5, 0.0), 0.06), (sine(700.0, 1.0, 0.3), 0.03)],
         vec![(sine(350.0, 1.2, 0.0), 0.04), (sine(900.0, 1.0, 0.3), 0.03)],
     ));
     let mut p = base;
     p.amp.tau_s = 4e-4;
-    let mut amp = case(
-        "amplifier_dynamics",
-        Some(Effect::AmplifierDynamics),
-        "ja",
-        p,
-        dynamic_fit.clone(),
-        dynamic_val.clone(),
-    );
+    let mut amp = case(Some(Effect::AmplifierDynamics), ja, p, dynamic_fit.clone(), dynamic_val.clone());
     amp.plant.log_current = false; // the rig logs the command only
     v.push(amp);
     let mut p = base;
@@ -158,9 +144,8 @@ pub fn all() -> Vec<Case> {
     p.aftereffect.tau_s = 0.05;
     let square = |f, a, b| Excitation::Square { freq_hz: f, amplitude: a, bias: b };
     v.push(case(
-        "magnetic_aftereffect",
         Some(Effect::MagneticAftereffect),
-        "ja",
+        ja,
         p,
         vec![(square(2.0, 1.0, 0.0), 1.0), (sine(10.0, 1.5, 0.0), 0.2)],
         vec![(square(4.0, 1.5, 0.3), 0.6), (sine(7.0, 1.0, 0.0), 0.3)],
@@ -171,21 +156,13 @@ pub fn all() -> Vec<Case> {
     p.dt_s = 5e-4; // 2 kHz is plenty for a 20 Hz drive over seconds
     p.thermal.tau_s = 2.0;
     v.push(case(
-        "thermal_drift",
         Some(Effect::ThermalDrift),
-        "anhysteretic",
+        anhysteretic,
         p,
         vec![(sine(20.0, 1.0, 1.0), 4.0), (sine(35.0, 1.5, 0.0), 2.0)],
         vec![(sine(25.0, 1.2, 0.8), 3.0), (sine(15.0, 1.0, -0.5), 3.0)],
     ));
-    v.push(case(
-        "sensor_delay",
-        Some(Effect::SensorDelay),
-        "ja",
-        base,
-        dynamic_fit.clone(),
-        dynamic_val.clone(),
-    ));
-    v.push(case("complete", None, "ja", base, dynamic_fit, dynamic_val));
+    v.push(case(Some(Effect::SensorDelay), ja, base, dynamic_fit.clone(), dynamic_val.clone()));
+    v.push(case(None, ja, base, dynamic_fit, dynamic_val));
     v
 }

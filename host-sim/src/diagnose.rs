@@ -19,6 +19,7 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::{bail, Result};
+use model_core::effects::{Candidacy, Signature, Stage};
 use model_core::{Effect, ModelSpec};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -42,8 +43,8 @@ pub const MIN_SAMPLES: usize = 200;
 /// One candidate effect, as the JSON contract lists it.
 #[derive(Debug, Clone, Serialize)]
 pub struct Candidate {
-    /// Effect name (contract).
-    pub effect: &'static str,
+    /// The effect (its name in JSON).
+    pub effect: Effect,
     /// `displacement` (or `current`).
     pub channel: &'static str,
     /// Combined score in [0, 1]: evidence R² and the refit's error cut.
@@ -73,9 +74,9 @@ pub struct Diagnosis {
     /// Candidates, most likely first.
     pub candidates: Vec<Candidate>,
     /// The missing effect, or null.
-    pub verdict: Option<&'static str>,
+    pub verdict: Option<Effect>,
     /// Effects the evidence could not separate from the verdict.
-    pub undistinguished: Vec<&'static str>,
+    pub undistinguished: Vec<Effect>,
     /// Residual whiteness, trends across files: findings in words.
     pub findings: Vec<String>,
     /// The fit of the given structure.
@@ -83,20 +84,58 @@ pub struct Diagnosis {
     pub baseline: Option<FitResult>,
     /// `--time-limit` cut the work short: the baseline or some refits are the best found so
     /// far, and candidates not refitted in time are left out.
+    #[serde(rename = "time_limit_reached")]
     pub time_limited: bool,
 }
 
-/// The effects worth trying on top of `spec` for these files.
+/// The diagnosis in words (`--json` gives the same as one object).
+impl std::fmt::Display for Diagnosis {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        writeln!(
+            f,
+            "model `{}`: fit NRMSE {:.3} %{}",
+            self.model,
+            self.nrmse_fit * 100.0,
+            self.nrmse_val.map(|v| format!(", validation {:.3} %", v * 100.0)).unwrap_or_default()
+        )?;
+        for finding in &self.findings {
+            writeln!(f, "  - {finding}")?;
+        }
+        writeln!(f, "  candidates (most likely first):")?;
+        for c in &self.candidates {
+            writeln!(
+                f,
+                "    {:22} score {:.2}  {:.2} % → {:.2} %  {}",
+                c.effect,
+                c.score,
+                c.nrmse_before * 100.0,
+                c.nrmse_after * 100.0,
+                c.evidence
+            )?;
+        }
+        match self.verdict {
+            Some(v) => write!(
+                f,
+                "verdict: `{v}` is missing — try `--model {}+{}`",
+                self.model,
+                v.alias().unwrap_or(v.name())
+            ),
+            None => write!(f, "verdict: nothing significant is missing"),
+        }
+    }
+}
+
+/// The effects worth trying on top of `spec` for these files (the registry's candidacy).
 pub fn candidates_for(spec: ModelSpec, files: &[Recording]) -> Vec<Effect> {
     let all_have_command = files.iter().all(|f| f.command_v.is_some());
     Effect::ALL
         .into_iter()
         .filter(|&e| !spec.has(e))
-        .filter(|&e| match e {
-            Effect::Preisach => false, // an alternative magnetization model, not missing physics
-            Effect::Saturation | Effect::Hysteresis => !spec.has(Effect::Preisach),
-            Effect::AmplifierDynamics => all_have_command,
-            _ => true,
+        .filter(|&e| match e.info().candidacy {
+            Candidacy::Always => true,
+            Candidacy::NeedsCommand => all_have_command,
+            Candidacy::RefinesLaw => e.info().law.is_some_and(|l| l.refines(spec.law())),
+            Candidacy::Never => false,
         })
         .collect()
 }
@@ -183,14 +222,14 @@ fn evidence(effect: Effect, sigs: &[Signals]) -> f64 {
     let mut den = 0.0;
     for s in sigs {
         let var = s.residual.iter().map(|v| v * v).sum::<f64>();
-        let score = match effect {
-            Effect::EddyCurrent | Effect::AmplifierDynamics | Effect::SensorDelay => r2(&s.residual, &s.rate),
-            Effect::MechanicalDynamics => r2(&s.residual, &s.accel).max(r2(&s.residual, &s.rate)),
-            Effect::Hysteresis => r2(&s.residual, &s.branch),
-            Effect::Saturation => r2(&s.residual, &s.cubic),
-            Effect::MagneticAftereffect => r2(&s.residual, &s.creep),
-            Effect::ThermalDrift => r2(&s.residual, &s.heat),
-            Effect::Preisach => 0.0,
+        let score = match effect.info().signature {
+            Signature::Lag => r2(&s.residual, &s.rate),
+            Signature::Resonance => r2(&s.residual, &s.accel).max(r2(&s.residual, &s.rate)),
+            Signature::Branch => r2(&s.residual, &s.branch),
+            Signature::Cubic => r2(&s.residual, &s.cubic),
+            Signature::Creep => r2(&s.residual, &s.creep),
+            Signature::Heating => r2(&s.residual, &s.heat),
+            Signature::None => 0.0,
         };
         num += score * var;
         den += var;
@@ -202,17 +241,15 @@ fn evidence(effect: Effect, sigs: &[Signals]) -> f64 {
     }
 }
 
-fn signature_words(effect: Effect) -> &'static str {
-    match effect {
-        Effect::EddyCurrent | Effect::AmplifierDynamics | Effect::SensorDelay => {
-            "the lag signature −dy/dt (shared by eddy currents, amplifier and sensor delay)"
-        }
-        Effect::MechanicalDynamics => "the resonance signature −ÿ (and −dy/dt)",
-        Effect::Hysteresis => "the branch sign(dH/dt) (loop opening)",
-        Effect::Saturation => "the cubic field excursion (H − H̄)³",
-        Effect::MagneticAftereffect => "the creep signature lowpass(y) − y",
-        Effect::ThermalDrift => "the accumulated coil heating ∫i² dt",
-        Effect::Preisach => "—",
+fn signature_words(signature: Signature) -> &'static str {
+    match signature {
+        Signature::Lag => "the lag signature −dy/dt (shared by every lag: rod, amplifier, sensor)",
+        Signature::Resonance => "the resonance signature −ÿ (and −dy/dt)",
+        Signature::Branch => "the branch sign(dH/dt) (loop opening)",
+        Signature::Cubic => "the cubic field excursion (H − H̄)³",
+        Signature::Creep => "the creep signature lowpass(y) − y",
+        Signature::Heating => "the accumulated coil heating ∫i² dt",
+        Signature::None => "—",
     }
 }
 
@@ -411,7 +448,7 @@ pub fn diagnose(
         let cut = if before > 0.0 && after > 0.0 { before / after } else { 1.0 };
         let evidence = format!(
             "{} explains {:.0} % of the residual variance; adding it and refitting takes the {} NRMSE from {:.2} % to {:.2} % ({:.1}× {})",
-            signature_words(e),
+            signature_words(e.info().signature),
             r2 * 100.0,
             if val_files.is_empty() { "fit" } else { "validation" },
             before * 100.0,
@@ -421,7 +458,7 @@ pub fn diagnose(
         );
         let score = (0.5 * r2 + 0.5 * (1.0 - after / before).max(0.0)).clamp(0.0, 1.0);
         candidates.push(Candidate {
-            effect: e.name(),
+            effect: e,
             channel: "displacement",
             score,
             evidence,
@@ -447,7 +484,7 @@ pub fn diagnose(
             let tied: Vec<usize> = (0..candidates.len())
                 .filter(|&i| candidates[i].nrmse_after <= SAME_CUT * best.nrmse_after)
                 .collect();
-            let order = |name: &str| Effect::ALL.iter().position(|e| e.name() == name).unwrap_or(usize::MAX);
+            let order = |e: Effect| Effect::ALL.iter().position(|x| *x == e).unwrap_or(usize::MAX);
             let chosen = tied.iter().copied().min_by_key(|&i| order(candidates[i].effect)).unwrap_or(0);
             let pick = candidates.remove(chosen);
             candidates.insert(0, pick);
@@ -458,9 +495,7 @@ pub fn diagnose(
                 .map(|c| c.effect)
                 .collect();
             if !undistinguished.is_empty() {
-                let hint = if undistinguished.contains(&"eddy_current")
-                    && candidates[0].effect == "amplifier_dynamics"
-                {
+                let hint = if candidates[0].effect.info().stage == Stage::Amplifier {
                     " (record `current_A` to tell the amplifier from the rod)"
                 } else {
                     " (excite more frequencies or record more channels to separate them)"
@@ -468,7 +503,7 @@ pub fn diagnose(
                 findings.push(format!(
                     "the data do not separate `{}` from `{}`: their refits end within {:.0} % of each other; the verdict names the stage nearest the drive{hint}",
                     candidates[0].effect,
-                    undistinguished.join("`, `"),
+                    undistinguished.iter().map(|e| e.name()).collect::<Vec<_>>().join("`, `"),
                     (SAME_CUT - 1.0) * 100.0
                 ));
             }

@@ -44,7 +44,7 @@ pub struct Input {
     pub name: String,
     /// The first line, already read (the format is sniffed from it), then the rest.
     head: Vec<u8>,
-    rest: Box<dyn Read + Send>,
+    rest: std::io::BufReader<LineBounded<Box<dyn Read + Send>>>,
     /// Identity of a regular file (device, inode), to refuse writing over an input.
     pub identity: Option<(u64, u64)>,
 }
@@ -66,24 +66,11 @@ impl Input {
             let f = std::fs::File::open(path).with_context(|| format!("{name}: cannot read"))?;
             (name, Box::new(f), identity(&meta))
         };
-        let mut rest = LineBounded::new(reader);
-        let mut head = Vec::new();
         // The first line (with its newline), bounded like every other line.
-        let mut byte = [0u8; 1];
-        loop {
-            match rest.read(&mut byte) {
-                Ok(0) => break,
-                Ok(_) => {
-                    head.push(byte[0]);
-                    if byte[0] == b'\n' {
-                        break;
-                    }
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
-                Err(e) => return Err(read_error(&name, e)),
-            }
-        }
-        Ok(Self { name, head, rest: Box::new(rest), identity })
+        let mut rest = std::io::BufReader::with_capacity(1 << 16, LineBounded::new(reader));
+        let mut head = Vec::new();
+        rest.read_until(b'\n', &mut head).map_err(|e| read_error(&name, e))?;
+        Ok(Self { name, head, rest, identity })
     }
 
     /// Its name and identity, kept after the input is read.
@@ -97,9 +84,9 @@ impl Input {
         String::from_utf8_lossy(line).trim_end_matches(['\r', '\n']).to_string()
     }
 
-    /// The whole input as a byte stream (the first line included), buffered.
+    /// The whole input as a byte stream (the first line included).
     pub fn into_reader(self) -> impl BufRead + Send {
-        std::io::BufReader::with_capacity(1 << 16, std::io::Cursor::new(self.head).chain(self.rest))
+        std::io::Cursor::new(self.head).chain(self.rest)
     }
 
     /// The whole input as UTF-8 text, at most `max_bytes` of it (parameter files, loop files).

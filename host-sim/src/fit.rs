@@ -1,26 +1,23 @@
 //! Identification: one parameter set for a model spec from one or more recordings jointly, a
 //! displacement offset per file (closed form: the mean residual), cost = mean over files of
 //! NRMSE² (plus the current channel's when the model has an amplifier and the file measured the
-//! current). Search in the unit cube of the bounded, log-scaled free parameters
-//! ([`crate::params`]): a particle swarm (argmin, swarm evaluated in parallel with rayon), then
-//! Nelder–Mead (argmin) from the best particle; a sensor delay is an integer searched by scanning.
-//! Deterministic for a given seed.
+//! current). The free parameters and their bounds come from the effect registry
+//! ([`crate::params`]); the search is the workbench's optimiser ([`crate::search`]): a particle
+//! swarm on part of the data, then Nelder–Mead from the best points; an integer parameter (the
+//! sensor delay) is scanned. Deterministic for a given seed.
 
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
-use argmin::core::{CostFunction, Executor, State};
-use argmin::solver::neldermead::NelderMead;
-use argmin::solver::particleswarm::ParticleSwarm;
+use model_core::effects::STRAIN_SCALE;
 use model_core::{Actuator, ActuatorParams, Effect, ModelSpec};
-use rand::SeedableRng;
 use rayon::prelude::*;
 
-use crate::params::{free_params, FreeParam, MAX_DELAY_SEARCH};
+use crate::params::{free_params, scanned_params, FreeParam};
 use crate::progress::Progress;
 use crate::recording::Recording;
-use crate::search::bounded;
+use crate::search::{minimize, scan, Bound, Fidelity, Plan, SearchOptions, Start};
 
 /// How a file drives the model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -89,23 +86,52 @@ pub struct Simulation {
     pub magnetization_a_per_m: Vec<f64>,
 }
 
+/// A recording ready to be simulated: its sample period and drive worked out once (a fit
+/// evaluates the model thousands of times on the same files).
+#[derive(Debug, Clone, Copy)]
+pub struct Prepared<'a> {
+    /// The recording.
+    pub rec: &'a Recording,
+    /// Its sample period [s] (median step).
+    pub dt_s: f64,
+    /// How it drives the model.
+    pub drive: Drive,
+}
+
+impl<'a> Prepared<'a> {
+    /// Checks that `spec` can be simulated on `rec` and works out its period and drive.
+    pub fn new(spec: ModelSpec, rec: &'a Recording) -> Result<Self> {
+        Ok(Self { rec, dt_s: rec.dt_s(), drive: drive_for(spec, rec)? })
+    }
+
+    /// `head` (the first samples of this recording), with this one's drive.
+    fn head_of<'b>(&self, head: &'b Recording) -> Prepared<'b> {
+        Prepared { rec: head, dt_s: head.dt_s(), drive: self.drive }
+    }
+}
+
+/// Prepares every file.
+pub fn prepare(spec: ModelSpec, files: &[Recording]) -> Result<Vec<Prepared<'_>>> {
+    files.iter().map(|r| Prepared::new(spec, r)).collect()
+}
+
 /// Runs `spec` with `params` over `rec`. Simultaneous sampling, as a rig records: row k holds
 /// the drive and the displacement at the same instant t_k, so the model output at k is its state
 /// after integrating the drive up to t_k.
 pub fn simulate(spec: ModelSpec, params: &ActuatorParams, rec: &Recording) -> Result<Simulation> {
-    run_model(spec, params, rec, true)
+    run_model(spec, params, &Prepared::new(spec, rec)?, true)
 }
 
 /// [`simulate`]; `all_channels: false` keeps only displacement and current (the fit's inner loop).
 fn run_model(
     spec: ModelSpec,
     params: &ActuatorParams,
-    rec: &Recording,
+    prep: &Prepared,
     all_channels: bool,
 ) -> Result<Simulation> {
-    let drive = drive_for(spec, rec)?;
+    let (rec, drive) = (prep.rec, prep.drive);
     let mut p = *params;
-    p.dt_s = rec.dt_s() as f32;
+    p.dt_s = prep.dt_s as f32;
     let model = Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
     let n = rec.len();
     // Borrowed from the recording (this runs at every fit evaluation); only the ideal amplifier's
@@ -216,6 +242,19 @@ pub fn evaluate(spec: ModelSpec, params: &ActuatorParams, files: &[Recording]) -
     Ok(Evaluation { files: files? })
 }
 
+/// [`evaluate_projected`]'s cost, or a large finite number where the model cannot be run.
+fn projected_cost(spec: ModelSpec, params: &ActuatorParams, files: &[Prepared]) -> f64 {
+    let c = evaluate_projected(spec, params, files).map(|e| e.0.cost()).unwrap_or(FAILED_COST);
+    if c.is_finite() {
+        c
+    } else {
+        FAILED_COST
+    }
+}
+
+/// The cost of a parameter set the model cannot run (far above any NRMSE²).
+const FAILED_COST: f64 = 1e3;
+
 /// Evaluates `params` with the strain scale λ_s chosen by linear least squares (variable
 /// projection): the displacement is λ_s·g + t + offset, with g the magnetostrictive part and t the
 /// thermal elongation, so λ_s and the per-file offsets have a closed form. This removes the
@@ -224,19 +263,20 @@ pub fn evaluate(spec: ModelSpec, params: &ActuatorParams, files: &[Recording]) -
 pub fn evaluate_projected(
     spec: ModelSpec,
     params: &ActuatorParams,
-    files: &[Recording],
+    files: &[Prepared],
 ) -> Result<(Evaluation, f64)> {
     let lambda_ref = params.magnetostriction.lambda_s as f64;
     let thermal = spec.has(Effect::ThermalDrift);
     // Per file: (g, t, simulation) with y = λ g + t.
     let parts: Vec<(Vec<f64>, Vec<f64>, Simulation)> = files
         .par_iter()
-        .map(|rec| {
-            let sim_a = run_model(spec, params, rec, false)?;
+        .map(|prep| {
+            let rec = prep.rec;
+            let sim_a = run_model(spec, params, prep, false)?;
             if thermal {
                 let mut p2 = *params;
                 p2.magnetostriction.lambda_s = (2.0 * lambda_ref) as f32;
-                let sim_b = run_model(spec, &p2, rec, false)?;
+                let sim_b = run_model(spec, &p2, prep, false)?;
                 let g = sim_a
                     .displacement_um
                     .iter()
@@ -261,8 +301,8 @@ pub fn evaluate_projected(
         x.iter().map(move |v| v - m)
     }
     let (mut num, mut den) = (0.0, 0.0);
-    for (rec, (g, t, _)) in files.iter().zip(&parts) {
-        let y = rec.displacement_um.as_deref().unwrap_or_default();
+    for (prep, (g, t, _)) in files.iter().zip(&parts) {
+        let y = prep.rec.displacement_um.as_deref().unwrap_or_default();
         let (lo, hi) = y.iter().fold((f64::MAX, f64::MIN), |(l, h), &v| (l.min(v), h.max(v)));
         let w = 1.0 / (y.len() as f64 * (hi - lo).max(1e-12).powi(2));
         let target: Vec<f64> = y.iter().zip(t).map(|(a, b)| a - b).collect();
@@ -275,9 +315,9 @@ pub fn evaluate_projected(
     let scores = files
         .iter()
         .zip(parts)
-        .map(|(rec, (g, t, mut sim))| {
+        .map(|(prep, (g, t, mut sim))| {
             sim.displacement_um = g.iter().zip(&t).map(|(g, t)| lambda * g + t).collect();
-            score(spec, rec, &sim)
+            score(spec, prep.rec, &sim)
         })
         .collect();
     Ok((Evaluation { files: scores }, lambda))
@@ -307,11 +347,6 @@ pub fn time_left(deadline: Option<Instant>) -> Option<Duration> {
     deadline.map(|d| d.saturating_duration_since(Instant::now()))
 }
 
-/// Whether an argmin run ended on its time limit.
-fn ended_by_time<I: State>(state: &I) -> bool {
-    matches!(state.get_termination_reason(), Some(argmin::core::TerminationReason::Timeout))
-}
-
 /// What a fit produced.
 #[derive(Debug, Clone)]
 pub struct FitResult {
@@ -329,47 +364,18 @@ pub struct FitResult {
     pub time_limited: bool,
 }
 
-/// The fit problem in the unit cube.
-struct Problem<'a> {
-    spec: ModelSpec,
-    base: ActuatorParams,
-    free: &'a [FreeParam],
-    files: &'a [Recording],
-    evals: &'a AtomicUsize,
-    bar: &'a Progress,
-}
-
-impl Problem<'_> {
-    fn params_at(&self, u: &[f64]) -> ActuatorParams {
-        let mut p = self.base;
-        for (f, &x) in self.free.iter().zip(u) {
-            (f.set)(&mut p, f.from_unit(x));
-        }
-        p
-    }
-
-    fn cost_at(&self, u: &[f64]) -> f64 {
-        self.evals.fetch_add(1, Ordering::Relaxed);
-        self.bar.inc(1);
-        // Outside the cube: the clamped point's cost plus a pull back inside.
-        let outside: f64 = u.iter().map(|x| (x - x.clamp(0.0, 1.0)).powi(2)).sum();
-        let cost =
-            evaluate_projected(self.spec, &self.params_at(u), self.files).map(|e| e.0.cost()).unwrap_or(1e3);
-        if cost.is_finite() {
-            cost + outside
-        } else {
-            1e3
-        }
-    }
-}
-
-impl CostFunction for Problem<'_> {
-    type Param = Vec<f64>;
-    type Output = f64;
-    fn cost(&self, u: &Self::Param) -> Result<f64, argmin::core::Error> {
-        Ok(self.cost_at(u))
-    }
-}
+/// The displacement fit's search: one swarm on the first part of each file, then from the two
+/// best of the swarm's result and the start points a 5 % simplex on the first half of long
+/// files and a 1 % simplex on everything.
+const PLAN: Plan = Plan {
+    particles: (8, 3),
+    swarm_iters: 12.0,
+    swarms: 1,
+    simplex_iters_per_dim: 40.0,
+    local_searches: 2,
+    simplex: &[(0.05, Fidelity::Coarse), (0.01, Fidelity::Full)],
+    tolerance: (1e-6, 1e-18),
+};
 
 /// Identifies `spec` on `files`, starting from (and keeping the fixed parameters of) `init`.
 pub fn fit(
@@ -395,130 +401,79 @@ pub fn fit_from(
     if starts.is_empty() {
         bail!("no start parameters");
     }
-    let mut command_driven = false;
-    for rec in files {
-        command_driven |= drive_for(spec, rec)? != Drive::Current;
-    }
+    let full = prepare(spec, files)?;
+    let command_driven = full.iter().any(|p| p.drive != Drive::Current);
     // λ_s is solved in closed form at every evaluation (see `evaluate_projected`).
-    let free: Vec<FreeParam> = free_params(spec, command_driven)
-        .into_iter()
-        .filter(|f| f.name() != "magnetostriction.lambda_s")
-        .collect();
+    let free: Vec<FreeParam> =
+        free_params(spec, command_driven).into_iter().filter(|f| f.name() != STRAIN_SCALE.key).collect();
+    let scanned = scanned_params(spec);
     let d = free.len();
-    let particles = 8 + 3 * d;
-    let swarm_iters = ((12.0 * opts.effort).round() as u64).max(2);
-    let nm_iters = ((40.0 * d as f64 * opts.effort).round() as u64).max(20);
-    let delay_scan = spec.has(Effect::SensorDelay);
-    let planned = particles as u64 * (swarm_iters + 1)
+    let swarm_iters = ((PLAN.swarm_iters * opts.effort).round() as u64).max(2);
+    let nm_iters = ((PLAN.simplex_iters_per_dim * d as f64 * opts.effort).round() as u64).max(20);
+    let scan_len: u64 = scanned.iter().map(|p| (p.hi - p.lo) as u64 + 1).sum();
+    let planned = (PLAN.particles.0 + PLAN.particles.1 * d) as u64 * (swarm_iters + 1)
         + nm_iters * 8
-        + if delay_scan { (starts.len() as u64 + 1) * 17 } else { 0 };
+        + (starts.len() as u64 + 1) * scan_len;
     let bar = Progress::new(&format!("fitting {spec}"), planned, opts.progress);
-    let timed_out = AtomicBool::new(false);
     let evals = AtomicUsize::new(0);
-    let problem = |base: ActuatorParams| Problem { spec, base, free: &free, files, evals: &evals, bar: &bar };
 
-    // Sensor delay: scan the integer with everything else fixed.
-    let scan_delay = |p: &mut ActuatorParams| {
-        if !delay_scan {
-            return;
+    // The swarm needs only the landscape's shape: the first part of each file (at least 4000
+    // samples or a quarter); the coarse simplex the first half of long files (at least 8000).
+    let heads: Vec<Recording> = files.iter().map(|r| r.head(4000.max(r.len() / 4))).collect();
+    let halves: Vec<Recording> = files.iter().map(|r| r.head(8000.max(r.len() / 2))).collect();
+    let swarm_data: Vec<Prepared> = full.iter().zip(&heads).map(|(p, h)| p.head_of(h)).collect();
+    let coarse_data: Vec<Prepared> = full.iter().zip(&halves).map(|(p, h)| p.head_of(h)).collect();
+    let data = |fidelity| match fidelity {
+        Fidelity::Swarm => &swarm_data[..],
+        Fidelity::Coarse => &coarse_data[..],
+        Fidelity::Full => &full[..],
+    };
+    let with_values = |base: &ActuatorParams, values: &[f64]| {
+        let mut p = *base;
+        for (f, &v) in free.iter().zip(values) {
+            (f.set)(&mut p, v);
         }
-        let costs: Vec<(u16, f64)> = (0..=MAX_DELAY_SEARCH)
-            .into_par_iter()
-            .map(|dly| {
+        p
+    };
+    let cost = |base: &ActuatorParams, values: &[f64], fidelity: Fidelity| {
+        projected_cost(spec, &with_values(base, values), data(fidelity))
+    };
+    // Integer parameters (the sensor delay): scanned with everything else fixed.
+    let scan_integers = |p: &mut ActuatorParams| {
+        for sp in &scanned {
+            let best = scan(sp.lo as i64, sp.hi as i64, &|k| {
                 let mut q = *p;
-                q.delay_samples = dly;
+                (sp.set)(&mut q, k as f64);
                 evals.fetch_add(1, Ordering::Relaxed);
                 bar.inc(1);
-                (dly, evaluate_projected(spec, &q, files).map(|e| e.0.cost()).unwrap_or(f64::INFINITY))
-            })
-            .collect();
-        p.delay_samples = costs.iter().min_by(|a, b| a.1.total_cmp(&b.1)).map(|c| c.0).unwrap_or(0);
+                projected_cost(spec, &q, &full)
+            });
+            (sp.set)(p, best as f64);
+        }
     };
-    // Start points: the fixed parameters come from the first; each start's identified values are
-    // clamped into the bounds and its delay scanned.
-    let bases: Vec<ActuatorParams> = starts
+    // Start points: the fixed parameters come from the first; each start's identified values
+    // are clamped into the bounds and its integers scanned.
+    let bases: Vec<Start<ActuatorParams>> = starts
         .iter()
         .map(|st| {
             let mut b = starts[0];
             for f in &free {
                 (f.set)(&mut b, f.from_unit(f.to_unit((f.get)(st))));
             }
-            b.delay_samples = st.delay_samples;
-            scan_delay(&mut b);
-            b
+            for sp in &scanned {
+                (sp.set)(&mut b, (sp.get)(st));
+            }
+            scan_integers(&mut b);
+            Start { values: free.iter().map(|f| (f.get)(&b)).collect(), context: b }
         })
         .collect();
-    let unit = |b: &ActuatorParams| -> Vec<f64> { free.iter().map(|f| f.to_unit((f.get)(b))).collect() };
-
-    // Global: particle swarm over the unit cube, on the first part of each file (at least 4000
-    // samples or a quarter): the swarm only needs the landscape's shape; the local search below
-    // uses every sample.
-    let heads: Vec<Recording> = files.iter().map(|r| r.head(4000.max(r.len() / 4))).collect();
-    let pso = ParticleSwarm::new((vec![0.0; d], vec![1.0; d]), particles)
-        .with_rng_generator(rand::rngs::StdRng::seed_from_u64(opts.seed));
-    let swarm_problem =
-        Problem { spec, base: bases[0], free: &free, files: &heads, evals: &evals, bar: &bar };
-    let res = bounded(Executor::new(swarm_problem, pso), opts.deadline)
-        .configure(|s| s.max_iters(swarm_iters))
-        .run()
-        .map_err(|e| anyhow::anyhow!("particle swarm: {e}"))?;
-    timed_out.fetch_or(ended_by_time(res.state()), Ordering::Relaxed);
-    let mut seeds: Vec<(ActuatorParams, Vec<f64>, f64)> =
-        bases.iter().map(|b| (*b, unit(b), problem(*b).cost_at(&unit(b)))).collect();
-    if let Some(p) = res.state().get_best_param() {
-        let cost = problem(bases[0]).cost_at(&p.position);
-        seeds.push((bases[0], p.position.clone(), cost));
-    }
-    seeds.sort_by(|a, b| a.2.total_cmp(&b.2));
-    seeds.truncate(2);
-
-    // Local: Nelder–Mead from the two best seeds (in parallel), each run twice: a simplex of 5 %
-    // of each range, then a fresh 1 % simplex at its result (restarts undo collapsed simplices).
-    // The first, coarse simplex runs on the first half of long files (at least 8000 samples),
-    // the second on everything.
-    let halves: Vec<Recording> = files.iter().map(|r| r.head(8000.max(r.len() / 2))).collect();
-    let local =
-        |(base, start, _): &(ActuatorParams, Vec<f64>, f64)| -> Result<(ActuatorParams, Vec<f64>, f64)> {
-            let mut best = start.clone();
-            for (step, data) in [(0.05, &halves[..]), (0.01, files)] {
-                if time_left(opts.deadline).is_some_and(|t| t.is_zero()) {
-                    timed_out.store(true, Ordering::Relaxed);
-                    break;
-                }
-                let problem = |base: ActuatorParams| Problem {
-                    spec,
-                    base,
-                    free: &free,
-                    files: data,
-                    evals: &evals,
-                    bar: &bar,
-                };
-                let mut simplex = vec![best.clone()];
-                for i in 0..d {
-                    let mut v = best.clone();
-                    v[i] = if v[i] > 0.5 { v[i] - step } else { v[i] + step };
-                    simplex.push(v);
-                }
-                // Converged when the simplex's costs agree to a millionth of the cost itself.
-                let tol = (1e-6 * problem(*base).cost_at(&best)).max(1e-18);
-                let nm =
-                    NelderMead::new(simplex).with_sd_tolerance(tol).map_err(|e| anyhow::anyhow!("{e}"))?;
-                let res = bounded(Executor::new(problem(*base), nm), opts.deadline)
-                    .configure(|s| s.max_iters(nm_iters))
-                    .run()
-                    .map_err(|e| anyhow::anyhow!("Nelder–Mead: {e}"))?;
-                timed_out.fetch_or(ended_by_time(res.state()), Ordering::Relaxed);
-                best = res.state().get_best_param().cloned().unwrap_or(best);
-            }
-            let c = problem(*base).cost_at(&best);
-            Ok((*base, best, c))
-        };
-    let refined: Vec<(ActuatorParams, Vec<f64>, f64)> = seeds.par_iter().map(local).collect::<Result<_>>()?;
-    let (base, best, _) = refined.into_iter().min_by(|a, b| a.2.total_cmp(&b.2)).expect("at least one seed");
-    let mut params = problem(base).params_at(&best);
-    scan_delay(&mut params);
+    let bounds: Vec<Bound> = free.iter().map(|f| f.bound).collect();
+    let opts_search = SearchOptions { seed: opts.seed, effort: opts.effort, deadline: opts.deadline };
+    let found = minimize(&bounds, &cost, &bases[0].context, &bases, &PLAN, opts_search, &bar)?;
+    let mut params = with_values(&found.context, &found.best);
+    scan_integers(&mut params);
     bar.finish_and_clear();
-    let (_, lambda) = evaluate_projected(spec, &params, files)?;
+    let (_, lambda) = evaluate_projected(spec, &params, &full)?;
     params.magnetostriction.lambda_s = lambda as f32;
     // Never hand back NaN or an invalid set: say the fit failed instead.
     model_core::Actuator::new(spec, &params).map_err(|e| {
@@ -531,17 +486,15 @@ pub fn fit_from(
     if !fit.mean_nrmse().is_finite() {
         bail!("the fit found no parameter set whose simulation stays finite on these recordings");
     }
-    let mut identified: Vec<(&'static str, f64)> = vec![("magnetostriction.lambda_s", lambda)];
+    let mut identified: Vec<(&'static str, f64)> = vec![(STRAIN_SCALE.key, lambda)];
     identified.extend(free.iter().map(|f| (f.name(), (f.get)(&params))));
-    if delay_scan {
-        identified.push(("delay_samples", params.delay_samples as f64));
-    }
+    identified.extend(scanned.iter().map(|p| (p.key, (p.get)(&params))));
     Ok(FitResult {
         spec,
         params,
         identified,
         fit,
-        evaluations: evals.load(Ordering::Relaxed),
-        time_limited: timed_out.load(Ordering::Relaxed),
+        evaluations: evals.load(Ordering::Relaxed) + found.evaluations,
+        time_limited: found.time_limited,
     })
 }

@@ -1,6 +1,7 @@
 //! `gma`, the model workbench: measurement files, the plant simulator, identification,
-//! diagnosis of missing physics, plots and reports. The binary (`src/main.rs`) is the CLI over
-//! these modules.
+//! diagnosis of missing physics, plots and reports. The command line is [`cli`], one file per
+//! subcommand; `src/main.rs` only calls it. Papers are cited as 000–003: the list, and what the
+//! code takes from each, is docs/references.md.
 
 pub mod cases;
 pub mod cli;
@@ -17,6 +18,8 @@ pub mod progress;
 pub mod record;
 pub mod recording;
 pub mod report;
+pub mod results;
 pub mod rig;
 pub mod rod_diffusion;
 pub mod search;
+pub mod warning;

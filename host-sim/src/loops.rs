@@ -10,11 +10,25 @@ use model_core::magnetization::{
     Anhysteretic, AnhystereticParams, JaParams, JaState, JilesAtherton, LinearMagnetization, Preisach,
     PreisachParams,
 };
-use model_core::{ActuatorParams, Effect, ModelSpec};
+use model_core::{ActuatorParams, MagnetizationLaw, ModelSpec};
 
 use crate::files::{echo, Input};
 use crate::located;
-use crate::search::{minimize, Bound, SearchOptions};
+use crate::progress::Progress;
+use crate::search::{minimize, Bound, Fidelity, Plan, SearchOptions};
+use crate::warning::Warning;
+
+/// The loop fit's search: two swarms (seeds `seed`, `seed + 1`), each best refined by a 5 % and
+/// a 1 % simplex on every point.
+const PLAN: Plan = Plan {
+    particles: (10, 4),
+    swarm_iters: 25.0,
+    swarms: 2,
+    simplex_iters_per_dim: 80.0,
+    local_searches: 2,
+    simplex: &[(0.05, Fidelity::Full), (0.01, Fidelity::Full)],
+    tolerance: (1e-7, 1e-20),
+};
 
 /// Which quantity the file gives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -198,7 +212,7 @@ pub fn parse(name: &str, text: &str) -> Result<LoopFile> {
 }
 
 /// Coercivity, remanence and saturation read from a loop (NaN when the path does not show it).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct LoopFeatures {
     /// Mean |H| where M crosses zero [A/m].
     pub coercivity_a_per_m: f64,
@@ -249,27 +263,16 @@ pub enum LoopModel {
 impl LoopModel {
     /// From a model spec: only the magnetization stage counts.
     pub fn from_spec(spec: ModelSpec) -> Result<Self> {
-        let others = [
-            Effect::EddyCurrent,
-            Effect::MechanicalDynamics,
-            Effect::AmplifierDynamics,
-            Effect::MagneticAftereffect,
-            Effect::ThermalDrift,
-            Effect::SensorDelay,
-        ];
-        if let Some(e) = others.iter().find(|e| spec.has(**e)) {
+        if let Some(e) = spec.effects().find(|e| e.info().law.is_none()) {
             bail!(
                 "a magnetization loop fits the magnetization stage only; `{e}` needs displacement recordings"
             );
         }
-        Ok(if spec.has(Effect::Preisach) {
-            LoopModel::Preisach
-        } else if spec.has(Effect::Hysteresis) {
-            LoopModel::JilesAtherton
-        } else if spec.has(Effect::Saturation) {
-            LoopModel::Anhysteretic
-        } else {
-            LoopModel::Linear
+        Ok(match spec.law() {
+            MagnetizationLaw::Linear => LoopModel::Linear,
+            MagnetizationLaw::Anhysteretic => LoopModel::Anhysteretic,
+            MagnetizationLaw::JilesAtherton => LoopModel::JilesAtherton,
+            MagnetizationLaw::Preisach => LoopModel::Preisach,
         })
     }
 
@@ -386,10 +389,9 @@ pub struct LoopFit {
     pub nrmse: Vec<f64>,
     /// Objective evaluations.
     pub evaluations: usize,
-    /// Problems that make the result invalid: no parameter file may be written from it.
-    pub failures: Vec<String>,
-    /// Doubts about a valid result (a parameter on the edge of its range).
-    pub warnings: Vec<String>,
+    /// Doubts about the result; those that [`Warning::invalidates`] make it invalid (no
+    /// parameter file may be written from it).
+    pub warnings: Vec<Warning>,
     /// The search stopped at `--time-limit`: the best point so far.
     pub time_limited: bool,
 }
@@ -445,7 +447,7 @@ pub fn fit(model: LoopModel, files: &[LoopFile], opts: SearchOptions) -> Result<
     }
     let bounds = model.bounds(h_max, m_max);
     let targets: Vec<Vec<f64>> = files.iter().map(|f| f.value.clone()).collect();
-    let cost = |p: &[f64]| -> f64 {
+    let cost = |_: &(), p: &[f64], _: Fidelity| -> f64 {
         let mut sum = 0.0;
         for (f, t) in files.iter().zip(&targets) {
             match run(model, p, &f.h, h_max) {
@@ -456,19 +458,22 @@ pub fn fit(model: LoopModel, files: &[LoopFile], opts: SearchOptions) -> Result<
                 Err(_) => return 10.0,
             }
         }
-        sum / files.len() as f64
+        let c = sum / files.len() as f64;
+        if c.is_finite() {
+            c
+        } else {
+            f64::MAX / 4.0
+        }
     };
-    let found = minimize(&bounds, &cost, opts);
+    let found = minimize(&bounds, &cost, &(), &[], &PLAN, opts, &Progress::new("", 0, false))?;
     let (best, evaluations) = (found.best, found.evaluations);
     let mut warnings = Vec::new();
-    let mut failures = Vec::new();
     let mut per_file = Vec::new();
     for f in files {
         match run(model, &best, &f.h, h_max) {
             Ok(m) => per_file.push(nrmse(&f.value, &f.channel_from_m(&m))),
             Err(RunError(e)) => {
-                failures
-                    .push(format!("{}: the model integration failed at the best parameters: {e}", f.name));
+                warnings.push(Warning::IntegrationFailed { file: f.name.clone(), why: e });
                 per_file.push(f64::NAN);
             }
         }
@@ -476,31 +481,16 @@ pub fn fit(model: LoopModel, files: &[LoopFile], opts: SearchOptions) -> Result<
     let params: Vec<(&'static str, f64)> = bounds.iter().map(|b| b.name).zip(best.iter().copied()).collect();
     for (b, v) in bounds.iter().zip(&best) {
         if b.at_edge(*v) {
-            warnings.push(format!(
-                "`{}` = {v:.4e} ended at the edge of its search range [{:.3e}, {:.3e}]",
-                b.name, b.lo, b.hi
-            ));
+            warnings.push(Warning::AtEdge { param: b.name, value: *v, lo: b.lo, hi: b.hi });
         }
     }
     if model == LoopModel::JilesAtherton {
         let (ms, a, alpha) = (best[0], best[1], best[2]);
         if alpha * ms / (3.0 * a) >= 1.0 {
-            failures.push(format!(
-                "J–A region α·M_s/(3a) = {:.2} ≥ 1: the mean field makes the anhysteretic curve multivalued; \
-                 the loop there is an artefact of the integration limits, not physics",
-                alpha * ms / (3.0 * a)
-            ));
+            warnings.push(Warning::Multivalued { ratio: alpha * ms / (3.0 * a) });
         }
     }
-    Ok(LoopFit {
-        model,
-        params,
-        nrmse: per_file,
-        evaluations,
-        failures,
-        warnings,
-        time_limited: found.time_limited,
-    })
+    Ok(LoopFit { model, params, nrmse: per_file, evaluations, warnings, time_limited: found.time_limited })
 }
 
 /// The loop chart of one file: measured and modelled, H in kA/m.
@@ -548,8 +538,8 @@ pub fn html(spec: &str, fit: &LoopFit, files: &[LoopFile]) -> Result<String> {
         let _ = write!(h, "<tr><td class=l>{n}</td><td>{v:.5e}</td></tr>");
     }
     h.push_str("</table>");
-    for w in fit.failures.iter().chain(&fit.warnings) {
-        let _ = write!(h, "<p class=w>warning: {}</p>", w.replace('<', "&lt;"));
+    for w in &fit.warnings {
+        let _ = write!(h, "<p class=w>warning: {}</p>", w.to_string().replace('<', "&lt;"));
     }
     for (f, e) in files.iter().zip(&fit.nrmse) {
         let m =

@@ -9,10 +9,15 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use model_core::{Actuator, ActuatorParams, Effect, ModelSpec};
+use model_core::effects::{
+    parameter_tables, spec_words, table_of, Param, Scale, AMPLIFIER_GAIN, PARAMETER_FILE_FORMAT, STRAIN_SCALE,
+};
+use model_core::{Actuator, ActuatorParams, ModelSpec};
+use serde::Deserialize as _;
 
 use crate::error::Located;
 use crate::files::{echo, Input};
+use crate::located;
 use crate::search::Bound;
 
 /// One identified parameter: its bounds and scale ([`Bound`], named as in parameter files,
@@ -44,66 +49,35 @@ impl FreeParam {
     }
 }
 
-macro_rules! param {
-    ($name:literal, $lo:expr, $hi:expr, $log:expr, $($field:ident).+) => {
+impl FreeParam {
+    /// From the registry's description of a parameter.
+    pub fn of(p: &'static Param) -> Self {
         FreeParam {
-            bound: Bound { name: $name, lo: $lo, hi: $hi, log: $log },
-            get: |p| p.$($field).+ as f64,
-            set: |p, v| p.$($field).+ = v as f32,
+            bound: Bound { name: p.key, lo: p.lo, hi: p.hi, log: p.scale == Scale::Log },
+            get: p.get,
+            set: p.set,
         }
-    };
+    }
 }
 
-/// The parameters `spec` identifies. `command_driven`: the files give the command, not the
-/// current, so the amplifier gain is identified too.
+/// The continuous parameters `spec` identifies, from the effect registry: the strain scale, the
+/// magnetization law's, the amplifier gain when `command_driven` (the files give the command,
+/// not the current), and each effect's in chain order. Integer parameters (the sensor delay)
+/// are scanned instead: [`scanned_params`].
 pub fn free_params(spec: ModelSpec, command_driven: bool) -> Vec<FreeParam> {
-    let mut v = vec![param!("magnetostriction.lambda_s", 1e-5, 1e-2, true, magnetostriction.lambda_s)];
-    if spec.has(Effect::Preisach) {
-        v.push(param!("preisach.coercive_a_per_m", 100.0, 3e4, true, preisach.coercive_a_per_m));
-        v.push(param!("preisach.spread_a_per_m", 500.0, 6e4, true, preisach.spread_a_per_m));
-    } else if spec.has(Effect::Hysteresis) {
-        v.push(param!("ja.a_a_per_m", 500.0, 5e4, true, ja.a_a_per_m));
-        v.push(param!("ja.k_a_per_m", 100.0, 3e4, true, ja.k_a_per_m));
-        v.push(param!("ja.alpha", -0.1, 0.1, false, ja.alpha));
-        v.push(param!("ja.c", 0.0, 0.95, false, ja.c));
-    } else if spec.has(Effect::Saturation) {
-        v.push(param!("anhysteretic.a_a_per_m", 500.0, 1e5, true, anhysteretic.a_a_per_m));
-    } else {
-        v.push(param!("linear.susceptibility", 0.1, 200.0, true, linear.susceptibility));
-        v.push(param!("linear.offset_a_per_m", -3e5, 3e5, false, linear.offset_a_per_m));
-    }
+    let mut v: Vec<&'static Param> = vec![&STRAIN_SCALE];
+    v.extend(spec.law().params());
     if command_driven {
-        v.push(param!("amp.gain_a_per_v", 0.05, 50.0, true, amp.gain_a_per_v));
+        v.push(&AMPLIFIER_GAIN);
     }
-    if spec.has(Effect::AmplifierDynamics) {
-        v.push(param!("amp.tau_s", 1e-6, 1e-2, true, amp.tau_s));
-    }
-    if spec.has(Effect::EddyCurrent) {
-        v.push(param!("eddy_tau_s", 1e-6, 1e-2, true, eddy_tau_s));
-    }
-    if spec.has(Effect::MechanicalDynamics) {
-        v.push(param!("mech.natural_frequency_hz", 50.0, 2e4, true, mech.natural_frequency_hz));
-        v.push(param!("mech.damping_ratio", 0.02, 5.0, true, mech.damping_ratio));
-    }
-    if spec.has(Effect::MagneticAftereffect) {
-        v.push(param!("aftereffect.fraction", 1e-3, 0.6, true, aftereffect.fraction));
-        v.push(param!("aftereffect.tau_s", 1e-3, 30.0, true, aftereffect.tau_s));
-    }
-    if spec.has(Effect::ThermalDrift) {
-        v.push(param!(
-            "thermal.thermal_resistance_c_per_w",
-            1e-3,
-            100.0,
-            true,
-            thermal.thermal_resistance_c_per_w
-        ));
-        v.push(param!("thermal.tau_s", 0.05, 3000.0, true, thermal.tau_s));
-    }
-    v
+    v.extend(spec.effects().flat_map(|e| e.info().params).filter(|p| p.scale != Scale::Integer));
+    v.into_iter().map(FreeParam::of).collect()
 }
 
-/// Largest sensor delay searched [samples].
-pub const MAX_DELAY_SEARCH: u16 = 16;
+/// The integer parameters `spec` identifies by scanning their range.
+pub fn scanned_params(spec: ModelSpec) -> Vec<&'static Param> {
+    spec.effects().flat_map(|e| e.info().params).filter(|p| p.scale == Scale::Integer).collect()
+}
 
 /// Loads a parameter file (TOML as `--params-out` writes), or the built-in demo set, and checks
 /// it for `spec` (every stage the spec uses must be valid).
@@ -117,7 +91,11 @@ pub fn load_input(input: Option<Input>, spec: ModelSpec) -> Result<ActuatorParam
         None => Ok(ActuatorParams::TERFENOL_DEMO),
         Some(input) => {
             let name = input.name.clone();
-            parse(&name, &input.into_text(MAX_PARAM_FILE_BYTES)?, spec)
+            let f = parse_file(&name, &input.into_text(MAX_PARAM_FILE_BYTES)?, spec)?;
+            if let Some(note) = defaulted_note(&name, &f.defaulted) {
+                eprintln!("gma: note: {note}");
+            }
+            Ok(f.params)
         }
     }
 }
@@ -125,11 +103,100 @@ pub fn load_input(input: Option<Input>, spec: ModelSpec) -> Result<ActuatorParam
 /// Largest parameter file read [bytes] (they are a few KB).
 const MAX_PARAM_FILE_BYTES: u64 = 1 << 20;
 
+/// The parameter-file format this version writes (model-core's `PARAMETER_FILE_FORMAT`: 2 added
+/// `format_version` and made the tables of effects and laws optional; every earlier format loads).
+pub const FORMAT_VERSION: i64 = PARAMETER_FILE_FORMAT;
+
+/// The tables `spec` uses.
+fn tables_used(spec: ModelSpec) -> Vec<&'static str> {
+    let effects = spec.effects().flat_map(|e| e.info().params);
+    spec.law().params().iter().chain(effects).map(|p| table_of(p.key)).collect()
+}
+
+/// A parameter file, read.
+#[derive(Debug, Clone)]
+pub struct ParamFile {
+    /// The parameters.
+    pub params: ActuatorParams,
+    /// Its format (1 when it names none).
+    pub format_version: i64,
+    /// Tables it left out that the model uses: the demo set's values stand in.
+    pub defaulted: Vec<&'static str>,
+}
+
 /// Parses and checks parameter-file text; errors name the file, line and parameter.
 pub fn parse(file: &str, text: &str, spec: ModelSpec) -> Result<ActuatorParams> {
-    let p: ActuatorParams = toml::from_str(text).map_err(|e| toml_error(file, text, &e))?;
-    Actuator::new(spec, &p).map_err(|e| Located::file(file, format!("{e} (checked for model `{spec}`)")))?;
-    Ok(p)
+    Ok(parse_file(file, text, spec)?.params)
+}
+
+/// As [`parse`], saying which tables were left out and the file's format.
+pub fn parse_file(file: &str, text: &str, spec: ModelSpec) -> Result<ParamFile> {
+    let mut table: toml::Table = toml::from_str(text).map_err(|e| toml_error(file, text, &e))?;
+    let format_version = match table.remove("format_version") {
+        None => 1,
+        Some(toml::Value::Integer(v)) if (1..=FORMAT_VERSION).contains(&v) => v,
+        Some(v) => {
+            located!(file; "format_version = {v}: this gma reads formats 1 to {FORMAT_VERSION} (a newer gma wrote it?)")
+        }
+    };
+    let missing: Vec<&'static str> = parameter_tables().filter(|t| !table.contains_key(*t)).collect();
+    // The file as written, first: its own errors keep their line and column.
+    let strict = toml::from_str::<ActuatorParams>(&without_format_version(text));
+    let params = match strict {
+        Ok(p) => p,
+        Err(e) if missing.is_empty() || !is_missing_one_of(&e, &missing) => {
+            return Err(toml_error(file, text, &e))
+        }
+        Err(_) => {
+            let demo =
+                toml::Table::try_from(ActuatorParams::TERFENOL_DEMO).context("serialising the demo set")?;
+            for t in &missing {
+                if let Some(v) = demo.get(*t) {
+                    table.insert(t.to_string(), v.clone());
+                }
+            }
+            ActuatorParams::deserialize(table).map_err(|e| {
+                let msg = e.message().trim().to_string();
+                let what = match msg.strip_prefix("missing field `").and_then(|m| m.strip_suffix('`')) {
+                    Some(field) => format!("parameter `{field}` is missing"),
+                    None => format!("not a valid parameter file: {msg}"),
+                };
+                Located::file(file, what)
+            })?
+        }
+    };
+    Actuator::new(spec, &params)
+        .map_err(|e| Located::file(file, format!("{e} (checked for model `{spec}`)")))?;
+    let used = tables_used(spec);
+    let defaulted = missing.into_iter().filter(|t| used.contains(t)).collect();
+    Ok(ParamFile { params, format_version, defaulted })
+}
+
+/// `text` with its `format_version` line blanked (line numbers kept).
+fn without_format_version(text: &str) -> String {
+    text.lines()
+        .map(|l| if l.trim_start().starts_with("format_version") { "" } else { l })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// Whether `e` is a missing top-level field among `missing`.
+fn is_missing_one_of(e: &toml::de::Error, missing: &[&str]) -> bool {
+    e.message()
+        .trim()
+        .strip_prefix("missing field `")
+        .and_then(|m| m.strip_suffix('`'))
+        .is_some_and(|f| missing.contains(&f))
+}
+
+/// The note for tables a file left out that the model uses.
+pub fn defaulted_note(file: &str, defaulted: &[&str]) -> Option<String> {
+    (!defaulted.is_empty()).then(|| {
+        format!(
+            "{file} has no {} for this model: the demo set's values stand in (`gma effects` lists them)",
+            defaulted.iter().map(|t| format!("`{t}`")).collect::<Vec<_>>().join(", ")
+        )
+    })
 }
 
 /// `file:line:column: message`, naming the parameter a missing field belongs to.
@@ -173,6 +240,7 @@ pub fn to_toml(p: &ActuatorParams, header: &str) -> Result<String> {
         out.push_str(line);
         out.push('\n');
     }
+    out.push_str(&format!("format_version = {FORMAT_VERSION}\n"));
     out.push_str(&body);
     Ok(out)
 }
@@ -183,12 +251,69 @@ pub fn parse_spec(text: &str) -> Result<ModelSpec> {
         model_core::SpecError::UnknownEffect { start, end, suggestion } => {
             let hint = suggestion.map(|s| format!("; did you mean `{s}`?")).unwrap_or_default();
             anyhow::anyhow!(
-                "model spec `{text}`: unknown effect `{}`{hint} (effects: saturation|anhysteretic, hysteresis, ja, \
-                 preisach, eddy_current|eddy, mechanical_dynamics|mech, amplifier_dynamics|amp, \
-                 magnetic_aftereffect|aftereffect, thermal_drift|thermal, sensor_delay|delay)",
-                &text[start..end]
+                "model spec `{text}`: unknown effect `{}`{hint} (words: {})",
+                &text[start..end],
+                spec_words().collect::<Vec<_>>().join(", ")
             )
         }
         other => anyhow::anyhow!("model spec `{text}`: {other}"),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const FORMAT_1: &str = include_str!("../tests/data/params-format-1.toml");
+
+    fn spec(text: &str) -> ModelSpec {
+        parse_spec(text).unwrap()
+    }
+
+    #[test]
+    fn a_file_of_the_first_format_still_loads_unchanged() {
+        let f = parse_file("old.toml", FORMAT_1, spec("ja+mech")).unwrap();
+        assert_eq!(f.format_version, 1);
+        assert!(f.defaulted.is_empty());
+        assert_eq!(f.params.ja.k_a_per_m, 4174.6553);
+        assert_eq!(f.params.magnetostriction.lambda_s, 0.001026324);
+        // Written again, it names its format and reads back to the same set.
+        let again = parse_file("new.toml", &to_toml(&f.params, "test").unwrap(), spec("ja+mech")).unwrap();
+        assert_eq!(again.format_version, FORMAT_VERSION);
+        assert_eq!(again.params, f.params);
+    }
+
+    #[test]
+    fn a_table_left_out_takes_the_defaults_and_says_so_only_when_the_model_uses_it() {
+        let start = FORMAT_1.find("[mech]").unwrap();
+        let end = FORMAT_1.find("[aftereffect]").unwrap();
+        let text = format!("{}{}", &FORMAT_1[..start], &FORMAT_1[end..]);
+        let with_mech = parse_file("p.toml", &text, spec("ja+mech")).unwrap();
+        assert_eq!(with_mech.defaulted, ["mech"]);
+        assert_eq!(with_mech.params.mech, ActuatorParams::TERFENOL_DEMO.mech);
+        assert!(defaulted_note("p.toml", &with_mech.defaulted).unwrap().contains("`mech`"));
+        assert!(parse_file("p.toml", &text, spec("ja")).unwrap().defaulted.is_empty());
+        // A top-level key of an effect (the eddy time constant) too.
+        let text = FORMAT_1.replace("eddy_tau_s = 0.00015\n", "");
+        assert_eq!(parse_file("p.toml", &text, spec("ja+eddy")).unwrap().defaulted, ["eddy_tau_s"]);
+    }
+
+    #[test]
+    fn required_values_a_newer_format_and_errors_in_the_file_are_still_refused_with_their_place() {
+        let no_dt = FORMAT_1.replace("dt_s = 0.0001\n", "");
+        let e = parse_file("p.toml", &no_dt, spec("ja")).unwrap_err().to_string();
+        assert!(e.contains("dt_s") && e.contains("missing"), "{e}");
+        let newer = format!("format_version = 99\n{FORMAT_1}");
+        let e = parse_file("p.toml", &newer, spec("ja")).unwrap_err().to_string();
+        assert!(e.contains("format_version = 99"), "{e}");
+        // A type error in a file that also leaves a table out keeps its line and column.
+        let start = FORMAT_1.find("[mech]").unwrap();
+        let end = FORMAT_1.find("[aftereffect]").unwrap();
+        let text =
+            format!("{}{}", &FORMAT_1[..start], &FORMAT_1[end..]).replace("c = 0.19454733", "c = \"x\"");
+        let e = parse_file("p.toml", &text, spec("ja+mech")).unwrap_err().to_string();
+        assert!(e.starts_with("p.toml:") && e.contains("ja.c"), "{e}");
+        let line = text.lines().position(|l| l.starts_with("c = ")).unwrap() + 1;
+        assert!(e.starts_with(&format!("p.toml:{line}:")), "{e}");
+    }
 }

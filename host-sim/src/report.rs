@@ -9,7 +9,6 @@ use model_core::{ActuatorParams, ModelSpec};
 
 use crate::diagnose::{diagnose, Diagnosis};
 use crate::fit::{evaluate, simulate, FitOptions, Simulation};
-use crate::params::parse_spec;
 use crate::plots::{self, Chart, Series};
 use crate::recording::Recording;
 
@@ -76,7 +75,7 @@ pub fn ladder(
         if d.time_limited {
             break; // the next rung would start from a search cut short
         }
-        spec = parse_spec(&format!("{spec}+{v}"))?;
+        spec = spec.with(v);
         // Start the next rung from the verdict's refit.
         if let Some(c) = d.candidates.iter().find(|c| c.effect == v) {
             if let Some(f) = &c.refit {

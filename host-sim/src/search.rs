@@ -1,15 +1,24 @@
-//! Bounded global-then-local minimisation for small parameter vectors: a particle swarm
-//! (argmin; the swarm is evaluated in parallel with rayon) over the unit cube of the bounds
-//! (log scale where a parameter spans decades), then Nelder–Mead (argmin) from the swarm's best,
-//! restarted once with a smaller simplex. Deterministic for a seed.
+//! The workbench's one optimiser: bounded global-then-local minimisation for small parameter
+//! vectors. A particle swarm (argmin; particles evaluated in parallel with rayon) over the unit
+//! cube of the bounds (log scale where a parameter spans decades), then Nelder–Mead (argmin)
+//! from the best points found, restarted with a smaller simplex. Deterministic for a seed.
+//!
+//! Hooks for the displacement fit: the cost can be evaluated on cheaper data subsets
+//! ([`Fidelity`]: the swarm and the coarse simplex need only the landscape's shape), the search
+//! can start from given points that carry a context (e.g. an integer parameter held fixed), and
+//! [`scan`] searches an integer parameter exhaustively.
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
 
+use anyhow::Result;
 use argmin::core::{CostFunction, Executor, State};
 use argmin::solver::neldermead::NelderMead;
 use argmin::solver::particleswarm::ParticleSwarm;
 use rand::SeedableRng;
+use rayon::prelude::*;
+
+use crate::progress::Progress;
 
 /// One parameter's search range.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -71,12 +80,12 @@ impl Bound {
     }
 }
 
-/// Search settings.
+/// Search settings a user chooses.
 #[derive(Debug, Clone, Copy)]
 pub struct SearchOptions {
     /// Seed of the swarm.
     pub seed: u64,
-    /// Effort multiplier (1 = default).
+    /// Effort multiplier (1 = default): swarm iterations and simplex steps scale with it.
     pub effort: f64,
     /// Stop at this instant with the best point so far.
     pub deadline: Option<Instant>,
@@ -88,63 +97,94 @@ impl Default for SearchOptions {
     }
 }
 
+/// Which data the cost is evaluated on: the swarm and the coarse simplex need only the
+/// landscape's shape, so a caller may give them a subset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fidelity {
+    /// The particle swarm.
+    Swarm,
+    /// The first, coarse simplex.
+    Coarse,
+    /// The final simplex and the choice of the best point: all data.
+    Full,
+}
+
+/// A search's constants.
+#[derive(Debug, Clone, Copy)]
+pub struct Plan {
+    /// Particles: `base + per_dimension · d`.
+    pub particles: (usize, usize),
+    /// Swarm iterations at effort 1.
+    pub swarm_iters: f64,
+    /// Independent swarms (seeds `seed`, `seed + 1`, …), run in parallel.
+    pub swarms: usize,
+    /// Simplex iterations per dimension at effort 1.
+    pub simplex_iters_per_dim: f64,
+    /// The best this many of starts and swarm results are refined, in parallel.
+    pub local_searches: usize,
+    /// The simplex runs: initial step (unit-cube fraction) and the data each runs on.
+    pub simplex: &'static [(f64, Fidelity)],
+    /// Converged when the simplex's costs agree to this fraction of the cost (and the floor).
+    pub tolerance: (f64, f64),
+}
+
+/// A start point and the context its cost is evaluated in.
+#[derive(Debug, Clone)]
+pub struct Start<C> {
+    /// Values (in the parameters' units).
+    pub values: Vec<f64>,
+    /// What the cost needs besides the values (e.g. an integer parameter held fixed).
+    pub context: C,
+}
+
 /// What a search found.
 #[derive(Debug, Clone)]
-pub struct Found {
+pub struct Found<C> {
     /// The best values.
     pub best: Vec<f64>,
+    /// The context they belong to.
+    pub context: C,
+    /// Their cost on all data.
+    pub cost: f64,
     /// Cost evaluations.
     pub evaluations: usize,
     /// Stopped by the deadline.
     pub time_limited: bool,
 }
 
-struct Unit<'a> {
+/// The cost of `values` in `context` on the data of a [`Fidelity`]; it must return a finite
+/// number (callers map failures to a large one).
+pub type Cost<'a, C> = dyn Fn(&C, &[f64], Fidelity) -> f64 + Sync + 'a;
+
+/// The problem in the unit cube, for argmin.
+struct Unit<'a, C> {
     bounds: &'a [Bound],
-    cost: &'a (dyn Fn(&[f64]) -> f64 + Sync),
+    cost: &'a Cost<'a, C>,
+    context: &'a C,
+    fidelity: Fidelity,
     evals: &'a AtomicUsize,
+    progress: &'a Progress,
 }
 
-impl Unit<'_> {
+impl<C> Unit<'_, C> {
     fn values(&self, u: &[f64]) -> Vec<f64> {
         self.bounds.iter().zip(u).map(|(b, &x)| b.from_unit(x)).collect()
     }
 
+    /// The cost at the clamped point, plus a pull back inside the cube.
     fn eval(&self, u: &[f64]) -> f64 {
         self.evals.fetch_add(1, Ordering::Relaxed);
+        self.progress.inc(1);
         let outside: f64 = u.iter().map(|x| (x - x.clamp(0.0, 1.0)).powi(2)).sum();
-        let c = (self.cost)(&self.values(u));
-        if c.is_finite() {
-            c + outside
-        } else {
-            f64::MAX / 4.0
-        }
+        (self.cost)(self.context, &self.values(u), self.fidelity) + outside
     }
 }
 
-impl CostFunction for Unit<'_> {
+impl<C: Sync> CostFunction for Unit<'_, C> {
     type Param = Vec<f64>;
     type Output = f64;
     fn cost(&self, u: &Vec<f64>) -> Result<f64, argmin::core::Error> {
         Ok(self.eval(u))
-    }
-}
-
-/// Minimises `cost` over `bounds`: two independent swarm + simplex searches (seeds `seed` and
-/// `seed + 1`, run in parallel), the better one kept.
-pub fn minimize(bounds: &[Bound], cost: &(dyn Fn(&[f64]) -> f64 + Sync), opts: SearchOptions) -> Found {
-    let evals = AtomicUsize::new(0);
-    let timed_out = AtomicBool::new(false);
-    let second = SearchOptions { seed: opts.seed.wrapping_add(1), ..opts };
-    let ((a, ca), (b, cb)) = rayon::join(
-        || search_once(bounds, cost, opts, &evals, &timed_out),
-        || search_once(bounds, cost, second, &evals, &timed_out),
-    );
-    let best = if ca <= cb { a } else { b };
-    Found {
-        best,
-        evaluations: evals.load(Ordering::Relaxed),
-        time_limited: timed_out.load(Ordering::Relaxed),
     }
 }
 
@@ -159,56 +199,115 @@ pub fn bounded<O, S: argmin::core::Solver<O, I>, I: State>(
     }
 }
 
-fn search_once(
+fn passed(deadline: Option<Instant>) -> bool {
+    deadline.is_some_and(|d| Instant::now() >= d)
+}
+
+/// Minimises `cost` over `bounds`: `plan.swarms` swarms (in `swarm_context`) and the `starts`
+/// give candidates, the best `plan.local_searches` of them (by cost on all data) are refined by
+/// the plan's simplex runs in parallel, and the best result is returned.
+pub fn minimize<C: Clone + Send + Sync>(
     bounds: &[Bound],
-    cost: &(dyn Fn(&[f64]) -> f64 + Sync),
+    cost: &Cost<'_, C>,
+    swarm_context: &C,
+    starts: &[Start<C>],
+    plan: &Plan,
     opts: SearchOptions,
-    evals: &AtomicUsize,
-    timed_out: &AtomicBool,
-) -> (Vec<f64>, f64) {
+    progress: &Progress,
+) -> Result<Found<C>> {
     let d = bounds.len();
-    let ended_by_time = |reason: Option<&argmin::core::TerminationReason>| {
+    let evals = AtomicUsize::new(0);
+    let timed_out = AtomicBool::new(false);
+    // A macro, not a closure: each use borrows its context for as long as it needs.
+    macro_rules! unit {
+        ($context:expr, $fidelity:expr) => {
+            Unit { bounds, cost, context: $context, fidelity: $fidelity, evals: &evals, progress }
+        };
+    }
+    let note_time = |reason: Option<&argmin::core::TerminationReason>| {
         if matches!(reason, Some(argmin::core::TerminationReason::Timeout)) {
             timed_out.store(true, Ordering::Relaxed);
         }
     };
-    let unit = || Unit { bounds, cost, evals };
-    let particles = 10 + 4 * d;
-    let iters = ((25.0 * opts.effort).round() as u64).max(2);
-    let pso = ParticleSwarm::new((vec![0.0; d], vec![1.0; d]), particles)
-        .with_rng_generator(rand::rngs::StdRng::seed_from_u64(opts.seed));
-    let mut best = vec![0.5; d];
-    if let Ok(res) =
-        bounded(Executor::new(unit(), pso), opts.deadline).configure(|s| s.max_iters(iters)).run()
-    {
-        ended_by_time(res.state().get_termination_reason());
-        if let Some(p) = res.state().get_best_param() {
-            best = p.position.clone();
-        }
+
+    // Global: independent swarms over the unit cube.
+    let particles = plan.particles.0 + plan.particles.1 * d;
+    let iters = ((plan.swarm_iters * opts.effort).round() as u64).max(2);
+    let swarm_bests: Vec<Vec<f64>> = (0..plan.swarms as u64)
+        .into_par_iter()
+        .map(|k| -> Result<Vec<f64>> {
+            let pso = ParticleSwarm::new((vec![0.0; d], vec![1.0; d]), particles)
+                .with_rng_generator(rand::rngs::StdRng::seed_from_u64(opts.seed.wrapping_add(k)));
+            let res = bounded(Executor::new(unit!(swarm_context, Fidelity::Swarm), pso), opts.deadline)
+                .configure(|s| s.max_iters(iters))
+                .run()
+                .map_err(|e| anyhow::anyhow!("particle swarm: {e}"))?;
+            note_time(res.state().get_termination_reason());
+            Ok(res.state().get_best_param().map(|p| p.position.clone()).unwrap_or_else(|| vec![0.5; d]))
+        })
+        .collect::<Result<_>>()?;
+
+    // Candidates: the starts and the swarms' bests, ranked on all data.
+    let to_unit = |v: &[f64]| -> Vec<f64> { bounds.iter().zip(v).map(|(b, &x)| b.to_unit(x)).collect() };
+    let mut seeds: Vec<(C, Vec<f64>, f64)> = starts
+        .iter()
+        .map(|s| {
+            let u = to_unit(&s.values);
+            let c = unit!(&s.context, Fidelity::Full).eval(&u);
+            (s.context.clone(), u, c)
+        })
+        .collect();
+    for u in swarm_bests {
+        let c = unit!(swarm_context, Fidelity::Full).eval(&u);
+        seeds.push((swarm_context.clone(), u, c));
     }
-    let nm_iters = ((80.0 * d as f64 * opts.effort).round() as u64).max(20);
-    for step in [0.05, 0.01] {
-        let mut simplex = vec![best.clone()];
-        for i in 0..d {
-            let mut v = best.clone();
-            v[i] += if v[i] > 0.5 { -step } else { step };
-            simplex.push(v);
-        }
-        let tol = (1e-7 * unit().eval(&best)).max(1e-20);
-        let Ok(nm) = NelderMead::new(simplex).with_sd_tolerance(tol) else { break };
-        if opts.deadline.is_some_and(|d| Instant::now() >= d) {
-            timed_out.store(true, Ordering::Relaxed);
-            break;
-        }
-        if let Ok(res) =
-            bounded(Executor::new(unit(), nm), opts.deadline).configure(|s| s.max_iters(nm_iters)).run()
-        {
-            ended_by_time(res.state().get_termination_reason());
-            if let Some(p) = res.state().get_best_param() {
-                best = p.clone();
+    seeds.sort_by(|a, b| a.2.total_cmp(&b.2));
+    seeds.truncate(plan.local_searches.max(1));
+
+    // Local: the plan's simplex runs from each seed, in parallel.
+    let nm_iters = ((plan.simplex_iters_per_dim * d as f64 * opts.effort).round() as u64).max(20);
+    let local = |(context, start, _): &(C, Vec<f64>, f64)| -> Result<(C, Vec<f64>, f64)> {
+        let mut best = start.clone();
+        for &(step, fidelity) in plan.simplex {
+            if passed(opts.deadline) {
+                timed_out.store(true, Ordering::Relaxed);
+                break;
             }
+            let problem = || unit!(context, fidelity);
+            let mut simplex = vec![best.clone()];
+            for i in 0..d {
+                let mut v = best.clone();
+                v[i] = if v[i] > 0.5 { v[i] - step } else { v[i] + step };
+                simplex.push(v);
+            }
+            let tol = (plan.tolerance.0 * problem().eval(&best)).max(plan.tolerance.1);
+            let nm = NelderMead::new(simplex).with_sd_tolerance(tol).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let res = bounded(Executor::new(problem(), nm), opts.deadline)
+                .configure(|s| s.max_iters(nm_iters))
+                .run()
+                .map_err(|e| anyhow::anyhow!("Nelder–Mead: {e}"))?;
+            note_time(res.state().get_termination_reason());
+            best = res.state().get_best_param().cloned().unwrap_or(best);
         }
-    }
-    let c = unit().eval(&best);
-    (unit().values(&best), c)
+        let c = unit!(context, Fidelity::Full).eval(&best);
+        Ok((context.clone(), best, c))
+    };
+    let refined: Vec<(C, Vec<f64>, f64)> = seeds.par_iter().map(local).collect::<Result<_>>()?;
+    let (context, best, cost) =
+        refined.into_iter().min_by(|a, b| a.2.total_cmp(&b.2)).expect("at least one seed");
+    let values = bounds.iter().zip(&best).map(|(b, &x)| b.from_unit(x)).collect();
+    Ok(Found {
+        best: values,
+        context,
+        cost,
+        evaluations: evals.load(Ordering::Relaxed),
+        time_limited: timed_out.load(Ordering::Relaxed),
+    })
+}
+
+/// The integer in `lo..=hi` with the lowest `cost` (all evaluated, in parallel; ties go to the
+/// smallest).
+pub fn scan(lo: i64, hi: i64, cost: &(dyn Fn(i64) -> f64 + Sync)) -> i64 {
+    let costs: Vec<(i64, f64)> = (lo..=hi).into_par_iter().map(|k| (k, cost(k))).collect();
+    costs.iter().min_by(|a, b| a.1.total_cmp(&b.1)).map(|c| c.0).unwrap_or(lo)
 }

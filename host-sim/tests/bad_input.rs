@@ -503,9 +503,9 @@ fn fit_on_data_no_model_can_follow_gives_finite_parameters_or_says_so() {
             let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
             let params = j["params"].as_object().expect("params");
             assert!(params.values().all(|v| v.as_f64().is_some_and(f64::is_finite)), "{name}: {j}");
-            let p: model_core::ActuatorParams =
-                toml::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
-            model_core::Actuator::new(model_core::ModelSpec::parse("ja").unwrap(), &p).unwrap();
+            let spec = model_core::ModelSpec::parse("ja").unwrap();
+            let p = host_sim::params::parse("p.toml", &std::fs::read_to_string(&out).unwrap(), spec).unwrap();
+            model_core::Actuator::new(spec, &p).unwrap();
         } else {
             refused(&o, &["the fit"], name);
             assert!(!out.exists());

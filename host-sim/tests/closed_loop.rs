@@ -1,10 +1,11 @@
 //! The board's control code (gma-control), unchanged, in closed loop with the workbench's plant
-//! simulator (issue 5: "the same control code runs on the host against the host-sim plant"). The
-//! coil's R–L electrics are the plant's first-order `amp` stage (gain 1/R, τ = L/R: a held
-//! bridge voltage in, coil current out), integrated at 2× the tick rate.
+//! simulator (issue 5: "the same control code runs on the host against the host-sim plant") in
+//! the board's simulated rig. The coil's R–L electrics are the plant's first-order `amp` stage
+//! (gain 1/R, τ = L/R: a held bridge voltage in, coil current out), integrated at 2× the tick
+//! rate.
 
-use gma_control::units::{Amps, Calibration, Micrometres, Volts};
-use gma_control::{ControlConfig, Controller, RawSample};
+use gma_control::sim::Rig;
+use gma_control::{ControlConfig, Controller};
 use host_sim::plant::Plant;
 use model_core::amplifier::FirstOrderAmpParams;
 use model_core::{ActuatorParams, ModelSpec};
@@ -14,28 +15,20 @@ fn control_code_tracks_on_the_workbench_plant() {
     let mut p = ActuatorParams::TERFENOL_DEMO;
     p.amp = FirstOrderAmpParams { gain_a_per_v: 1.0 / 6.0, tau_s: 6e-3 / 6.0 }; // 6 Ω, 6 mH coil
     let plant = Plant::new(ModelSpec::parse("amp+eddy+ja+mech").unwrap(), p);
-    let mut rig = plant.stepper().unwrap();
-    let cal = Calibration::REFERENCE_BOARD;
+    let mut rig = Rig::new(plant.stepper().unwrap(), 1);
     // The controller's model is the identified actuator (no amp: its current loop is the amp).
     let mut ctl = Controller::new(ControlConfig::REFERENCE, ModelSpec::parse("eddy+ja+mech").unwrap(), &p);
-    let rest = rig.displacement_um();
-    let bus = 24.0f32;
     let (mut sum2, mut n) = (0.0f64, 0usize);
     for k in 0..4000 {
-        let y = rig.displacement_um();
-        let raw = RawSample {
-            current: cal.current_code(Amps(rig.current_a() as f32)),
-            displacement: cal.displacement_code(Micrometres((y - rest + 20.0) as f32)),
-            bus: Volts(bus),
-        };
-        let out = ctl.tick(&raw);
+        let y = rig.displacement_from_rest_um();
+        let out = ctl.tick(&rig.sample());
         assert!(out.bridge_enabled, "tripped at tick {k}: {:#x}", out.frame.faults);
         if k >= 1000 {
-            let e = (y - rest) - out.frame.reference_um as f64;
+            let e = y - out.frame.reference_um as f64;
             sum2 += e * e;
             n += 1;
         }
-        rig.step((out.duty * bus) as f64).unwrap();
+        rig.apply(&out).unwrap();
     }
     let rms = (sum2 / n as f64).sqrt() / 12.5 * 100.0;
     println!("gma-control on the host-sim plant: 25 µm p-p 100 Hz, RMS {rms:.2} % of amplitude");

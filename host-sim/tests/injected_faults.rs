@@ -4,10 +4,10 @@
 //! safe state (bridge off, fault bits in every frame, coil current decaying) or riding through.
 
 use gma_control::faults::FaultCode;
+use gma_control::sim::{Fault, Injection, Rig};
 use gma_control::telemetry::{Frame, MAX_ENCODED};
 use gma_control::{ControlConfig, Controller};
-use host_sim::plant::Plant;
-use host_sim::rig::{Fault, Injection, Rig};
+use host_sim::plant::{Plant, PlantStepper};
 use model_core::amplifier::FirstOrderAmpParams;
 use model_core::{ActuatorParams, ModelSpec};
 
@@ -30,13 +30,13 @@ struct Outcome {
     frames: Vec<Frame>,
 }
 
-fn rig(bus_v: f64, injections: Vec<Injection>) -> (Rig, Controller) {
+fn rig(bus_v: f64, injections: Vec<Injection>) -> (Rig<PlantStepper>, Controller) {
     let mut p = ActuatorParams::TERFENOL_DEMO;
     p.amp = FirstOrderAmpParams { gain_a_per_v: 1.0 / 6.0, tau_s: 6e-3 / 6.0 }; // 6 Ω, 6 mH coil
     let plant = Plant::new(ModelSpec::parse("amp+eddy+ja+mech").unwrap(), p);
     let mut rig = Rig::new(plant.stepper().unwrap(), 7);
     rig.bus_v = bus_v;
-    rig.injections = injections;
+    rig.injections.extend(injections);
     let ctl = Controller::new(ControlConfig::REFERENCE, ModelSpec::parse("eddy+ja+mech").unwrap(), &p);
     (rig, ctl)
 }

@@ -11,6 +11,7 @@
 //! stages a spec uses are validated.
 
 use crate::amplifier::{AmpState, Amplifier, FirstOrderAmpParams, SecondOrderAmp, SecondOrderAmpParams};
+use crate::effects::{Effect, MagnetizationLaw};
 use crate::error::{check, positive, ParamError};
 use crate::field::{CoilField, FirstOrderLag};
 use crate::magnetization::{
@@ -20,7 +21,7 @@ use crate::magnetization::{
 use crate::magnetostriction::{QuadraticMagnetostriction, QuadraticParams};
 use crate::mechanics::{MassSpringDamper, MechState, SecondOrderZoh};
 use crate::slow::{Aftereffect, AftereffectParams, DelayLine, ThermalDrift, ThermalParams};
-use crate::spec::{Effect, ModelSpec};
+use crate::spec::ModelSpec;
 
 /// Longest sensor delay the chain supports [samples].
 pub const MAX_DELAY_SAMPLES: usize = 64;
@@ -237,14 +238,14 @@ impl Actuator {
         } else {
             None
         };
-        let magnetization = if spec.has(Effect::Preisach) {
-            Magnetization::Preisach(Preisach::new(p.preisach)?)
-        } else if spec.has(Effect::Hysteresis) {
-            Magnetization::JilesAtherton(JilesAtherton::new(p.ja)?)
-        } else if spec.has(Effect::Saturation) {
-            Magnetization::Anhysteretic(Anhysteretic::new(p.anhysteretic)?)
-        } else {
-            Magnetization::Linear(LinearMagnetization::new(p.linear.offset_a_per_m, p.linear.susceptibility)?)
+        let magnetization = match spec.law() {
+            MagnetizationLaw::Preisach => Magnetization::Preisach(Preisach::new(p.preisach)?),
+            MagnetizationLaw::JilesAtherton => Magnetization::JilesAtherton(JilesAtherton::new(p.ja)?),
+            MagnetizationLaw::Anhysteretic => Magnetization::Anhysteretic(Anhysteretic::new(p.anhysteretic)?),
+            MagnetizationLaw::Linear => Magnetization::Linear(LinearMagnetization::new(
+                p.linear.offset_a_per_m,
+                p.linear.susceptibility,
+            )?),
         };
         let aftereffect = if spec.has(Effect::MagneticAftereffect) {
             Some(Aftereffect::new(p.aftereffect, dt)?)

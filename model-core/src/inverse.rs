@@ -184,13 +184,13 @@ mod tests {
     fn inverse_of_each_static_chain_is_identity() {
         for spec in [
             "linear",
-            "anhysteretic",
+            "linear+anhysteretic",
             "ja",
             "ja+eddy",
             "ja+amp",
             "ja+aftereffect",
             "ja+thermal+eddy+amp",
-            "preisach",
+            "linear+preisach",
             "preisach+eddy+amp",
         ] {
             let e = round_trip_error(spec, &[0.3, 0.15], &[10.0, 37.0]);
@@ -218,7 +218,7 @@ mod tests {
     /// The check can fail: a compensator that ignores hysteresis misses a J–A plant by far.
     #[test]
     fn mismatched_inverse_is_detected() {
-        let e = round_trip_error_with("anhysteretic", "ja", &[0.3, 0.15], &[10.0, 37.0]);
+        let e = round_trip_error_with("linear+anhysteretic", "ja", &[0.3, 0.15], &[10.0, 37.0]);
         assert!(e > 0.05, "a saturation-only inverse on a J–A plant should miss by > 5 %, got {e}");
     }
 

@@ -4,6 +4,7 @@
 pub mod amplifier;
 pub mod arx;
 pub mod chain;
+pub mod effects;
 pub mod error;
 pub mod field;
 pub mod inverse;
@@ -16,6 +17,7 @@ pub mod slow;
 pub mod spec;
 
 pub use chain::{Actuator, ActuatorOutput, ActuatorParams, ActuatorState, StepError, DT_MAX_S, DT_MIN_S};
+pub use effects::{Effect, MagnetizationLaw};
 pub use error::ParamError;
 pub use inverse::{Compensator, CompensatorState};
-pub use spec::{Effect, ModelSpec, SpecError};
+pub use spec::{ModelSpec, SpecError};

@@ -1,93 +1,11 @@
 //! Model specifications: a `+`-joined list of effects on top of the minimal model (linear
 //! magnetization, quadratic magnetostriction, static mechanics, ideal amplifier, no eddy
-//! currents), with the names of `docs/cli.md` (the model specification). `linear` is the minimal model.
+//! currents). The words are the registry's ([`crate::effects`]): names, aliases and shorthands.
 
 use core::fmt;
 
-/// One physical effect a model can include.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
-#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
-pub enum Effect {
-    /// Langevin anhysteretic magnetization instead of the linear one.
-    Saturation,
-    /// Jiles–Atherton irreversible magnetization (implies saturation).
-    Hysteresis,
-    /// Rate-dependent field lag in the rod.
-    EddyCurrent,
-    /// Preisach (relay-plane) hysteresis instead of the linear or Jiles–Atherton magnetization.
-    Preisach,
-    /// Mass-spring-damper between strain and displacement.
-    MechanicalDynamics,
-    /// Command voltage → coil current dynamics.
-    AmplifierDynamics,
-    /// Slow magnetization creep.
-    MagneticAftereffect,
-    /// Coil heating → thermal expansion of the rod.
-    ThermalDrift,
-    /// Pure transport delay of the displacement measurement.
-    SensorDelay,
-}
-
-impl Effect {
-    /// Every effect, in chain order.
-    pub const ALL: [Effect; 9] = [
-        Effect::AmplifierDynamics,
-        Effect::EddyCurrent,
-        Effect::Saturation,
-        Effect::Hysteresis,
-        Effect::Preisach,
-        Effect::MagneticAftereffect,
-        Effect::MechanicalDynamics,
-        Effect::ThermalDrift,
-        Effect::SensorDelay,
-    ];
-
-    /// The contract name.
-    pub const fn name(self) -> &'static str {
-        match self {
-            Effect::Saturation => "saturation",
-            Effect::Hysteresis => "hysteresis",
-            Effect::EddyCurrent => "eddy_current",
-            Effect::Preisach => "preisach",
-            Effect::MechanicalDynamics => "mechanical_dynamics",
-            Effect::AmplifierDynamics => "amplifier_dynamics",
-            Effect::MagneticAftereffect => "magnetic_aftereffect",
-            Effect::ThermalDrift => "thermal_drift",
-            Effect::SensorDelay => "sensor_delay",
-        }
-    }
-
-    /// The contract alias, if any.
-    pub const fn alias(self) -> Option<&'static str> {
-        match self {
-            Effect::Saturation => Some("anhysteretic"),
-            Effect::Hysteresis => None,
-            Effect::EddyCurrent => Some("eddy"),
-            Effect::Preisach => None,
-            Effect::MechanicalDynamics => Some("mech"),
-            Effect::AmplifierDynamics => Some("amp"),
-            Effect::MagneticAftereffect => Some("aftereffect"),
-            Effect::ThermalDrift => Some("thermal"),
-            Effect::SensorDelay => Some("delay"),
-        }
-    }
-
-    const fn bit(self) -> u16 {
-        1 << (self as u16)
-    }
-
-    /// Looks up a name or alias.
-    pub fn from_name(s: &str) -> Option<Effect> {
-        Effect::ALL.into_iter().find(|e| e.name() == s || e.alias() == Some(s))
-    }
-}
-
-impl fmt::Display for Effect {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
+pub use crate::effects::Effect;
+use crate::effects::{spec_words, Inverse, MagnetizationLaw, EFFECTS, SHORTHANDS};
 
 /// A set of effects (a model structure).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
@@ -144,27 +62,26 @@ impl fmt::Display for SpecError {
 
 impl core::error::Error for SpecError {}
 
-/// Every accepted word, for suggestions.
-const WORDS: [&str; 18] = [
-    "linear",
-    "preisach",
-    "ja",
-    "saturation",
-    "anhysteretic",
-    "hysteresis",
-    "eddy_current",
-    "eddy",
-    "mechanical_dynamics",
-    "mech",
-    "amplifier_dynamics",
-    "amp",
-    "magnetic_aftereffect",
-    "aftereffect",
-    "thermal_drift",
-    "thermal",
-    "sensor_delay",
-    "delay",
-];
+/// The effects the drive's feedback handles instead of its compensator. None of them is implied
+/// by another effect (checked here at compile time), so removing them keeps a spec closed.
+const LEFT_TO_FEEDBACK: u16 = {
+    let mut mask = 0;
+    let mut k = 0;
+    while k < EFFECTS.len() {
+        if matches!(EFFECTS[k].inverse, Inverse::LeftToFeedback) {
+            mask |= EFFECTS[k].effect.bit();
+        }
+        k += 1;
+    }
+    let mut k = 0;
+    while k < EFFECTS.len() {
+        if let Some(implied) = EFFECTS[k].implies {
+            assert!(mask & implied.bit() == 0, "an implied effect cannot be left to feedback");
+        }
+        k += 1;
+    }
+    mask
+};
 
 impl ModelSpec {
     /// The minimal model.
@@ -186,47 +103,73 @@ impl ModelSpec {
             if word.is_empty() {
                 return Err(SpecError::EmptyEffect { at: start });
             }
-            match word {
-                "linear" => {}
-                "ja" => spec = spec.with(Effect::Hysteresis),
-                _ => match Effect::from_name(word) {
-                    Some(e) => spec = spec.with(e),
-                    None => {
-                        return Err(SpecError::UnknownEffect {
-                            start,
-                            end: start + word.len(),
-                            suggestion: nearest_word(word),
-                        })
-                    }
-                },
+            if let Some((_, effects)) = SHORTHANDS.iter().find(|(w, _)| *w == word) {
+                for e in effects.iter() {
+                    spec = spec.with(*e);
+                }
+                continue;
+            }
+            match Effect::from_name(word) {
+                Some(e) => spec = spec.with(e),
+                None => {
+                    return Err(SpecError::UnknownEffect {
+                        start,
+                        end: start + word.len(),
+                        suggestion: nearest_word(word),
+                    })
+                }
             }
         }
-        if spec.has(Effect::Preisach) {
-            for other in [Effect::Hysteresis, Effect::Saturation] {
-                if spec.has(other) {
-                    return Err(SpecError::Conflict { first: other, second: Effect::Preisach });
+        // Laws that replace each other: every law present must be implied by the most
+        // specific one (hysteresis brings saturation; Preisach brings neither).
+        let law_effects = || spec.effects().filter(|e| e.info().law.is_some());
+        if let Some(top) = law_effects().max_by_key(|e| e.info().law) {
+            for other in
+                law_effects().filter(|e| *e != top).collect::<heapless::Vec<Effect, 8>>().iter().rev()
+            {
+                if top.info().implies != Some(*other) {
+                    return Err(SpecError::Conflict { first: *other, second: top });
                 }
             }
         }
         Ok(spec)
     }
 
-    /// This spec with `effect` added (hysteresis brings saturation with it).
+    /// This spec with `effect` added (and what it implies: hysteresis brings saturation).
     pub const fn with(self, effect: Effect) -> ModelSpec {
-        let mut bits = self.bits | effect.bit();
-        if matches!(effect, Effect::Hysteresis) {
-            bits |= Effect::Saturation.bit();
+        ModelSpec { bits: self.bits | effect.bit() }.closed()
+    }
+
+    /// This spec without `effect` (what a remaining effect implies stays).
+    pub const fn without(self, effect: Effect) -> ModelSpec {
+        ModelSpec { bits: self.bits & !effect.bit() }.closed()
+    }
+
+    /// Adds what the present effects imply.
+    const fn closed(self) -> ModelSpec {
+        let mut bits = self.bits;
+        let mut k = 0;
+        while k < EFFECTS.len() {
+            if let Some(implied) = EFFECTS[k].implies {
+                if bits & EFFECTS[k].effect.bit() != 0 {
+                    bits |= implied.bit();
+                }
+            }
+            k += 1;
         }
         ModelSpec { bits }
     }
 
-    /// This spec without `effect` (saturation stays while hysteresis needs it).
-    pub const fn without(self, effect: Effect) -> ModelSpec {
-        let mut bits = self.bits & !effect.bit();
-        if bits & Effect::Hysteresis.bit() != 0 {
-            bits |= Effect::Saturation.bit();
-        }
-        ModelSpec { bits }
+    /// The magnetization law the spec selects.
+    pub fn law(self) -> MagnetizationLaw {
+        MagnetizationLaw::of(self.effects())
+    }
+
+    /// The part of the model the drive's inverse compensator inverts (without the effects its
+    /// feedback handles). A mask known at compile time, so that the firmware's optimiser sees
+    /// which stages can never be built and leaves their code out.
+    pub const fn for_compensator(self) -> ModelSpec {
+        ModelSpec { bits: self.bits & !LEFT_TO_FEEDBACK }
     }
 
     /// Whether the spec includes `effect`.
@@ -248,10 +191,14 @@ impl fmt::Display for ModelSpec {
         }
         let mut first = true;
         for e in self.effects() {
-            let word = match e {
-                Effect::Saturation if self.has(Effect::Hysteresis) => continue,
-                Effect::Hysteresis => "ja",
-                _ => e.alias().unwrap_or(e.name()),
+            // A shorthand stands for its effects when all are present, at its last one's place.
+            let shorthand = SHORTHANDS
+                .iter()
+                .find(|(_, es)| es.len() > 1 && es.contains(&e) && es.iter().all(|x| self.has(*x)));
+            let word = match shorthand {
+                Some((_, es)) if es.last() != Some(&e) => continue,
+                Some((w, _)) => w,
+                None => e.alias().unwrap_or(e.name()),
             };
             if !first {
                 f.write_str("+")?;
@@ -266,7 +213,7 @@ impl fmt::Display for ModelSpec {
 /// The known word with the smallest edit distance to `word`, if at most 3 (or a prefix match).
 fn nearest_word(word: &str) -> Option<&'static str> {
     let mut best: Option<(usize, &'static str)> = None;
-    for w in WORDS {
+    for w in spec_words() {
         let d = if w.starts_with(word) && word.len() >= 3 { 1 } else { edit_distance(word, w) };
         if best.is_none_or(|(bd, _)| d < bd) {
             best = Some((d, w));
@@ -312,7 +259,7 @@ mod tests {
             ModelSpec::parse("anhysteretic + mech").unwrap(),
             ModelSpec::parse("saturation+mechanical_dynamics").unwrap()
         );
-        assert!(ModelSpec::parse("hysteresis").unwrap().has(Effect::Saturation));
+        assert!(ModelSpec::parse(Effect::Hysteresis.name()).unwrap().has(Effect::Saturation));
         for e in Effect::ALL {
             assert_eq!(ModelSpec::parse(e.name()).unwrap(), ModelSpec::LINEAR.with(e));
         }
@@ -332,11 +279,15 @@ mod tests {
     fn typos_get_a_suggestion_and_a_position() {
         assert_eq!(
             ModelSpec::parse("ja+mehc"),
-            Err(SpecError::UnknownEffect { start: 3, end: 7, suggestion: Some("mech") })
+            Err(SpecError::UnknownEffect {
+                start: 3,
+                end: 7,
+                suggestion: Effect::MechanicalDynamics.alias()
+            })
         );
         assert_eq!(
             ModelSpec::parse("ja+eddy_curent"),
-            Err(SpecError::UnknownEffect { start: 3, end: 14, suggestion: Some("eddy_current") })
+            Err(SpecError::UnknownEffect { start: 3, end: 14, suggestion: Some(Effect::EddyCurrent.name()) })
         );
         assert!(matches!(
             ModelSpec::parse("quantum_foam"),

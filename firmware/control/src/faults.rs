@@ -2,8 +2,8 @@
 //! telemetry frame, and cleared only by an explicit command once their cause is gone. While any
 //! fault is latched the bridge is off (the safe state).
 
+use crate::tick::RawSample;
 use crate::units::{AdcCode, Amps, ADC_FULL_SCALE};
-use crate::RawSample;
 
 /// Latched fault bits (one `u16`, as sent in telemetry).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -11,31 +11,23 @@
 
 pub mod current;
 pub mod faults;
+pub mod pid;
 pub mod reference;
 pub mod sim;
 pub mod telemetry;
+pub mod tick;
 pub mod units;
 
-use model_core::{Actuator, ActuatorParams, Compensator, CompensatorState, Effect, ModelSpec};
+use model_core::{Actuator, ActuatorParams, Compensator, CompensatorState, ModelSpec, ParamError};
 
 use crate::current::{CurrentLoop, CurrentLoopParams};
 use crate::faults::{FaultCode, FaultLimits, FaultMonitor};
+use crate::pid::{Pid, PidParams, PidState};
 use crate::reference::{Reference, Waveform};
 use crate::telemetry::Frame;
-use crate::units::{AdcCode, Amps, Calibration, Micrometres, Volts};
+use crate::units::{Amps, Calibration, Micrometres};
 
-/// Incremental PID on displacement error [µm] → current correction [A].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PidGains {
-    /// Proportional [A/µm].
-    pub kp: f32,
-    /// Integral per tick [A/µm].
-    pub ki: f32,
-    /// Derivative [A/µm].
-    pub kd: f32,
-    /// Largest correction [A].
-    pub limit_a: f32,
-}
+pub use crate::tick::{RawSample, TickOutput};
 
 /// Everything the controller needs besides the model.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -51,7 +43,7 @@ pub struct ControlConfig {
     /// Ticks the compensator looks ahead on the reference (current-loop and mechanics lag).
     pub preview_ticks: u32,
     /// Displacement PID; `None` runs the compensator alone (open loop).
-    pub pid: Option<PidGains>,
+    pub pid: Option<PidParams>,
     /// Largest current reference [A].
     pub max_current_a: f32,
 }
@@ -64,31 +56,9 @@ impl ControlConfig {
         limits: FaultLimits::REFERENCE,
         reference: Waveform::Sine { freq_hz: 100.0, amplitude: 12.5, bias: 15.0 },
         preview_ticks: 2,
-        pid: Some(PidGains { kp: 0.02, ki: 0.02, kd: 0.0, limit_a: 1.0 }),
+        pid: Some(PidParams { kp: 0.02, ki: 0.02, kd: 0.0, limit_a: 1.0 }),
         max_current_a: 3.5,
     };
-}
-
-/// One tick's measurements.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RawSample {
-    /// Coil current channel.
-    pub current: AdcCode,
-    /// Displacement channel.
-    pub displacement: AdcCode,
-    /// Bus voltage (measured, or nominal where the board has no divider).
-    pub bus: Volts,
-}
-
-/// What the tick asks of the power stage, and its telemetry record.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TickOutput {
-    /// Signed duty of the full bridge.
-    pub duty: f32,
-    /// Whether the bridge outputs are enabled (false: the safe state).
-    pub bridge_enabled: bool,
-    /// The record of this tick.
-    pub frame: Frame,
 }
 
 /// The controller: fixed configuration and model, plus the state stepped every tick.
@@ -102,25 +72,16 @@ pub struct Controller {
     faults: FaultMonitor,
     seq: u32,
     rest_um: Option<f32>,
-    pid_i: f32,
-    e1: f32,
-    e2: f32,
+    pid: Option<(Pid, PidState)>,
 }
 
 impl Controller {
-    /// Builds the controller for `spec` with the identified `params` (from `gma fit`). The
-    /// amplifier, sensor delay and mechanics are left out of the inverse: the current loop is
-    /// the amplifier, and the PID handles the rest. A rejected parameter set or controller design
-    /// starts the controller with `PARAMETERS_INVALID` latched (bridge off).
+    /// Builds the controller for `spec` with the identified `params` (from `gma fit`); the
+    /// compensator inverts [`compensator_model`]. A rejected parameter set or controller design
+    /// (current loop, PID) starts the controller with `PARAMETERS_INVALID` latched (bridge off).
     pub fn new(cfg: ControlConfig, spec: ModelSpec, params: &ActuatorParams) -> Self {
         let mut faults = FaultMonitor::new(cfg.limits);
-        let comp_spec = spec
-            .without(Effect::AmplifierDynamics)
-            .without(Effect::SensorDelay)
-            .without(Effect::MechanicalDynamics);
-        let mut p = *params;
-        p.dt_s = cfg.current_loop.tick_s;
-        let compensator = match Actuator::new(comp_spec, &p) {
+        let compensator = match compensator_model(spec, params, cfg.current_loop.tick_s) {
             Ok(model) => {
                 let c = Compensator::new(model);
                 let s = c.rest_state();
@@ -140,6 +101,14 @@ impl Controller {
                 CurrentLoop::idle()
             }
         };
+        let pid = match cfg.pid.map(Pid::new) {
+            Some(Ok(pid)) => Some((pid, PidState::default())),
+            Some(Err(_)) => {
+                faults.latch(FaultCode::PARAMETERS_INVALID);
+                None
+            }
+            None => None,
+        };
         Self {
             cfg,
             current_loop,
@@ -149,9 +118,7 @@ impl Controller {
             faults,
             seq: 0,
             rest_um: None,
-            pid_i: 0.0,
-            e1: 0.0,
-            e2: 0.0,
+            pid,
         }
     }
 
@@ -176,9 +143,9 @@ impl Controller {
         let left = self.faults.clear(raw, i);
         if left.is_clear() {
             self.current_loop.reset();
-            self.pid_i = 0.0;
-            self.e1 = 0.0;
-            self.e2 = 0.0;
+            if let Some((_, s)) = self.pid.as_mut() {
+                *s = PidState::default();
+            }
             if let Some((c, s)) = self.compensator.as_mut() {
                 *s = c.rest_state();
             }
@@ -219,16 +186,12 @@ impl Controller {
             Some((c, s)) => c.step(s, self.model_rest_m + ahead * 1e-6),
             None => 0.0,
         };
-        // Incremental PID on the displacement error.
-        if let Some(g) = self.cfg.pid {
-            let e = r - y.0;
-            let d = g.kp * (e - self.e1) + g.ki * e + g.kd * (e - 2.0 * self.e1 + self.e2);
-            self.pid_i = (self.pid_i + d).clamp(-g.limit_a, g.limit_a);
-            self.e2 = self.e1;
-            self.e1 = e;
-        }
+        let i_pid = match self.pid.as_mut() {
+            Some((pid, s)) => pid.step(s, r - y.0),
+            None => 0.0,
+        };
         let max_i = self.cfg.max_current_a;
-        let i_ref = (i_ff + self.pid_i).clamp(-max_i, max_i);
+        let i_ref = (i_ff + i_pid).clamp(-max_i, max_i);
         let cmd = self.current_loop.step(Amps(i_ref), i, raw.bus);
         TickOutput {
             duty: cmd.duty,
@@ -243,4 +206,19 @@ impl Controller {
             },
         }
     }
+}
+
+/// The model the inverse compensator inverts: `spec` with `params` at the tick period, less the
+/// effects the registry leaves to feedback (`Inverse::LeftToFeedback`: the amplifier, as the
+/// current loop is the amplifier; the mechanics and the sensor delay, which the PID handles). `firmware/build.rs` builds it too, so that a bad parameter set fails the
+/// build.
+pub fn compensator_model(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    tick_s: f32,
+) -> Result<Actuator, ParamError> {
+    let spec = spec.for_compensator();
+    let mut p = *params;
+    p.dt_s = tick_s;
+    Actuator::new(spec, &p)
 }

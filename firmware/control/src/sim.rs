@@ -1,123 +1,282 @@
-//! A SIMULATED rig for closed-loop tests on the host and under QEMU: the coil's R–L electrics
-//! driven by the bridge, a model-core actuator driven by the coil current, and the board's
-//! front end (calibration, 12-bit codes). Faults can be injected: a bridge stuck on, a shorted
-//! coil, a disconnected or frozen displacement probe.
+//! A SIMULATED drive rig for closed-loop tests on the host and under QEMU: the board's side —
+//! full bridge, bus, analog front end (calibration, 12-bit codes) — around a [`Plant`] (coil and
+//! actuator), with faults injected at chosen ticks: what the sensors and the power stage do when
+//! something breaks. [`CoilActuator`] is the no_std plant; the workbench (host-sim) puts its
+//! plant simulator in the same rig.
+//!
+//! The rig's analog side is `f64`, the workbench plant's precision; [`CoilActuator`] rounds to
+//! `f32` at its input.
 
-use model_core::{Actuator, ActuatorParams, ActuatorState, ModelSpec, ParamError};
+use model_core::{Actuator, ActuatorParams, ActuatorState, Effect, ModelSpec, ParamError, StepError};
 
+use crate::tick::{RawSample, TickOutput};
 use crate::units::{AdcCode, Amps, Calibration, Micrometres, Volts};
-use crate::{RawSample, TickOutput};
 
-/// Injected faults.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Injected {
-    /// Displacement probe unplugged (input pulled to 0 V).
-    pub probe_disconnected: bool,
-    /// Displacement code frozen at its present value.
-    pub probe_frozen: bool,
-    /// A gate-drive fault holds the bridge at full positive voltage while it is enabled (the
-    /// master output enable still switches it off).
-    pub bridge_stuck_on: bool,
+/// Most faults a rig holds in its schedule.
+pub const MAX_INJECTIONS: usize = 8;
+
+/// What the displacement probe reads at the actuator's rest position [µm].
+const PROBE_AT_REST_UM: f64 = 20.0;
+
+/// What the bridge puts across the coil for one tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CoilDrive {
+    /// Bridge enabled: this voltage [V].
+    Voltage(f64),
+    /// Bridge off: the body diodes return the coil current into the bus until it reaches zero.
+    Freewheel {
+        /// The voltage the diodes conduct against [V].
+        bus_v: f64,
+    },
 }
 
-/// The simulated rig.
-pub struct SimRig {
+/// The coil and actuator a [`Rig`] drives.
+pub trait Plant {
+    /// Why a step failed.
+    type Error;
+    /// Holds `drive` across the coil for one tick.
+    fn step(&mut self, drive: CoilDrive) -> Result<(), Self::Error>;
+    /// Coil current [A].
+    fn current_a(&self) -> f64;
+    /// Displacement [µm] (absolute: the rig takes its zero at rest).
+    fn displacement_um(&self) -> f64;
+}
+
+/// A fault of the sensors, the supply or the power stage.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Fault {
+    /// The displacement probe's cable is unplugged: its input is pulled to 0 V.
+    DisplacementDropout,
+    /// The displacement code freezes at the value it has when the fault starts.
+    DisplacementFrozen,
+    /// The current-sense amplifier loses its supply: its output reads 0 V.
+    CurrentSenseDropout,
+    /// The probe is mounted off-centre by this much [µm]: the signal clips at the ADC's full scale.
+    DisplacementSaturation {
+        /// Extra probe offset [µm].
+        offset_um: f64,
+    },
+    /// Broadband interference on the displacement channel [µm rms].
+    NoiseBurst {
+        /// Noise level [µm rms].
+        rms_um: f64,
+    },
+    /// The supply folds back: the bus sags to this voltage (the board measures it).
+    BusSag {
+        /// Bus voltage during the fault [V].
+        bus_v: f64,
+    },
+    /// The power stage cannot follow: its output clips at ± this voltage (amplifier saturation).
+    AmplifierSaturation {
+        /// Largest output magnitude [V].
+        max_v: f64,
+    },
+    /// A gate-drive fault holds the bridge at full positive voltage while it is enabled (the
+    /// master output enable still switches it off).
+    BridgeStuckOn,
+}
+
+/// A fault active for ticks `from..from + ticks`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Injection {
+    /// What breaks.
+    pub fault: Fault,
+    /// First tick.
+    pub from: u64,
+    /// Duration [ticks] (`u64::MAX`: until the end).
+    pub ticks: u64,
+}
+
+impl Injection {
+    fn active_at(&self, tick: u64) -> bool {
+        tick >= self.from && tick - self.from < self.ticks
+    }
+}
+
+/// The rig: a plant behind the board's bridge and front end, and the faults injected between.
+pub struct Rig<P> {
+    /// The plant (a test may change it mid-run, e.g. short the winding).
+    pub plant: P,
+    /// The front end's calibration.
+    pub calibration: Calibration,
+    /// Nominal bus voltage [V].
+    pub bus_v: f64,
+    /// Faults to inject.
+    pub injections: heapless::Vec<Injection, MAX_INJECTIONS>,
+    tick: u64,
+    rest_um: f64,
+    frozen: Option<AdcCode>,
+    noise: Noise,
+}
+
+impl<P: Plant> Rig<P> {
+    /// `plant` at rest; the probe reads 20 µm there, the bus is 24 V. `seed` fixes the noise.
+    pub fn new(plant: P, seed: u64) -> Self {
+        let rest_um = plant.displacement_um();
+        Self {
+            plant,
+            calibration: Calibration::REFERENCE_BOARD,
+            bus_v: 24.0,
+            injections: heapless::Vec::new(),
+            tick: 0,
+            rest_um,
+            frozen: None,
+            noise: Noise(seed),
+        }
+    }
+
+    fn active(&self) -> impl Iterator<Item = Fault> + '_ {
+        let t = self.tick;
+        self.injections.iter().filter(move |j| j.active_at(t)).map(|j| j.fault)
+    }
+
+    /// Coil current [A] (the truth).
+    pub fn current_a(&self) -> f64 {
+        self.plant.current_a()
+    }
+
+    /// Displacement from rest [µm] (the truth, without the probe).
+    pub fn displacement_from_rest_um(&self) -> f64 {
+        self.plant.displacement_um() - self.rest_um
+    }
+
+    /// Ticks applied so far.
+    pub fn tick(&self) -> u64 {
+        self.tick
+    }
+
+    fn bus_now(&self) -> f64 {
+        self.active()
+            .filter_map(|f| if let Fault::BusSag { bus_v } = f { Some(bus_v) } else { None })
+            .fold(self.bus_v, f64::min)
+    }
+
+    /// What the ADC converts at the start of this tick.
+    pub fn sample(&mut self) -> RawSample {
+        let mut y = self.displacement_from_rest_um() + PROBE_AT_REST_UM;
+        let mut current = self.calibration.current_code(Amps(self.current_a() as f32));
+        let (mut dropout, mut frozen) = (false, false);
+        let t = self.tick;
+        // Fields borrowed apart: the injections are read while the noise generator advances.
+        for j in self.injections.iter().filter(|j| j.active_at(t)) {
+            match j.fault {
+                Fault::DisplacementSaturation { offset_um } => y += offset_um,
+                Fault::NoiseBurst { rms_um } => y += rms_um * self.noise.gaussian(),
+                Fault::DisplacementDropout => dropout = true,
+                Fault::DisplacementFrozen => frozen = true,
+                Fault::CurrentSenseDropout => current = AdcCode(0),
+                _ => {}
+            }
+        }
+        let mut displacement =
+            if dropout { AdcCode(0) } else { self.calibration.displacement_code(Micrometres(y as f32)) };
+        if frozen {
+            displacement = *self.frozen.get_or_insert(displacement);
+        } else {
+            self.frozen = None;
+        }
+        RawSample { current, displacement, bus: Volts(self.bus_now() as f32) }
+    }
+
+    /// Applies one tick's bridge command for one tick period.
+    pub fn apply(&mut self, out: &TickOutput) -> Result<(), P::Error> {
+        let bus = self.bus_now();
+        // A clipping power stage limits whatever it puts across the coil.
+        let limit = self
+            .active()
+            .filter_map(|f| if let Fault::AmplifierSaturation { max_v } = f { Some(max_v) } else { None })
+            .fold(f64::INFINITY, f64::min);
+        let drive = if !out.bridge_enabled {
+            CoilDrive::Freewheel { bus_v: bus.min(limit) }
+        } else if self.active().any(|f| f == Fault::BridgeStuckOn) {
+            CoilDrive::Voltage(bus.clamp(-limit, limit))
+        } else {
+            CoilDrive::Voltage((out.duty.clamp(-1.0, 1.0) as f64 * bus).clamp(-limit, limit))
+        };
+        self.plant.step(drive)?;
+        self.tick += 1;
+        Ok(())
+    }
+}
+
+/// Interference for [`Fault::NoiseBurst`]: SplitMix64, and the sum of twelve uniforms less six
+/// (unit variance, near-Gaussian, and no logarithm needed without std).
+struct Noise(u64);
+
+impl Noise {
+    fn uniform(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        (z ^ (z >> 31)) as f64 / 18_446_744_073_709_551_616.0 // 2^64
+    }
+
+    fn gaussian(&mut self) -> f64 {
+        (0..12).map(|_| self.uniform()).sum::<f64>() - 6.0
+    }
+}
+
+/// The no_std plant: the coil's R–L electrics, integrated exactly over the tick, driving a
+/// model-core actuator with the tick's mean current.
+pub struct CoilActuator {
     /// Coil resistance [Ω] (change it to simulate a shorted winding).
     pub coil_resistance_ohm: f32,
     coil_inductance_h: f32,
     tick_s: f32,
-    /// Bus voltage [V].
-    pub bus: Volts,
-    /// Front end.
-    pub calibration: Calibration,
-    /// Injected faults.
-    pub injected: Injected,
     actuator: Actuator,
     state: ActuatorState,
-    current: f32,
+    current_a: f32,
     displacement_m: f32,
-    probe_offset_um: f32,
-    frozen: Option<AdcCode>,
 }
 
-impl SimRig {
-    /// A rig whose actuator is `spec` (no `amp`: the coil current drives it) with `params`,
-    /// the coil of 000 Table 1 (6 Ω, 6 mH) on a 24 V bus, stepped at `tick_s`. The probe reads
-    /// 20 µm at rest.
+impl CoilActuator {
+    /// The coil of 000 Table 1 (6 Ω, 6 mH) driving `spec` (no `amp`: the coil current drives it)
+    /// with `params`, stepped at `tick_s`.
     pub fn new(spec: ModelSpec, params: &ActuatorParams, tick_s: f32) -> Result<Self, ParamError> {
         let mut p = *params;
         p.dt_s = tick_s;
-        let actuator = Actuator::new(spec.without(model_core::Effect::AmplifierDynamics), &p)?;
+        let actuator = Actuator::new(spec.without(Effect::AmplifierDynamics), &p)?;
         let state = actuator.rest_state();
-        let rest_um = state.mech.displacement_m * 1e6;
         Ok(Self {
             coil_resistance_ohm: 6.0,
             coil_inductance_h: 6e-3,
             tick_s,
-            bus: Volts(24.0),
-            calibration: Calibration::REFERENCE_BOARD,
-            injected: Injected::default(),
             actuator,
             state,
-            current: 0.0,
+            current_a: 0.0,
             displacement_m: state.mech.displacement_m,
-            probe_offset_um: 20.0 - rest_um,
-            frozen: None,
         })
     }
+}
 
-    /// Actuator displacement [µm] relative to its rest position (the truth, without the probe).
-    pub fn displacement_from_rest_um(&self) -> f32 {
-        self.displacement_m * 1e6 + self.probe_offset_um - 20.0
-    }
+impl Plant for CoilActuator {
+    type Error = StepError;
 
-    /// Coil current [A].
-    pub fn current(&self) -> Amps {
-        Amps(self.current)
-    }
-
-    /// What the ADC converts at the start of a tick.
-    pub fn sample(&mut self) -> RawSample {
-        let y = self.displacement_m * 1e6 + self.probe_offset_um;
-        let mut disp = self.calibration.displacement_code(Micrometres(y));
-        if self.injected.probe_disconnected {
-            disp = AdcCode(0);
-        }
-        if self.injected.probe_frozen {
-            disp = *self.frozen.get_or_insert(disp);
-        } else {
-            self.frozen = None;
-        }
-        RawSample {
-            current: self.calibration.current_code(Amps(self.current)),
-            displacement: disp,
-            bus: self.bus,
-        }
-    }
-
-    /// Applies a tick's bridge command for one tick period.
-    pub fn apply(&mut self, out: &TickOutput) {
+    fn step(&mut self, drive: CoilDrive) -> Result<(), StepError> {
         let r = self.coil_resistance_ohm.max(1e-3);
         let p = model_core::math::exp(-self.tick_s * r / self.coil_inductance_h);
-        let i0 = self.current;
-        let v = if out.bridge_enabled && self.injected.bridge_stuck_on {
-            self.bus.0
-        } else if out.bridge_enabled {
-            out.duty.clamp(-1.0, 1.0) * self.bus.0
-        } else if i0 != 0.0 {
-            // Bridge off: the coil discharges into the bus through the body diodes.
-            -i0.signum() * self.bus.0
-        } else {
-            0.0
+        let i0 = self.current_a;
+        let (v, freewheel) = match drive {
+            CoilDrive::Voltage(v) => (v as f32, false),
+            CoilDrive::Freewheel { bus_v } if i0 != 0.0 => (-i0.signum() * bus_v as f32, true),
+            CoilDrive::Freewheel { .. } => (0.0, true),
         };
         let mut i1 = p * i0 + (1.0 - p) * v / r;
-        if !out.bridge_enabled && i0 * i1 < 0.0 {
+        if freewheel && i0 * i1 < 0.0 {
             i1 = 0.0; // the diodes stop conducting at zero current
         }
-        self.current = i1;
+        self.current_a = i1;
         // The actuator sees the tick's mean current.
-        if let Ok(o) = self.actuator.step(&mut self.state, 0.5 * (i0 + i1)) {
-            self.displacement_m = o.displacement_m;
-        }
+        self.displacement_m = self.actuator.step(&mut self.state, 0.5 * (i0 + i1))?.displacement_m;
+        Ok(())
+    }
+
+    fn current_a(&self) -> f64 {
+        self.current_a as f64
+    }
+
+    fn displacement_um(&self) -> f64 {
+        (self.displacement_m * 1e6) as f64
     }
 }

@@ -4,9 +4,10 @@
 
 use gma_control::current::{CurrentLoop, CurrentLoopParams};
 use gma_control::faults::FaultCode;
-use gma_control::sim::SimRig;
+use gma_control::pid::PidParams;
+use gma_control::sim::{CoilActuator, Fault, Injection, Rig};
 use gma_control::units::{Amps, Volts};
-use gma_control::{ControlConfig, Controller, PidGains, TickOutput};
+use gma_control::{ControlConfig, Controller, TickOutput};
 use model_core::{ActuatorParams, ModelSpec};
 
 const TICK: f32 = 1e-4;
@@ -15,17 +16,26 @@ fn spec(s: &str) -> ModelSpec {
     ModelSpec::parse(s).unwrap()
 }
 
+fn rig(model: ModelSpec, params: &ActuatorParams) -> Rig<CoilActuator> {
+    Rig::new(CoilActuator::new(model, params, TICK).unwrap(), 1)
+}
+
+/// `fault` from the rig's present tick on.
+fn inject(rig: &mut Rig<CoilActuator>, fault: Fault) {
+    rig.injections.push(Injection { fault, from: rig.tick(), ticks: u64::MAX }).unwrap();
+}
+
 #[test]
 fn current_step_settles_in_five_ticks_without_overshoot() {
-    let mut rig = SimRig::new(spec("ja"), &ActuatorParams::TERFENOL_DEMO, TICK).unwrap();
+    let mut rig = rig(spec("ja"), &ActuatorParams::TERFENOL_DEMO);
     let mut pi = CurrentLoop::new(CurrentLoopParams::REFERENCE).unwrap();
     let target = 0.5;
     let mut trace = Vec::new();
     for _ in 0..20 {
-        let i = rig.current();
-        let cmd = pi.step(Amps(target), i, rig.bus);
-        rig.apply(&TickOutput { duty: cmd.duty, bridge_enabled: true, frame: Default::default() });
-        trace.push(rig.current().0);
+        let i = Amps(rig.current_a() as f32);
+        let cmd = pi.step(Amps(target), i, Volts(rig.bus_v as f32));
+        rig.apply(&TickOutput { duty: cmd.duty, bridge_enabled: true, frame: Default::default() }).unwrap();
+        trace.push(rig.current_a() as f32);
     }
     let overshoot = (trace.iter().fold(f32::MIN, |m, &v| m.max(v)) - target) / target;
     println!("current step 0 → {target} A: {:?}", &trace[..8]);
@@ -37,9 +47,9 @@ fn current_step_settles_in_five_ticks_without_overshoot() {
 }
 
 /// Tracks the reference for 0.3 s; returns the RMS error over the last 0.2 s in % of amplitude.
-fn tracking_rms_percent(pid: Option<PidGains>, plant_params: &ActuatorParams) -> f32 {
+fn tracking_rms_percent(pid: Option<PidParams>, plant_params: &ActuatorParams) -> f32 {
     let model = spec("ja+eddy+mech");
-    let mut rig = SimRig::new(model, plant_params, TICK).unwrap();
+    let mut rig = rig(model, plant_params);
     let cfg = ControlConfig { pid, ..ControlConfig::REFERENCE };
     let mut ctl = Controller::new(cfg, model, &ActuatorParams::TERFENOL_DEMO);
     let (mut sum2, mut n) = (0.0f64, 0usize);
@@ -53,11 +63,11 @@ fn tracking_rms_percent(pid: Option<PidGains>, plant_params: &ActuatorParams) ->
         );
         if k >= 1000 {
             // This tick's reference against the true displacement at the same instant.
-            let e = y_now - out.frame.reference_um;
-            sum2 += (e * e) as f64;
+            let e = y_now - out.frame.reference_um as f64;
+            sum2 += e * e;
             n += 1;
         }
-        rig.apply(&out);
+        rig.apply(&out).unwrap();
     }
     ((sum2 / n as f64).sqrt() / 12.5 * 100.0) as f32
 }
@@ -82,14 +92,18 @@ fn compensated_tracking_of_a_100_hz_sine() {
     );
 }
 
-fn run_until_fault(ctl: &mut Controller, rig: &mut SimRig, ticks: usize) -> Option<(usize, TickOutput)> {
+fn run_until_fault(
+    ctl: &mut Controller,
+    rig: &mut Rig<CoilActuator>,
+    ticks: usize,
+) -> Option<(usize, TickOutput)> {
     for k in 0..ticks {
         let raw = rig.sample();
         let out = ctl.tick(&raw);
         if !out.bridge_enabled {
             return Some((k, out));
         }
-        rig.apply(&out);
+        rig.apply(&out).unwrap();
     }
     None
 }
@@ -97,12 +111,12 @@ fn run_until_fault(ctl: &mut Controller, rig: &mut SimRig, ticks: usize) -> Opti
 #[test]
 fn overcurrent_trips_in_the_tick_that_sees_it() {
     let model = spec("ja+eddy+mech");
-    let mut rig = SimRig::new(model, &ActuatorParams::TERFENOL_DEMO, TICK).unwrap();
+    let mut rig = rig(model, &ActuatorParams::TERFENOL_DEMO);
     let mut ctl = Controller::new(ControlConfig::REFERENCE, model, &ActuatorParams::TERFENOL_DEMO);
     run_until_fault(&mut ctl, &mut rig, 200);
     // A gate-drive fault holds the bridge on with a partly shorted winding: the current shoots up.
-    rig.injected.bridge_stuck_on = true;
-    rig.coil_resistance_ohm = 1.0;
+    inject(&mut rig, Fault::BridgeStuckOn);
+    rig.plant.coil_resistance_ohm = 1.0;
     let mut last_ok_current = 0.0;
     let mut tripped = None;
     for k in 0..200 {
@@ -114,7 +128,7 @@ fn overcurrent_trips_in_the_tick_that_sees_it() {
             break;
         }
         last_ok_current = i;
-        rig.apply(&out);
+        rig.apply(&out).unwrap();
     }
     let (k, i, out) = tripped.expect("no trip");
     assert!(
@@ -128,12 +142,12 @@ fn overcurrent_trips_in_the_tick_that_sees_it() {
         FaultCode(out.frame.faults).names().collect::<Vec<_>>()
     );
     // Latched: stays off even when the current has decayed, until the explicit command.
-    rig.coil_resistance_ohm = 6.0;
-    rig.injected.bridge_stuck_on = false;
+    rig.plant.coil_resistance_ohm = 6.0;
+    rig.injections.clear();
     for _ in 0..50 {
         let out = ctl.tick(&rig.sample());
         assert!(!out.bridge_enabled);
-        rig.apply(&out);
+        rig.apply(&out).unwrap();
     }
     assert!(ctl.clear_faults(&rig.sample()).is_clear());
     assert!(ctl.tick(&rig.sample()).bridge_enabled);
@@ -145,14 +159,13 @@ fn probe_disconnect_and_frozen_probe_are_caught() {
     for (what, code) in
         [("disconnected", FaultCode::DISPLACEMENT_SENSOR_RANGE), ("frozen", FaultCode::DISPLACEMENT_STUCK)]
     {
-        let mut rig = SimRig::new(model, &ActuatorParams::TERFENOL_DEMO, TICK).unwrap();
+        let mut rig = rig(model, &ActuatorParams::TERFENOL_DEMO);
         let mut ctl = Controller::new(ControlConfig::REFERENCE, model, &ActuatorParams::TERFENOL_DEMO);
         assert!(run_until_fault(&mut ctl, &mut rig, 300).is_none());
-        if what == "disconnected" {
-            rig.injected.probe_disconnected = true;
-        } else {
-            rig.injected.probe_frozen = true;
-        }
+        inject(
+            &mut rig,
+            if what == "disconnected" { Fault::DisplacementDropout } else { Fault::DisplacementFrozen },
+        );
         let (k, out) = run_until_fault(&mut ctl, &mut rig, 2000).expect("no fault");
         assert!(FaultCode(out.frame.faults).contains(code), "{what}: code {:?}", out.frame.faults);
         if what == "disconnected" {
@@ -173,7 +186,7 @@ fn a_corrupt_parameter_set_never_enables_the_bridge() {
     let model = spec("ja+eddy+mech");
     let mut bad = ActuatorParams::TERFENOL_DEMO;
     bad.ja.k_a_per_m = f32::NAN;
-    let mut rig = SimRig::new(model, &ActuatorParams::TERFENOL_DEMO, TICK).unwrap();
+    let mut rig = rig(model, &ActuatorParams::TERFENOL_DEMO);
     let mut ctl = Controller::new(ControlConfig::REFERENCE, model, &bad);
     let out = ctl.tick(&rig.sample());
     assert!(!out.bridge_enabled);
@@ -182,5 +195,13 @@ fn a_corrupt_parameter_set_never_enables_the_bridge() {
         ctl.clear_faults(&rig.sample()).contains(FaultCode::PARAMETERS_INVALID),
         "a bad parameter set stays latched"
     );
-    let _ = Volts(0.0);
+    // A PID design that does not validate is refused the same way.
+    let pid = ControlConfig::REFERENCE.pid.map(|p| PidParams { ki: f32::NAN, ..p });
+    let mut ctl = Controller::new(
+        ControlConfig { pid, ..ControlConfig::REFERENCE },
+        model,
+        &ActuatorParams::TERFENOL_DEMO,
+    );
+    let out = ctl.tick(&rig.sample());
+    assert!(!out.bridge_enabled && FaultCode(out.frame.faults).contains(FaultCode::PARAMETERS_INVALID));
 }

@@ -122,9 +122,10 @@ fn run(case: &str) -> Result<f32, &'static str> {
             // The whole board tick (gma-control): calibration, faults, reference, compensator
             // (ja+eddy), PID, current loop, telemetry frame; the simulated rig runs outside the
             // markers.
-            use gma_control::{sim::SimRig, ControlConfig, Controller};
+            use gma_control::sim::{CoilActuator, Rig};
+            use gma_control::{ControlConfig, Controller};
             let spec = ModelSpec::parse("ja+eddy+mech").map_err(|_| "bad spec")?;
-            let mut rig = SimRig::new(spec, &p, 1e-4).map_err(err)?;
+            let mut rig = Rig::new(CoilActuator::new(spec, &p, 1e-4).map_err(err)?, 1);
             let mut ctl = Controller::new(ControlConfig::REFERENCE, spec, &p);
             let mut acc = 0.0;
             for _ in 0..STEPS {
@@ -133,7 +134,7 @@ fn run(case: &str) -> Result<f32, &'static str> {
                 let out = ctl.tick(black_box(&raw));
                 bench_end();
                 acc += black_box(out.duty);
-                rig.apply(&out);
+                rig.apply(&out).map_err(|_| "rig input out of range")?;
             }
             acc
         }

@@ -40,18 +40,19 @@ fn compare(name: &str, got: &[f32], expected: &[f32], rtol: f32, perturb: bool) 
 /// must trip within one tick, and a corrupt parameter set that must never enable the bridge.
 fn closed_loop(force_fail: bool) -> u32 {
     use gma_control::faults::FaultCode;
-    use gma_control::sim::SimRig;
+    use gma_control::sim::{CoilActuator, Fault, Injection, Rig};
     use gma_control::{ControlConfig, Controller};
     use model_core::{ActuatorParams, ModelSpec};
 
     let mut failures = 0;
     let Ok(spec) = ModelSpec::parse("ja+eddy+mech") else { return 1 };
     let p = ActuatorParams::TERFENOL_DEMO;
-    let Ok(mut rig) = SimRig::new(spec, &p, 1e-4) else { return 1 };
+    let Ok(plant) = CoilActuator::new(spec, &p, 1e-4) else { return 1 };
+    let mut rig = Rig::new(plant, 1);
     let mut ctl = Controller::new(ControlConfig::REFERENCE, spec, &p);
     let (mut sum2, mut n) = (0.0f32, 0u32);
     for k in 0..10_000u32 {
-        let y_now = rig.displacement_from_rest_um();
+        let y_now = rig.displacement_from_rest_um() as f32;
         let out = ctl.tick(&rig.sample());
         if !out.bridge_enabled {
             hprintln!("qemu-smoke: FAIL closed loop tripped at tick {}: faults {:#x}", k, out.frame.faults);
@@ -62,7 +63,10 @@ fn closed_loop(force_fail: bool) -> u32 {
             sum2 += e * e;
             n += 1;
         }
-        rig.apply(&out);
+        if rig.apply(&out).is_err() {
+            hprintln!("qemu-smoke: FAIL closed loop: rig input out of range at tick {}", k);
+            return failures + 1;
+        }
     }
     let rms = model_core::math::sqrt(sum2 / n as f32) / 12.5 * 100.0;
     let limit = if force_fail { 0.0 } else { 1.0 };
@@ -75,7 +79,10 @@ fn closed_loop(force_fail: bool) -> u32 {
         hprintln!("qemu-smoke: FAIL closed-loop tracking");
         failures += 1;
     }
-    rig.injected.probe_disconnected = true;
+    let unplugged = Injection { fault: Fault::DisplacementDropout, from: rig.tick(), ticks: u64::MAX };
+    if rig.injections.push(unplugged).is_err() {
+        return failures + 1;
+    }
     let out = ctl.tick(&rig.sample());
     if out.bridge_enabled || !FaultCode(out.frame.faults).contains(FaultCode::DISPLACEMENT_SENSOR_RANGE) {
         hprintln!(
@@ -89,7 +96,7 @@ fn closed_loop(force_fail: bool) -> u32 {
     let mut bad = p;
     bad.ja.k_a_per_m = f32::NAN;
     let mut ctl = Controller::new(ControlConfig::REFERENCE, spec, &bad);
-    rig.injected.probe_disconnected = false;
+    rig.injections.clear();
     let out = ctl.tick(&rig.sample());
     if out.bridge_enabled || !FaultCode(out.frame.faults).contains(FaultCode::PARAMETERS_INVALID) {
         hprintln!("qemu-smoke: FAIL corrupt parameter set enabled the bridge");

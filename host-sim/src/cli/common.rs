@@ -14,6 +14,7 @@ use crate::loops::{self, LoopFile};
 use crate::params;
 use crate::recording::Recording;
 use crate::search::SearchOptions;
+use crate::warning::Warning;
 
 /// 200 s at the board's 10 kHz: about 100 MB for a recording with every column.
 pub const DEFAULT_MAX_SAMPLES: usize = 2_000_000;
@@ -110,6 +111,18 @@ impl ModelFiles {
     }
 }
 
+impl ModelFiles {
+    /// Says on stderr that `--time-limit` cut the work short, when it did.
+    pub fn warn_if_time_limited(&self, reached: bool) {
+        if reached {
+            eprintln!(
+                "gma: warning: {}",
+                Warning::TimeLimit { seconds: self.time_limit.unwrap_or(f64::NAN) }
+            );
+        }
+    }
+}
+
 /// A `--time-limit` value as a duration, or why it is not one.
 pub fn time_limit(seconds: f64) -> Result<Duration> {
     if !(seconds.is_finite() && seconds > 0.0 && seconds <= MAX_TIME_LIMIT_S) {
@@ -160,12 +173,4 @@ pub fn read_recording(input: Input, max_samples: usize) -> Result<Recording> {
         );
     }
     Ok(r)
-}
-
-/// The warning printed when `--time-limit` cut a search short.
-pub fn warn_time_limited(limit: Option<f64>) {
-    eprintln!(
-        "gma: warning: --time-limit {} s reached: the result is the best found so far, not a converged fit",
-        limit.unwrap_or(f64::NAN)
-    );
 }

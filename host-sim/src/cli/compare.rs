@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 use model_core::{ActuatorParams, ModelSpec};
-use serde_json::json;
 
 use super::common::{check_max_samples, read_data, Data, DEFAULT_MAX_SAMPLES};
 use crate::files::{check_outputs, display, open_all, output_folder, unique_stems, Input};
@@ -16,6 +15,7 @@ use crate::params;
 use crate::plots::{self, Chart};
 use crate::recording::Recording;
 use crate::report;
+use crate::results::{CompareSummary, FileScoreRow};
 
 /// Options of `gma compare`.
 #[derive(Args)]
@@ -67,15 +67,6 @@ pub fn run(a: &CompareArgs) -> Result<()> {
     }
 }
 
-/// Draws every chart first and writes them only when all succeeded: a failing file leaves no
-/// partial set of plots.
-fn write_all(charts: &[(PathBuf, Chart)]) -> Result<()> {
-    for (path, chart) in charts {
-        plots::write(path, chart)?;
-    }
-    Ok(())
-}
-
 fn plot_path(a: &CompareArgs, stem: &str, kind: &str) -> PathBuf {
     a.out_dir.join(format!("{stem}-{kind}.{}", a.format))
 }
@@ -92,7 +83,6 @@ fn compare_recordings(
     }
     let model = [(spec, *p)];
     let mut rows = Vec::new();
-    let mut lines = Vec::new();
     let mut charts = Vec::new();
     let mut total = 0.0;
     for (rec, stem) in recs.iter().zip(stems) {
@@ -110,26 +100,31 @@ fn compare_recordings(
             written.push(display(&out));
             charts.push((out, chart));
         }
-        lines.push(format!(
-            "{:50} NRMSE {:6.3} %  offset {:8.3} µm  plots: {}",
-            rec.name,
-            sc.nrmse * 100.0,
-            sc.offset_um,
-            written.join(", ")
-        ));
-        rows.push(json!({"file": rec.name, "channel": "displacement", "nrmse": sc.nrmse, "offset_um": sc.offset_um, "plots": written}));
+        rows.push(FileScoreRow {
+            offset_um: Some(sc.offset_um),
+            plots: Some(written),
+            ..FileScoreRow::new(&rec.name, None, "displacement", sc.nrmse)
+        });
         if let Some(c) = sc.nrmse_current {
-            rows.push(json!({"file": rec.name, "channel": "current", "nrmse": c}));
+            rows.push(FileScoreRow::new(&rec.name, None, "current", c));
         }
     }
-    write_all(&charts)?;
-    for l in lines {
-        say!(a.json, "{l}");
+    report_all(
+        a,
+        &charts,
+        CompareSummary { model: spec.to_string(), nrmse: total / recs.len() as f64, files: rows },
+    )
+}
+
+/// Writes every chart (only now that all were drawn: a failing file leaves no partial set of
+/// plots), then the summary.
+fn report_all(a: &CompareArgs, charts: &[(PathBuf, Chart)], summary: CompareSummary) -> Result<()> {
+    for (path, chart) in charts {
+        plots::write(path, chart)?;
     }
-    let mean = total / recs.len() as f64;
-    say!(a.json, "mean NRMSE {:.3} % over {} file(s), model `{spec}`", mean * 100.0, recs.len());
+    say!(a.json, "{summary}");
     if a.json {
-        out!("{}", json!({"model": spec.to_string(), "nrmse": mean, "files": rows}));
+        out!("{}", serde_json::to_string(&summary)?);
     }
     Ok(())
 }
@@ -147,7 +142,6 @@ fn compare_loops(
     let values = model.values_of(p);
     let mut rows = Vec::new();
     let mut charts = Vec::new();
-    let mut text = Vec::new();
     let mut total = 0.0;
     for (f, stem) in files.iter().zip(stems) {
         let h_max = f.h.iter().fold(0.0f64, |m, v| m.max(v.abs()));
@@ -155,29 +149,18 @@ fn compare_loops(
             loops::run(model, &values, &f.h, h_max).map_err(|e| anyhow::anyhow!("{}: {}", f.name, e.0))?;
         let e = fit::nrmse(&f.value, &f.channel_from_m(&m));
         total += e;
-        let (fm, fmod) = (loops::features(&f.h, &f.magnetization()), loops::features(&f.h, &m));
         let out = plot_path(a, stem, "loop");
-        text.push(format!("{:40} NRMSE {:6.3} %  plot: {}", f.name, e * 100.0, display(&out)));
-        text.push(format!("  {:28} {:>14} {:>14}", "", "measured", "model"));
-        for (name, x, y) in [
-            ("coercivity H_c [A/m]", fm.coercivity_a_per_m, fmod.coercivity_a_per_m),
-            ("remanence M_r [A/m]", fm.remanence_a_per_m, fmod.remanence_a_per_m),
-            ("largest |M| [A/m]", fm.max_magnetization_a_per_m, fmod.max_magnetization_a_per_m),
-        ] {
-            text.push(format!("  {name:28} {x:>14.4e} {y:>14.4e}"));
-        }
-        rows.push(json!({"file": f.name, "channel": f.channel.name(), "nrmse": e, "plots": [display(&out)],
-            "measured": {"coercivity_a_per_m": fm.coercivity_a_per_m, "remanence_a_per_m": fm.remanence_a_per_m, "max_magnetization_a_per_m": fm.max_magnetization_a_per_m},
-            "model": {"coercivity_a_per_m": fmod.coercivity_a_per_m, "remanence_a_per_m": fmod.remanence_a_per_m, "max_magnetization_a_per_m": fmod.max_magnetization_a_per_m}}));
+        rows.push(FileScoreRow {
+            plots: Some(vec![display(&out)]),
+            measured: Some(loops::features(&f.h, &f.magnetization())),
+            model: Some(loops::features(&f.h, &m)),
+            ..FileScoreRow::new(&f.name, None, f.channel.name(), e)
+        });
         charts.push((out, loops::chart(f, &m, &spec.to_string())));
     }
-    write_all(&charts)?;
-    for l in text {
-        say!(a.json, "{l}");
-    }
-    let mean = total / files.len() as f64;
-    if a.json {
-        out!("{}", json!({"model": spec.to_string(), "nrmse": mean, "files": rows}));
-    }
-    Ok(())
+    report_all(
+        a,
+        &charts,
+        CompareSummary { model: spec.to_string(), nrmse: total / files.len() as f64, files: rows },
+    )
 }

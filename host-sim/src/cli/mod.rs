@@ -5,7 +5,7 @@
 use std::process::ExitCode;
 
 use anyhow::Result;
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use serde_json::json;
 
 use crate::error::Located;
@@ -30,6 +30,7 @@ mod common;
 mod compare;
 mod demo;
 mod diagnose;
+mod effects;
 mod fit;
 mod mechanics;
 mod record;
@@ -42,19 +43,7 @@ const EXIT_FAILURE: u8 = 1;
 const EXIT_USAGE: u8 = 2;
 
 #[derive(Parser)]
-#[command(
-    name = "gma",
-    version,
-    about = "Model workbench for giant-magnetostrictive (Terfenol-D) actuators",
-    long_about = "Model workbench for giant-magnetostrictive (Terfenol-D) actuators: compare a model \
-                  with measurements, see where it fails, learn which physical effect is missing, add it \
-                  and watch the error fall.\n\nMeasurement CSV columns (by name): time_s [s], command_V, \
-                  current_A, displacement_um, force_N, temperature_C. Model specs are `+`-joined effects: \
-                  linear, saturation|anhysteretic, hysteresis|ja, preisach, eddy_current|eddy, \
-                  mechanical_dynamics|mech, amplifier_dynamics|amp, magnetic_aftereffect|aftereffect, \
-                  thermal_drift|thermal, sensor_delay|delay. File formats, model specs and the JSON \
-                  output: docs/formats.md and docs/cli.md in the source repository."
-)]
+#[command(name = "gma", version, about = "Model workbench for giant-magnetostrictive (Terfenol-D) actuators")]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -88,6 +77,9 @@ enum Command {
     /// and demos.
     #[command(allow_negative_numbers = true)]
     Simulate(simulate::SimulateArgs),
+    /// The physical effects a model spec can name: what each adds, where it acts, and the
+    /// parameters a fit identifies for it (units, ranges, defaults).
+    Effects(effects::EffectsArgs),
     /// Natural frequency, damping ratio and step response of the actuator mechanics
     /// (m ÿ + c ẏ + k y = F, 001 eq. 14–15), discretised exactly at the loop rate.
     #[command(allow_negative_numbers = true)]
@@ -103,15 +95,31 @@ impl Command {
             Command::Report(a) => a.mf.json,
             Command::Compare(a) => a.json,
             Command::Record(a) => a.json,
+            Command::Effects(a) => a.json,
             Command::Demo(_) | Command::Simulate(_) | Command::Mechanics(_) => false,
         }
     }
 }
 
+/// `gma --help`'s description, with the effect names from the registry.
+fn long_about() -> String {
+    format!(
+        "Model workbench for giant-magnetostrictive (Terfenol-D) actuators: compare a model with \
+         measurements, see where it fails, learn which physical effect is missing, add it and watch \
+         the error fall.\n\nMeasurement CSV columns (by name): time_s [s], command_V, current_A, \
+         displacement_um, force_N, temperature_C. Model specs are `+`-joined effects: {} (`gma effects` \
+         describes each). File formats, model specs and the JSON output: docs/formats.md and \
+         docs/cli.md in the source repository.",
+        effects::help_words()
+    )
+}
+
 /// Runs `gma` with the process's arguments; the exit status says how it went.
 pub fn main() -> ExitCode {
     let json_asked = std::env::args_os().any(|a| a == "--json");
-    let cli = match Cli::try_parse() {
+    let parsed =
+        Cli::command().long_about(long_about()).try_get_matches().and_then(|m| Cli::from_arg_matches(&m));
+    let cli = match parsed {
         Ok(cli) => cli,
         Err(e) => {
             // --help and --version are not errors.
@@ -179,6 +187,7 @@ fn run(command: Command) -> Result<()> {
         Command::Report(a) => report::run(&a),
         Command::Record(a) => record::run(&a),
         Command::Simulate(a) => simulate::run(&a),
+        Command::Effects(a) => effects::run(&a),
         Command::Mechanics(a) => mechanics::run(&a),
     }
 }

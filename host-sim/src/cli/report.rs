@@ -6,7 +6,7 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 
-use super::common::{warn_time_limited, Data, ModelFiles};
+use super::common::{Data, ModelFiles};
 use crate::files::{display, write_atomic};
 use crate::{loops, report};
 
@@ -29,28 +29,23 @@ pub fn run(a: &ReportArgs) -> Result<()> {
         Data::Loops(files, _) => {
             let res = loops::fit(loops::LoopModel::from_spec(spec)?, files, p.search_options())?;
             write_atomic(&a.out, loops::html(&spec.to_string(), &res, files)?.as_bytes())?;
-            if res.time_limited {
-                warn_time_limited(a.mf.time_limit);
-            }
+            a.mf.warn_if_time_limited(res.time_limited);
             say!(j, "loop report written to {}", display(&a.out));
             if j {
                 out!(
                     "{}",
-                    json!({"report": display(&a.out), "nrmse": res.nrmse, "warnings": res.failures.iter().chain(&res.warnings).collect::<Vec<_>>(),
+                    json!({"report": display(&a.out), "nrmse": res.nrmse, "warnings": res.warnings.iter().map(|w| w.to_string()).collect::<Vec<_>>(),
                            "time_limit_reached": res.time_limited})
                 );
             }
         }
         Data::Recordings(fit_files, val_files) => {
-            let rungs = report::ladder(spec, &p.init, fit_files, val_files, p.opts, |r| {
-                super::diagnose::print(j, &r.diagnosis)
-            })?;
+            let rungs =
+                report::ladder(spec, &p.init, fit_files, val_files, p.opts, |r| say!(j, "{}", r.diagnosis))?;
             let time_limited = rungs.iter().any(|r| r.diagnosis.time_limited);
             let html = report::html(&format!("gma report — {spec}"), &rungs, fit_files, val_files, "")?;
             write_atomic(&a.out, html.as_bytes())?;
-            if time_limited {
-                warn_time_limited(a.mf.time_limit);
-            }
+            a.mf.warn_if_time_limited(time_limited);
             say!(j, "report written to {}", display(&a.out));
             if j {
                 out!(

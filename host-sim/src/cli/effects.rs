@@ -1,0 +1,211 @@
+//! `gma effects`: the effect registry — names, what each adds, where it acts, its identified
+//! parameters with units and ranges — as text, as the Markdown tables of docs/cli.md, or JSON.
+
+use anyhow::Result;
+use clap::Args;
+use model_core::effects::{
+    Candidacy, EffectInfo, Inverse, MagnetizationLaw, Param, Scale, Signature, Stage, AMPLIFIER_GAIN,
+    EFFECTS, SHORTHANDS, STRAIN_SCALE,
+};
+use model_core::ActuatorParams;
+use serde_json::json;
+
+/// Options of `gma effects`.
+#[derive(Args)]
+pub struct EffectsArgs {
+    /// The Markdown tables docs/cli.md carries (generated: a test compares them).
+    #[arg(long, conflicts_with = "json")]
+    pub markdown: bool,
+    /// One JSON object on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs `gma effects`.
+pub fn run(a: &EffectsArgs) -> Result<()> {
+    if a.json {
+        out!("{}", to_json());
+    } else if a.markdown {
+        out!("{}", markdown());
+    } else {
+        for e in &EFFECTS {
+            let alias = e.alias.map(|a| format!(" ({a})")).unwrap_or_default();
+            out!("{}{alias}: {} [{}]", e.name, e.adds, stage(e.stage));
+            for p in e.params {
+                out!("    {}", param_line(p));
+            }
+        }
+        for (word, effects) in SHORTHANDS {
+            let names: Vec<&str> = effects.iter().map(|e| e.name()).collect();
+            out!(
+                "{word}: {}",
+                if names.is_empty() { "no effects (the minimal model)".into() } else { names.join(" + ") }
+            );
+        }
+    }
+    Ok(())
+}
+
+fn stage(s: Stage) -> &'static str {
+    match s {
+        Stage::Amplifier => "amplifier",
+        Stage::RodField => "field in the rod",
+        Stage::Magnetization => "magnetization law",
+        Stage::MagnetizationCreep => "magnetization creep",
+        Stage::Mechanics => "mechanics",
+        Stage::Thermal => "thermal strain",
+        Stage::Sensor => "displacement sensor",
+    }
+}
+
+fn signature(s: Signature) -> &'static str {
+    match s {
+        Signature::Lag => "lag −dy/dt",
+        Signature::Resonance => "resonance −ÿ",
+        Signature::Branch => "loop opening sign(dH/dt)",
+        Signature::Cubic => "cubic (H − H̄)³",
+        Signature::Creep => "creep lowpass(y) − y",
+        Signature::Heating => "heating ∫i² dt",
+        Signature::None => "—",
+    }
+}
+
+fn candidacy(c: Candidacy) -> &'static str {
+    match c {
+        Candidacy::Always => "yes",
+        Candidacy::NeedsCommand => "when every file has `command_V`",
+        Candidacy::RefinesLaw => "when it refines the model's law",
+        Candidacy::Never => "no (an alternative law)",
+    }
+}
+
+fn inverse(i: Inverse) -> &'static str {
+    match i {
+        Inverse::Inverted => "inverted",
+        Inverse::LeftToFeedback => "left to feedback",
+    }
+}
+
+fn range(p: &Param) -> String {
+    // Plain numbers where they read well, exponents for the very small and large.
+    let num =
+        |v: f64| if v == 0.0 || (1e-3..1e5).contains(&v.abs()) { format!("{v}") } else { format!("{v:e}") };
+    match p.scale {
+        Scale::Integer => format!("integers {}–{}", p.lo, p.hi),
+        _ => format!("[{}, {}]", num(p.lo), num(p.hi)),
+    }
+}
+
+fn scale(p: &Param) -> &'static str {
+    match p.scale {
+        Scale::Linear => "linear",
+        Scale::Log => "log",
+        Scale::Integer => "scan",
+    }
+}
+
+/// The demo set's value (parameter sets are single precision: shown as such).
+fn default(p: &Param) -> f32 {
+    (p.get)(&ActuatorParams::TERFENOL_DEMO) as f32
+}
+
+fn param_line(p: &Param) -> String {
+    format!("{} [{}] in {} ({}), default {}", p.key, p.unit, range(p), scale(p), default(p))
+}
+
+/// Which parameters are identified when: (condition, parameters).
+fn identified() -> Vec<(String, Vec<&'static Param>)> {
+    let mut rows = vec![("always (least squares)".to_string(), vec![&STRAIN_SCALE])];
+    for law in MagnetizationLaw::ALL {
+        let by = EFFECTS
+            .iter()
+            .filter(|e| e.law == Some(law))
+            .map(|e| format!("`{}`", e.name))
+            .collect::<Vec<_>>();
+        let when = if by.is_empty() {
+            "linear law (no law effect)".to_string()
+        } else {
+            format!("{} law", by.join(", "))
+        };
+        rows.push((when, law.params().iter().collect()));
+    }
+    rows.push(("files without `current_A`, or `amplifier_dynamics`".into(), vec![&AMPLIFIER_GAIN]));
+    for e in EFFECTS.iter().filter(|e| !e.params.is_empty()) {
+        rows.push((format!("`{}`", e.name), e.params.iter().collect()));
+    }
+    rows
+}
+
+/// The two tables of docs/cli.md.
+pub fn markdown() -> String {
+    let mut s = String::from(
+        "| effect | alias | what it adds | stage | residual signature | diagnosis tries it | drive's compensator |\n\
+         |---|---|---|---|---|---|---|\n",
+    );
+    for e in &EFFECTS {
+        s.push_str(&effect_row(e));
+    }
+    s.push_str("\nShorthands: ");
+    let words: Vec<String> = SHORTHANDS
+        .iter()
+        .map(|(w, es)| {
+            let names: Vec<String> = es.iter().map(|e| format!("`{}`", e.name())).collect();
+            format!("`{w}` = {}", if names.is_empty() { "no effects".into() } else { names.join(" + ") })
+        })
+        .collect();
+    s.push_str(&words.join("; "));
+    s.push_str(
+        ".\n\n| identified when | key | unit | search range | scale | default |\n|---|---|---|---|---|---|\n",
+    );
+    for (when, params) in identified() {
+        for (k, p) in params.iter().enumerate() {
+            let w = if k == 0 { when.as_str() } else { "" };
+            s.push_str(&format!(
+                "| {w} | `{}` | {} | {} | {} | {} |\n",
+                p.key,
+                p.unit,
+                range(p),
+                scale(p),
+                default(p)
+            ));
+        }
+    }
+    s.pop();
+    s
+}
+
+fn effect_row(e: &EffectInfo) -> String {
+    format!(
+        "| `{}` | {} | {} | {} | {} | {} | {} |\n",
+        e.name,
+        e.alias.map(|a| format!("`{a}`")).unwrap_or_else(|| "—".into()),
+        e.adds,
+        stage(e.stage),
+        signature(e.signature),
+        candidacy(e.candidacy),
+        inverse(e.inverse)
+    )
+}
+
+fn to_json() -> serde_json::Value {
+    let param = |p: &Param| json!({"key": p.key, "unit": p.unit, "lo": p.lo, "hi": p.hi, "scale": scale(p), "default": default(p)});
+    json!({
+        "effects": EFFECTS.iter().map(|e| json!({
+            "name": e.name, "alias": e.alias, "adds": e.adds, "stage": stage(e.stage),
+            "signature": signature(e.signature), "diagnosis": candidacy(e.candidacy), "compensator": inverse(e.inverse),
+            "params": e.params.iter().map(param).collect::<Vec<_>>(),
+        })).collect::<Vec<_>>(),
+        "shorthands": SHORTHANDS.iter().map(|(w, es)| json!({"word": w, "effects": es.iter().map(|e| e.name()).collect::<Vec<_>>()})).collect::<Vec<_>>(),
+        "identified": identified().iter().map(|(when, ps)| json!({"when": when, "params": ps.iter().map(|p| param(p)).collect::<Vec<_>>()})).collect::<Vec<_>>(),
+    })
+}
+
+/// The effects for `gma --help`: `name|alias` for each, and the shorthands.
+pub fn help_words() -> String {
+    let mut words: Vec<String> = SHORTHANDS.iter().map(|(w, _)| w.to_string()).collect();
+    words.extend(EFFECTS.iter().map(|e| match e.alias {
+        Some(a) => format!("{}|{a}", e.name),
+        None => e.name.to_string(),
+    }));
+    words.join(", ")
+}

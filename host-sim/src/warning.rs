@@ -1,0 +1,68 @@
+//! What makes a result doubtful or invalid, as values: commands print them (`gma: warning: …`),
+//! put them in JSON as text, and decide from [`Warning::invalidates`] whether a result may be
+//! written — never by searching message text.
+
+use std::fmt;
+
+/// One doubt about a result.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Warning {
+    /// A parameter ended within 0.5 % of its search range's end.
+    AtEdge {
+        /// Its name.
+        param: &'static str,
+        /// Its value.
+        value: f64,
+        /// The range.
+        lo: f64,
+        /// The range.
+        hi: f64,
+    },
+    /// Jiles–Atherton with α·M_s/(3a) ≥ 1: the anhysteretic curve is multivalued and the loop an
+    /// artefact of the integration.
+    Multivalued {
+        /// α·M_s/(3a).
+        ratio: f64,
+    },
+    /// The model could not be integrated along a file's path at the result.
+    IntegrationFailed {
+        /// The file.
+        file: String,
+        /// Why.
+        why: String,
+    },
+    /// `--time-limit` stopped the search: the best point so far.
+    TimeLimit {
+        /// The limit [s].
+        seconds: f64,
+    },
+}
+
+impl Warning {
+    /// Whether the result is invalid (nothing may be written from it), not merely doubtful.
+    pub fn invalidates(&self) -> bool {
+        matches!(self, Warning::Multivalued { .. } | Warning::IntegrationFailed { .. })
+    }
+}
+
+impl fmt::Display for Warning {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Warning::AtEdge { param, value, lo, hi } => {
+                write!(f, "`{param}` = {value:.4e} ended at the edge of its search range [{lo:.3e}, {hi:.3e}]")
+            }
+            Warning::Multivalued { ratio } => write!(
+                f,
+                "J–A region α·M_s/(3a) = {ratio:.2} ≥ 1: the mean field makes the anhysteretic curve multivalued; \
+                 the loop there is an artefact of the integration limits, not physics"
+            ),
+            Warning::IntegrationFailed { file, why } => {
+                write!(f, "{file}: the model integration failed at the best parameters: {why}")
+            }
+            Warning::TimeLimit { seconds } => write!(
+                f,
+                "--time-limit {seconds} s reached: the result is the best found so far, not a converged fit"
+            ),
+        }
+    }
+}
