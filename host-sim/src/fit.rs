@@ -242,9 +242,19 @@ pub fn evaluate(spec: ModelSpec, params: &ActuatorParams, files: &[Recording]) -
     Ok(Evaluation { files: files? })
 }
 
-/// [`evaluate_projected`]'s cost, or a large finite number where the model cannot be run.
-fn projected_cost(spec: ModelSpec, params: &ActuatorParams, files: &[Prepared]) -> f64 {
-    let c = evaluate_projected(spec, params, files).map(|e| e.0.cost()).unwrap_or(FAILED_COST);
+/// [`evaluate_projected`]'s cost (λ_s solved within `lambda`, or kept when `None`: `--fix`), or a
+/// large finite number where the model cannot be run.
+fn projected_cost(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    files: &[Prepared],
+    lambda: Option<(f64, f64)>,
+) -> f64 {
+    let c = match lambda {
+        Some(range) => evaluate_projected_in(spec, params, files, range).map(|e| e.0.cost()),
+        None => evaluate_prepared(spec, params, files).map(|e| e.cost()),
+    }
+    .unwrap_or(FAILED_COST);
     if c.is_finite() {
         c
     } else {
@@ -264,6 +274,19 @@ pub fn evaluate_projected(
     spec: ModelSpec,
     params: &ActuatorParams,
     files: &[Prepared],
+) -> Result<(Evaluation, f64)> {
+    evaluate_projected_in(spec, params, files, LAMBDA_RANGE)
+}
+
+/// The range the closed-form λ_s is clamped to (without `--bound`).
+pub const LAMBDA_RANGE: (f64, f64) = (1e-8, 1.0);
+
+/// [`evaluate_projected`] with λ_s clamped to `lambda_range`.
+fn evaluate_projected_in(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    files: &[Prepared],
+    lambda_range: (f64, f64),
 ) -> Result<(Evaluation, f64)> {
     let lambda_ref = params.magnetostriction.lambda_s as f64;
     let thermal = spec.has(Effect::ThermalDrift);
@@ -311,7 +334,7 @@ pub fn evaluate_projected(
             den += w * b * b;
         }
     }
-    let lambda = if den > 0.0 { (num / den).clamp(1e-8, 1.0) } else { lambda_ref };
+    let lambda = if den > 0.0 { (num / den).clamp(lambda_range.0, lambda_range.1) } else { lambda_ref };
     let scores = files
         .iter()
         .zip(parts)
@@ -321,6 +344,46 @@ pub fn evaluate_projected(
         })
         .collect();
     Ok((Evaluation { files: scores }, lambda))
+}
+
+/// Scores `params` as they are (λ_s included; offsets in closed form) on prepared files.
+fn evaluate_prepared(spec: ModelSpec, params: &ActuatorParams, files: &[Prepared]) -> Result<Evaluation> {
+    let files = files
+        .par_iter()
+        .map(|prep| Ok(score(spec, prep.rec, &run_model(spec, params, prep, false)?)))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(Evaluation { files })
+}
+
+/// The residuals the fit's cost is made of, one block per file and channel (displacement with
+/// its offset re-solved, flagged `true`, then the current where [`score`] scores it), each
+/// scaled by 1/(range·√n) so that the sum of squares over a block is its NRMSE²: the cost
+/// ([`Evaluation::cost`]) is the mean of the blocks' sums of squares.
+pub fn residual_blocks(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    files: &[Prepared],
+) -> Result<Vec<(bool, Vec<f64>)>> {
+    fn scaled(measured: &[f64], model: impl Iterator<Item = f64>) -> Vec<f64> {
+        let (lo, hi) = measured.iter().fold((f64::MAX, f64::MIN), |(l, h), &v| (l.min(v), h.max(v)));
+        let w = 1.0 / ((hi - lo).max(1e-12) * (measured.len() as f64).sqrt());
+        measured.iter().zip(model).map(|(a, b)| w * (a - b)).collect()
+    }
+    let per_file: Vec<Vec<(bool, Vec<f64>)>> = files
+        .par_iter()
+        .map(|prep| {
+            let sim = run_model(spec, params, prep, false)?;
+            let s = score(spec, prep.rec, &sim);
+            let meas = prep.rec.displacement_um.as_deref().unwrap_or_default();
+            let mut blocks = vec![(true, scaled(meas, sim.displacement_um.iter().map(|y| y + s.offset_um)))];
+            if s.nrmse_current.is_some() {
+                let i = prep.rec.current_a.as_deref().unwrap_or_default();
+                blocks.push((false, scaled(i, sim.current_a.iter().copied())));
+            }
+            Ok(blocks)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(per_file.into_iter().flatten().collect())
 }
 
 /// Fit settings.
@@ -362,6 +425,138 @@ pub struct FitResult {
     pub evaluations: usize,
     /// The search stopped at the deadline: the best point so far, not a converged fit.
     pub time_limited: bool,
+    /// The continuous parameters identified, with the ranges searched: λ_s first (its
+    /// closed-form range) unless fixed, then the searched ones in the fit's order.
+    pub free: Vec<FreeParam>,
+    /// Parameters held fixed by [`Constraints`], with their values.
+    pub fixed: Vec<(&'static str, f64)>,
+}
+
+/// `gma fit --fix/--bound`: parameters held at their start value, and narrowed search ranges.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Constraints {
+    /// Held at their start value: not searched, not reported as identified.
+    pub fixed: Vec<&'static str>,
+    /// Narrowed ranges (name, lo, hi), within the registry's.
+    pub bounds: Vec<(&'static str, f64, f64)>,
+}
+
+/// Every parameter `spec` identifies on these files: the continuous ones (λ_s first) and the
+/// scanned integers (flagged `true`), with the registry's ranges.
+pub fn identifiable(spec: ModelSpec, files: &[Recording]) -> Result<Vec<(FreeParam, bool)>> {
+    let command_driven = prepare(spec, files)?.iter().any(|p| p.drive != Drive::Current);
+    let mut v: Vec<(FreeParam, bool)> =
+        free_params(spec, command_driven).into_iter().map(|f| (f, false)).collect();
+    v.extend(scanned_params(spec).into_iter().map(|p| (FreeParam::of(p), true)));
+    Ok(v)
+}
+
+impl Constraints {
+    /// Parses `--fix NAME[=VALUE]` and `--bound NAME=LO:HI` for `spec` on `files`; a fixed
+    /// VALUE is written into `init`. Refuses (naming the option) unknown names, a name given
+    /// twice, values outside the registry's range, and ranges that are empty or leave it: a
+    /// bound only narrows.
+    pub fn parse(
+        spec: ModelSpec,
+        files: &[Recording],
+        fix: &[String],
+        bound: &[String],
+        init: &mut ActuatorParams,
+    ) -> Result<Self> {
+        let known = identifiable(spec, files)?;
+        let names = || known.iter().map(|(f, _)| format!("`{}`", f.name())).collect::<Vec<_>>().join(", ");
+        let find = |opt: &str, name: &str| -> Result<(FreeParam, bool)> {
+            let name = name.trim();
+            known.iter().find(|(f, _)| f.name() == name).copied().ok_or_else(|| {
+                anyhow::anyhow!(
+                    "{opt} {}: model `{spec}` identifies no such parameter on these files (it identifies {})",
+                    crate::files::echo(name),
+                    names()
+                )
+            })
+        };
+        let number = |opt: &str, what: &str, text: &str| -> Result<f64> {
+            text.trim().parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(|| {
+                anyhow::anyhow!("{opt} {what}: `{}` is not a number", crate::files::echo(text.trim()))
+            })
+        };
+        let mut c = Constraints::default();
+        let mut seen: Vec<&'static str> = Vec::new();
+        let mut once = |opt: &str, name: &'static str| -> Result<()> {
+            if seen.contains(&name) {
+                bail!("{opt} {name}: `{name}` is already fixed or bounded (give each parameter one --fix or --bound)");
+            }
+            seen.push(name);
+            Ok(())
+        };
+        for arg in fix {
+            let (name, value) = match arg.split_once('=') {
+                Some((n, v)) => (n, Some(v)),
+                None => (arg.as_str(), None),
+            };
+            let (f, integer) = find("--fix", name)?;
+            once("--fix", f.name())?;
+            if let Some(text) = value {
+                let v = number("--fix", f.name(), text)?;
+                let b = f.bound;
+                if !(b.lo..=b.hi).contains(&v) || (integer && v.fract() != 0.0) {
+                    bail!(
+                        "--fix {}={v}: outside its range [{}, {}]{}",
+                        f.name(),
+                        b.lo,
+                        b.hi,
+                        if integer { " of integers" } else { "" }
+                    );
+                }
+                (f.set)(init, v);
+            }
+            c.fixed.push(f.name());
+        }
+        for arg in bound {
+            let Some((name, range)) = arg.split_once('=') else {
+                bail!("--bound {}: expected NAME=LO:HI", crate::files::echo(arg));
+            };
+            let (f, integer) = find("--bound", name)?;
+            once("--bound", f.name())?;
+            let Some((lo, hi)) = range.split_once(':') else {
+                bail!("--bound {}: expected NAME=LO:HI, got `{}`", f.name(), crate::files::echo(range));
+            };
+            let (lo, hi) = (number("--bound", f.name(), lo)?, number("--bound", f.name(), hi)?);
+            let b = f.bound;
+            if lo >= hi {
+                bail!(
+                    "--bound {}={lo}:{hi}: empty range (LO must be below HI; to hold a value use --fix)",
+                    f.name()
+                );
+            }
+            if lo < b.lo || hi > b.hi {
+                bail!(
+                    "--bound {}={lo}:{hi}: leaves the parameter's range [{}, {}] (a bound can only narrow it)",
+                    f.name(),
+                    b.lo,
+                    b.hi
+                );
+            }
+            if integer && (lo.fract() != 0.0 || hi.fract() != 0.0) {
+                bail!("--bound {}={lo}:{hi}: an integer parameter takes integer bounds", f.name());
+            }
+            c.bounds.push((f.name(), lo, hi));
+        }
+        Ok(c)
+    }
+
+    /// Whether `name` is held fixed.
+    pub fn is_fixed(&self, name: &str) -> bool {
+        self.fixed.contains(&name)
+    }
+
+    /// `b` narrowed by a `--bound` on its parameter.
+    pub fn narrow(&self, b: Bound) -> Bound {
+        match self.bounds.iter().find(|(n, _, _)| *n == b.name) {
+            Some(&(_, lo, hi)) => Bound { lo, hi, ..b },
+            None => b,
+        }
+    }
 }
 
 /// The displacement fit's search: one swarm on the first part of each file, then from the two
@@ -395,6 +590,27 @@ pub fn fit_from(
     files: &[Recording],
     opts: FitOptions,
 ) -> Result<FitResult> {
+    fit_constrained(spec, starts, files, opts, &Constraints::default())
+}
+
+/// A scanned integer parameter and its range.
+struct Scanned {
+    key: &'static str,
+    lo: f64,
+    hi: f64,
+    get: fn(&ActuatorParams) -> f64,
+    set: fn(&mut ActuatorParams, f64),
+}
+
+/// As [`fit_from`], with parameters held fixed (at the first start's values) and search ranges
+/// narrowed by `constraints` (`gma fit --fix/--bound`); without constraints the same fit.
+pub fn fit_constrained(
+    spec: ModelSpec,
+    starts: &[ActuatorParams],
+    files: &[Recording],
+    opts: FitOptions,
+    constraints: &Constraints,
+) -> Result<FitResult> {
     if files.is_empty() {
         bail!("no files to fit");
     }
@@ -404,9 +620,24 @@ pub fn fit_from(
     let full = prepare(spec, files)?;
     let command_driven = full.iter().any(|p| p.drive != Drive::Current);
     // λ_s is solved in closed form at every evaluation (see `evaluate_projected`).
-    let free: Vec<FreeParam> =
-        free_params(spec, command_driven).into_iter().filter(|f| f.name() != STRAIN_SCALE.key).collect();
-    let scanned = scanned_params(spec);
+    let c = constraints;
+    let lambda_fixed = c.is_fixed(STRAIN_SCALE.key);
+    let mut lambda_param = FreeParam::of(&STRAIN_SCALE);
+    lambda_param.bound = c.narrow(Bound { lo: LAMBDA_RANGE.0, hi: LAMBDA_RANGE.1, ..lambda_param.bound });
+    let lambda_range = (!lambda_fixed).then_some((lambda_param.bound.lo, lambda_param.bound.hi));
+    let free: Vec<FreeParam> = free_params(spec, command_driven)
+        .into_iter()
+        .filter(|f| f.name() != STRAIN_SCALE.key && !c.is_fixed(f.name()))
+        .map(|f| FreeParam { bound: c.narrow(f.bound), ..f })
+        .collect();
+    let scanned: Vec<Scanned> = scanned_params(spec)
+        .into_iter()
+        .filter(|p| !c.is_fixed(p.key))
+        .map(|p| {
+            let b = c.narrow(FreeParam::of(p).bound);
+            Scanned { key: p.key, lo: b.lo, hi: b.hi, get: p.get, set: p.set }
+        })
+        .collect();
     let d = free.len();
     let swarm_iters = ((PLAN.swarm_iters * opts.effort).round() as u64).max(2);
     let nm_iters = ((PLAN.simplex_iters_per_dim * d as f64 * opts.effort).round() as u64).max(20);
@@ -436,7 +667,7 @@ pub fn fit_from(
         p
     };
     let cost = |base: &ActuatorParams, values: &[f64], fidelity: Fidelity| {
-        projected_cost(spec, &with_values(base, values), data(fidelity))
+        projected_cost(spec, &with_values(base, values), data(fidelity), lambda_range)
     };
     // Integer parameters (the sensor delay): scanned with everything else fixed.
     let scan_integers = |p: &mut ActuatorParams| {
@@ -446,7 +677,7 @@ pub fn fit_from(
                 (sp.set)(&mut q, k as f64);
                 evals.fetch_add(1, Ordering::Relaxed);
                 bar.inc(1);
-                projected_cost(spec, &q, &full)
+                projected_cost(spec, &q, &full, lambda_range)
             });
             (sp.set)(p, best as f64);
         }
@@ -473,7 +704,10 @@ pub fn fit_from(
     let mut params = with_values(&found.context, &found.best);
     scan_integers(&mut params);
     bar.finish_and_clear();
-    let (_, lambda) = evaluate_projected(spec, &params, &full)?;
+    let lambda = match lambda_range {
+        Some(range) => evaluate_projected_in(spec, &params, &full, range)?.1,
+        None => params.magnetostriction.lambda_s as f64,
+    };
     params.magnetostriction.lambda_s = lambda as f32;
     // Never hand back NaN or an invalid set: say the fit failed instead.
     model_core::Actuator::new(spec, &params).map_err(|e| {
@@ -486,9 +720,16 @@ pub fn fit_from(
     if !fit.mean_nrmse().is_finite() {
         bail!("the fit found no parameter set whose simulation stays finite on these recordings");
     }
-    let mut identified: Vec<(&'static str, f64)> = vec![(STRAIN_SCALE.key, lambda)];
+    let mut identified: Vec<(&'static str, f64)> =
+        if lambda_fixed { Vec::new() } else { vec![(STRAIN_SCALE.key, lambda)] };
     identified.extend(free.iter().map(|f| (f.name(), (f.get)(&params))));
     identified.extend(scanned.iter().map(|p| (p.key, (p.get)(&params))));
+    let fixed = identifiable(spec, files)?
+        .into_iter()
+        .filter(|(f, _)| c.is_fixed(f.name()))
+        .map(|(f, _)| (f.name(), (f.get)(&params)))
+        .collect();
+    let free = (!lambda_fixed).then_some(lambda_param).into_iter().chain(free).collect();
     Ok(FitResult {
         spec,
         params,
@@ -496,5 +737,7 @@ pub fn fit_from(
         fit,
         evaluations: evals.load(Ordering::Relaxed) + found.evaluations,
         time_limited: found.time_limited,
+        free,
+        fixed,
     })
 }

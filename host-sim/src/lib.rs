@@ -5,6 +5,7 @@
 
 pub mod cases;
 pub mod cli;
+pub mod columns;
 pub mod diagnose;
 pub mod error;
 pub mod excitation;
@@ -22,4 +23,5 @@ pub mod results;
 pub mod rig;
 pub mod rod_diffusion;
 pub mod search;
+pub mod uncertainty;
 pub mod warning;

@@ -49,6 +49,12 @@ impl FreeParam {
     }
 }
 
+impl std::fmt::Debug for FreeParam {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{:?}", self.bound)
+    }
+}
+
 impl FreeParam {
     /// From the registry's description of a parameter.
     pub fn of(p: &'static Param) -> Self {

@@ -6,6 +6,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 
+use crate::columns::{ColumnMap, ReadOptions, Resample, MAX_GAP_STEPS};
 use crate::error::Located;
 use crate::files::{echo, output_dir, partial_file, persist, Input};
 use crate::located;
@@ -13,6 +14,17 @@ use crate::located;
 /// The recognised columns, in the order the workbench writes them.
 pub const COLUMNS: [&str; 6] =
     ["time_s", "command_V", "current_A", "displacement_um", "force_N", "temperature_C"];
+
+/// What [`Recording::from_reader_with`] read.
+#[derive(Debug, Clone)]
+pub struct ReadOutcome {
+    /// The recording (trimmed, and resampled when asked).
+    pub recording: Recording,
+    /// Data rows in the file at or after the `--trim-start` point (all rows without it).
+    pub rows: u64,
+    /// Of those, the rows kept (at most `max_samples`), before any resampling.
+    pub kept: usize,
+}
 
 /// Largest allowed deviation of one time step from the median step (fraction of the median).
 const MAX_JITTER: f64 = 0.01;
@@ -110,29 +122,43 @@ impl Recording {
         Self::from_reader(&name, input.into_reader(), max_samples)
     }
 
+    /// [`Recording::read_input`] with column mapping, trimming and resampling
+    /// ([`ReadOptions`]).
+    pub fn read_input_with(input: Input, max_samples: usize, opts: &ReadOptions) -> Result<ReadOutcome> {
+        let name = input.name.clone();
+        Self::from_reader_with(&name, input.into_reader(), max_samples, opts)
+    }
+
     /// Parses CSV text; `file` names it in messages.
     pub fn parse(file: &str, text: &[u8]) -> Result<Self> {
         Ok(Self::from_reader(file, text, usize::MAX)?.0)
     }
 
-    /// The streaming reader behind [`Recording::read_window`] and [`Recording::parse`].
+    /// The streaming reader behind [`Recording::read_input`] and [`Recording::parse`]: the file
+    /// as it is, no options. Returns the recording and the number of data rows in the file.
     pub fn from_reader<R: std::io::Read>(file: &str, input: R, max_samples: usize) -> Result<(Self, u64)> {
+        let out = Self::from_reader_with(file, input, max_samples, &ReadOptions::default())?;
+        Ok((out.recording, out.rows))
+    }
+
+    /// The streaming reader with [`ReadOptions`]: mapped columns are read under their canonical
+    /// names and converted cell by cell (the plausibility limits apply after conversion); rows
+    /// before t0 + `trim_start_s` are checked, then dropped; with `resample`, time steps may
+    /// jitter (gaps over [`MAX_GAP_STEPS`] median steps are still refused) and the kept samples
+    /// are interpolated onto a uniform grid.
+    pub fn from_reader_with<R: std::io::Read>(
+        file: &str,
+        input: R,
+        max_samples: usize,
+        opts: &ReadOptions,
+    ) -> Result<ReadOutcome> {
         let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(false).from_reader(input);
         let headers = rdr.headers().map_err(|e| csv_error(file, e))?.clone();
         if headers.iter().all(|h| h.trim().is_empty()) {
             located!(file, Some(1), None; "empty file (no header line); expected a header such as `time_s,current_A,displacement_um`");
         }
-        // Map recognised columns to their index; refuse duplicates.
-        let mut index: [Option<usize>; COLUMNS.len()] = [None; COLUMNS.len()];
-        for (col, h) in headers.iter().enumerate() {
-            let h = h.trim();
-            if let Some(k) = COLUMNS.iter().position(|c| *c == h) {
-                if let Some(first) = index[k] {
-                    located!(file, Some(1), Some(col as u64 + 1); "column `{}` appears twice (columns {} and {})", echo(h), first + 1, col + 1);
-                }
-                index[k] = Some(col);
-            }
-        }
+        let index = locate_columns(file, &headers, opts)?;
+        let maps: [Option<&ColumnMap>; COLUMNS.len()] = std::array::from_fn(|k| opts.map_of(k));
         if index[0].is_none() {
             let found: Vec<&str> = headers.iter().collect();
             let joined = found.join(", ");
@@ -142,18 +168,21 @@ impl Recording {
                 .map(|(_, name)| format!(" — the file seems to separate columns with {name}; measurement files are comma-separated"))
                 .unwrap_or_default();
             located!(file, Some(1), None;
-                "no `time_s` column (header has: {}); recognised columns are {}{hint}",
+                "no `time_s` column (header has: {}); recognised columns are {}{hint}; a time column of \
+                 another name or unit can be mapped, e.g. `--column time_s=time_ms:ms`",
                 echo(&joined),
                 COLUMNS.join(", ")
             );
         }
         if index[1].is_none() && index[2].is_none() {
-            located!(file, Some(1), None; "needs a drive column: `current_A` or `command_V`");
+            located!(file, Some(1), None; "needs a drive column: `current_A` or `command_V` (or one mapped with `--column current_A=HEADER[:UNIT]`)");
         }
         let time_col = index[0].unwrap_or(0) + 1;
         let mut cols: [Vec<f64>; COLUMNS.len()] = Default::default();
-        let mut time = TimeCheck::default();
-        let mut rows: u64 = 0;
+        let mut time = TimeCheck { resample: opts.resample.is_some(), ..TimeCheck::default() };
+        let trim = opts.trim_start_s.unwrap_or(0.0);
+        let mut t0: Option<f64> = None;
+        let (mut rows, mut eligible): (u64, u64) = (0, 0);
         let mut rec = csv::StringRecord::new();
         let mut values = [0.0; COLUMNS.len()];
         while rdr.read_record(&mut rec).map_err(|e| csv_error(file, e))? {
@@ -161,15 +190,19 @@ impl Recording {
             for (k, idx) in index.iter().enumerate() {
                 let Some(c) = *idx else { continue };
                 let raw = rec.get(c).unwrap_or("").trim();
-                values[k] = cell(file, line, c + 1, k, raw)?;
+                values[k] = cell(file, line, c + 1, k, raw, maps[k])?;
             }
             time.push(file, line, time_col, values[0])?;
-            if (rows as usize) < max_samples {
-                for (k, idx) in index.iter().enumerate() {
-                    if idx.is_some() {
-                        cols[k].push(values[k]);
+            let start = *t0.get_or_insert(values[0]);
+            if opts.trim_start_s.is_none() || values[0] >= start + trim {
+                if (eligible as usize) < max_samples {
+                    for (k, idx) in index.iter().enumerate() {
+                        if idx.is_some() {
+                            cols[k].push(values[k]);
+                        }
                     }
                 }
+                eligible += 1;
             }
             rows += 1;
         }
@@ -179,10 +212,11 @@ impl Recording {
                 if rows == 1 { "" } else { "s" }
             );
         }
+        let t_last = time.last.unwrap_or(0.0);
         time.finish(file, time_col)?;
         let take =
             |k: usize, cols: &mut [Vec<f64>; COLUMNS.len()]| index[k].map(|_| std::mem::take(&mut cols[k]));
-        let r = Recording {
+        let mut r = Recording {
             name: file.to_string(),
             command_v: take(1, &mut cols),
             current_a: take(2, &mut cols),
@@ -191,7 +225,54 @@ impl Recording {
             temperature_c: take(5, &mut cols),
             time_s: std::mem::take(&mut cols[0]),
         };
-        Ok((r, rows))
+        if r.len() < 3 {
+            located!(file;
+                "--trim-start {trim} s leaves {} of the file's {rows} samples (the file spans {:.6e} s); at \
+                 least 3 are needed",
+                r.len(),
+                t_last - t0.unwrap_or(0.0)
+            );
+        }
+        let kept = r.len();
+        if let Some(Resample::Linear) = opts.resample {
+            r = r.resampled_linear(max_samples)?;
+        }
+        Ok(ReadOutcome { recording: r, rows: eligible, kept })
+    }
+
+    /// The recording linearly interpolated onto a uniform grid at its median step, from its
+    /// first sample to its last (at most `max_samples` points); every channel alike.
+    pub fn resampled_linear(&self, max_samples: usize) -> Result<Recording> {
+        let dt = self.dt_s();
+        let (t0, t_end) = (self.time_s[0], self.time_s[self.len() - 1]);
+        // The last grid point may fall a rounding error beyond the last sample: allow 1e-9 steps.
+        let n = (((t_end - t0) / dt + 1e-9).floor() as usize + 1).min(max_samples);
+        if n < 3 {
+            located!(self.name; "resampled at the median step {dt:.3e} s, the recording has {n} samples; at least 3 are needed");
+        }
+        let grid: Vec<f64> = (0..n).map(|k| t0 + k as f64 * dt).collect();
+        // For every grid point: the segment [j, j+1] of the original time axis it falls in.
+        let mut at = Vec::with_capacity(n);
+        let mut j = 0;
+        for &t in &grid {
+            while j + 2 < self.len() && self.time_s[j + 1] <= t {
+                j += 1;
+            }
+            let (a, b) = (self.time_s[j], self.time_s[j + 1]);
+            at.push((j, ((t - a) / (b - a)).clamp(0.0, 1.0)));
+        }
+        let interp = |v: &Option<Vec<f64>>| {
+            v.as_ref().map(|v| at.iter().map(|&(j, w)| v[j] + w * (v[j + 1] - v[j])).collect::<Vec<f64>>())
+        };
+        Ok(Recording {
+            name: self.name.clone(),
+            time_s: grid,
+            command_v: interp(&self.command_v),
+            current_a: interp(&self.current_a),
+            displacement_um: interp(&self.displacement_um),
+            force_n: interp(&self.force_n),
+            temperature_c: interp(&self.temperature_c),
+        })
     }
 
     /// Checks every value against the reader's plausible ranges (what this workbench writes, it
@@ -274,23 +355,34 @@ fn median(mut v: Vec<f64>) -> f64 {
 const PLAUSIBLE: [(f64, &str); COLUMNS.len()] =
     [(1e10, "s"), (1e4, "V"), (1e3, "A"), (1e6, "µm"), (1e7, "N"), (1e4, "°C")];
 
-/// One cell: a finite number within the column's plausible range.
-fn cell(file: &str, line: u64, col: usize, k: usize, raw: &str) -> Result<f64> {
-    let name = COLUMNS[k];
+/// One cell: a finite number within the column's plausible range (after conversion from a
+/// mapped column's unit).
+fn cell(file: &str, line: u64, col: usize, k: usize, raw: &str, map: Option<&ColumnMap>) -> Result<f64> {
+    let name = match map {
+        Some(m) => m.label(),
+        None => format!("`{}`", COLUMNS[k]),
+    };
     let at = (Some(line), Some(col as u64));
     if raw.is_empty() {
-        located!(file, at.0, at.1; "column `{name}` is empty");
+        located!(file, at.0, at.1; "column {name} is empty");
     }
     let Ok(v) = raw.parse::<f64>() else {
-        located!(file, at.0, at.1; "column `{name}`: `{}` is not a number", echo(raw));
+        located!(file, at.0, at.1; "column {name}: `{}` is not a number", echo(raw));
     };
     if !v.is_finite() {
-        located!(file, at.0, at.1; "column `{name}`: `{}` is not a finite number", echo(raw));
+        located!(file, at.0, at.1; "column {name}: `{}` is not a finite number", echo(raw));
     }
-    if let Err(why) = plausible(k, v) {
-        located!(file, at.0, at.1; "column `{name}`: {} {why}", echo(raw));
+    let Some(m) = map.filter(|m| !m.unit.is_identity()) else {
+        if let Err(why) = plausible(k, v) {
+            located!(file, at.0, at.1; "column {name}: {} {why}", echo(raw));
+        }
+        return Ok(v);
+    };
+    let converted = m.unit.convert(raw, v);
+    if let Err(why) = plausible(k, converted) {
+        located!(file, at.0, at.1; "column {name}: {} {} = {converted:e} {why}", echo(raw), m.unit.name);
     }
-    Ok(v)
+    Ok(converted)
 }
 
 /// Whether `v` is a plausible value of column `k` (of [`COLUMNS`]); the error says why not.
@@ -333,6 +425,8 @@ const REFERENCE_STEPS: usize = 1024;
 /// median of the first [`REFERENCE_STEPS`] steps.
 #[derive(Default)]
 struct TimeCheck {
+    /// `--resample`: steps may jitter; only gaps over [`MAX_GAP_STEPS`] median steps are refused.
+    resample: bool,
     last: Option<f64>,
     /// Steps (line, step) held until the reference step is known.
     pending: Vec<(u64, f64)>,
@@ -347,7 +441,7 @@ impl TimeCheck {
         }
         let step = t - last;
         match self.reference {
-            Some(dt) => jitter(file, line, col, step, dt),
+            Some(dt) => jitter(file, line, col, step, dt, self.resample),
             None => {
                 self.pending.push((line, step));
                 if self.pending.len() == REFERENCE_STEPS {
@@ -364,11 +458,12 @@ impl TimeCheck {
         let (lo, hi) = (model_core::DT_MIN_S as f64, model_core::DT_MAX_S as f64);
         if !(lo..=hi).contains(&dt) {
             located!(file, self.pending.first().map(|p| p.0), Some(col as u64);
-                "sample period {dt:.3e} s is outside [{lo:e}, {hi:e}] s (is time_s in seconds?)");
+                "sample period {dt:.3e} s is outside [{lo:e}, {hi:e}] s (is time_s in seconds? a time column \
+                 in ms maps with `--column time_s=HEADER:ms`)");
         }
         self.reference = Some(dt);
         for (line, step) in std::mem::take(&mut self.pending) {
-            jitter(file, line, col, step, dt)?;
+            jitter(file, line, col, step, dt, self.resample)?;
         }
         Ok(())
     }
@@ -381,15 +476,72 @@ impl TimeCheck {
     }
 }
 
-fn jitter(file: &str, line: u64, col: usize, step: f64, dt: f64) -> Result<()> {
+/// One time step against the median step `dt`: within [`MAX_JITTER`], or with `resample` at
+/// most [`MAX_GAP_STEPS`] steps.
+fn jitter(file: &str, line: u64, col: usize, step: f64, dt: f64, resample: bool) -> Result<()> {
+    if resample {
+        if step > MAX_GAP_STEPS * dt {
+            located!(file, Some(line), Some(col as u64);
+                "time step {step:.3e} s is more than {MAX_GAP_STEPS} median steps ({dt:.3e} s): a gap (lost \
+                 samples), which --resample does not bridge; split the recording at the gap"
+            );
+        }
+        return Ok(());
+    }
     if (step - dt).abs() > MAX_JITTER * dt {
         located!(file, Some(line), Some(col as u64);
-            "time step {step:.3e} s differs from the median step {dt:.3e} s by more \
-             than {:.0} % (missing samples or jittered time; resample the recording uniformly)",
+            "time step {step:.3e} s differs from the median step {dt:.3e} s by more than {:.0} % (missing \
+             samples or jittered time stamps; `--resample linear` interpolates jittered time stamps onto \
+             a uniform grid)",
             MAX_JITTER * 100.0
         );
     }
     Ok(())
+}
+
+/// The header's names as a message lists them: each quoted as a cell, at most 24.
+fn header_list(headers: &csv::StringRecord) -> String {
+    const SHOWN: usize = 24;
+    let mut names: Vec<String> = headers.iter().take(SHOWN).map(|h| echo(h.trim())).collect();
+    if headers.len() > SHOWN {
+        names.push(format!("… ({} more)", headers.len() - SHOWN));
+    }
+    names.join(", ")
+}
+
+/// The column index of each canonical column: a mapped column by its header (which must be in
+/// the file), any other by its own name unless a mapping reads that header as something else. A
+/// column name found twice is refused.
+fn locate_columns(
+    file: &str,
+    headers: &csv::StringRecord,
+    opts: &ReadOptions,
+) -> Result<[Option<usize>; COLUMNS.len()]> {
+    let mut index = [None; COLUMNS.len()];
+    for (k, name) in COLUMNS.iter().enumerate() {
+        let map = opts.map_of(k);
+        let wanted = match map {
+            Some(m) => m.header.as_str(),
+            None if opts.claims(name) => continue,
+            None => name,
+        };
+        let mut found = headers.iter().enumerate().filter(|(_, h)| h.trim() == wanted).map(|(c, _)| c);
+        let first = found.next();
+        if let (Some(a), Some(b)) = (first, found.next()) {
+            located!(file, Some(1), Some(b as u64 + 1);
+                "column `{}` appears twice (columns {} and {})", echo(wanted), a + 1, b + 1);
+        }
+        if let (None, Some(m)) = (first, map) {
+            located!(file, Some(1), None;
+                "--column `{}`: the file has no column `{}` (header has: {})",
+                echo(&m.option),
+                echo(wanted),
+                header_list(headers)
+            );
+        }
+        index[k] = first;
+    }
+    Ok(index)
 }
 
 #[cfg(test)]
@@ -438,6 +590,60 @@ mod tests {
         let r = Recording::parse("rig.csv", b"\xEF\xBB\xBFtime_s,current_A\r\n0,1\r\n0.001,2\r\n0.002,3\r\n")
             .unwrap();
         assert_eq!(r.current_a.unwrap(), vec![1.0, 2.0, 3.0]);
+    }
+
+    fn with(text: &str, opts: &ReadOptions) -> Result<Recording> {
+        Ok(Recording::from_reader_with("j.csv", text.as_bytes(), usize::MAX, opts)?.recording)
+    }
+
+    #[test]
+    fn resampling_interpolates_every_channel_at_the_median_step() {
+        // Steps of 1.03, 0.94, 1.05, 0.98, 0.99 ms; channels linear in time, so the grid values
+        // are known exactly.
+        let mut text = String::from("time_s,current_A,displacement_um\n");
+        for t in [0.0, 0.00103, 0.00197, 0.00302, 0.004, 0.00499] {
+            text += &format!("{t},{},{}\n", 1.0 + 100.0 * t, 5.0 - 1000.0 * t);
+        }
+        let e = format!("{:#}", with(&text, &ReadOptions::default()).unwrap_err());
+        assert!(e.contains("j.csv:3:1") && e.contains("--resample linear"), "{e}");
+        let opts = ReadOptions { resample: Some(Resample::Linear), ..Default::default() };
+        let r = with(&text, &opts).unwrap();
+        assert_eq!(r.len(), 6);
+        for k in 0..6 {
+            let t = k as f64 * 0.00099;
+            assert!((r.time_s[k] - t).abs() < 1e-15);
+            assert!((r.current_a.as_ref().unwrap()[k] - (1.0 + 100.0 * t)).abs() < 1e-12);
+            assert!((r.displacement_um.as_ref().unwrap()[k] - (5.0 - 1000.0 * t)).abs() < 1e-12);
+        }
+        // A gap of more than 5 median steps is refused all the same.
+        let gap = "time_s,current_A\n0,1\n0.001,2\n0.002,3\n0.008,4\n0.009,5\n";
+        let e = format!("{:#}", with(gap, &opts).unwrap_err());
+        assert!(e.contains("j.csv:5:1") && e.contains("gap"), "{e}");
+    }
+
+    #[test]
+    fn mapped_columns_are_converted_and_the_start_trimmed() {
+        let opts = ReadOptions::new(
+            &["time_s=t:ms".to_string(), "current_A=I:mA".to_string(), "temperature_C=T:K".to_string()],
+            None,
+            Some(0.002),
+        )
+        .unwrap();
+        let text = "t,I,T,current_A\n0,1000,300,9\n1,2000,301,9\n2,3000,302,9\n3,4000,303,9\n4,5000,304,9\n";
+        let r = with(text, &opts).unwrap();
+        assert_eq!(r.time_s, vec![0.002, 0.003, 0.004]);
+        assert_eq!(r.current_a.unwrap(), vec![3.0, 4.0, 5.0]);
+        assert!((r.temperature_c.unwrap()[0] - 28.85).abs() < 1e-12);
+        let e = format!("{:#}", with("t,x\n0,1\n1,2\n2,3\n", &opts).unwrap_err());
+        assert!(
+            e.contains("j.csv:1: --column `current_A=I:mA`: the file has no column `I` (header has: t, x)"),
+            "{e}"
+        );
+        let e = format!("{:#}", with("t,I,T\n0,1,1\n1,2,1\n2,x,1\n", &opts).unwrap_err());
+        assert!(
+            e.contains("j.csv:4:2: column `I` (read as `current_A`, mA → A): `x` is not a number"),
+            "{e}"
+        );
     }
 
     #[test]

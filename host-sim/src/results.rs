@@ -8,6 +8,7 @@ use std::fmt;
 use serde::Serialize;
 
 use crate::loops::LoopFeatures;
+use crate::uncertainty::Uncertainty;
 
 /// One file's score on one channel.
 #[derive(Debug, Clone, Serialize)]
@@ -70,12 +71,93 @@ pub struct FitSummary {
     pub seed: u64,
     /// `--time-limit` stopped the search.
     pub time_limit_reached: bool,
-    /// Doubts about the result (loop fits).
+    /// Doubts about the result.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub warnings: Option<Vec<String>>,
+    /// Parameters held by `--fix`, by name (displacement fits; absent when none).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fixed: Option<BTreeMap<&'static str, f64>>,
+    /// Per identified continuous parameter: value, standard deviation, 95 % interval
+    /// (displacement fits).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<BTreeMap<&'static str, ParamEstimate>>,
+    /// Correlations of those parameters (displacement fits).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub correlation: Option<Correlation>,
+    /// What the uncertainty rests on (displacement fits).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uncertainty_basis: Option<UncertaintyBasis>,
     /// For the text: the parameters in the fit's order, whether the files are loops, the time.
     #[serde(skip)]
     pub text: FitText,
+}
+
+/// One parameter's estimate in a fit's JSON.
+#[derive(Debug, Clone, Serialize)]
+pub struct ParamEstimate {
+    /// The fitted value (as in `params`).
+    pub value: f64,
+    /// Standard deviation in the parameter's unit; null when not identifiable.
+    pub std: Option<f64>,
+    /// 95 % interval; null when not identifiable.
+    pub ci95: Option<[f64; 2]>,
+    /// `log` (log-normal interval, `std` = value·σ of ln) or `linear`.
+    pub scale: &'static str,
+}
+
+/// A fit's correlation matrix in JSON.
+#[derive(Debug, Clone, Serialize)]
+pub struct Correlation {
+    /// Parameter names, the matrix's order.
+    pub names: Vec<&'static str>,
+    /// ρ by row and column (null for a parameter that is not identifiable).
+    pub matrix: Vec<Vec<Option<f64>>>,
+}
+
+/// What a fit's uncertainty rests on.
+#[derive(Debug, Clone, Serialize)]
+pub struct UncertaintyBasis {
+    /// Residuals N (samples of every fit file and channel).
+    pub samples: usize,
+    /// N_eff = N (1 − ρ₁)/(1 + ρ₁).
+    pub effective_samples: f64,
+    /// ρ₁, the residuals' lag-1 autocorrelation.
+    pub lag1_autocorrelation: f64,
+    /// Condition number of the column-normalised Jacobian (null: singular).
+    pub condition: Option<f64>,
+}
+
+impl FitSummary {
+    /// Adds a fit's uncertainty (JSON fields and text).
+    pub fn with_uncertainty(mut self, u: &Uncertainty) -> Self {
+        let finite = |x: f64| x.is_finite().then_some(x);
+        self.uncertainty = Some(
+            u.params
+                .iter()
+                .map(|p| {
+                    let e = ParamEstimate {
+                        value: p.value,
+                        std: p.std,
+                        ci95: p.ci95.map(|(a, b)| [a, b]),
+                        scale: if p.bound.log { "log" } else { "linear" },
+                    };
+                    (p.bound.name, e)
+                })
+                .collect(),
+        );
+        self.correlation = Some(Correlation {
+            names: u.params.iter().map(|p| p.bound.name).collect(),
+            matrix: u.correlation.iter().map(|row| row.iter().map(|&x| finite(x)).collect()).collect(),
+        });
+        self.uncertainty_basis = Some(UncertaintyBasis {
+            samples: u.samples,
+            effective_samples: u.effective_samples,
+            lag1_autocorrelation: u.lag1_autocorrelation,
+            condition: finite(u.condition),
+        });
+        self.text.uncertainty = Some(u.clone());
+        self
+    }
 }
 
 /// What only the text form of a fit shows.
@@ -87,6 +169,10 @@ pub struct FitText {
     pub loops: bool,
     /// Wall time [s].
     pub seconds: f64,
+    /// Parameters held fixed, in order.
+    pub fixed: Vec<(&'static str, f64)>,
+    /// The parameters' uncertainty (displacement fits).
+    pub uncertainty: Option<Uncertainty>,
 }
 
 impl fmt::Display for FitSummary {
@@ -102,8 +188,50 @@ impl fmt::Display for FitSummary {
             self.text.seconds,
             self.seed
         )?;
+        let estimate = |n: &str| {
+            self.text.uncertainty.as_ref().and_then(|u| u.params.iter().find(|p| p.bound.name == n).cloned())
+        };
         for (n, v) in &self.text.params_in_order {
-            writeln!(f, "  {n:width$} = {v:.6e}")?;
+            match estimate(n) {
+                None => writeln!(f, "  {n:width$} = {v:.6e}")?,
+                Some(e) => match (e.std, e.ci95) {
+                    (Some(s), Some((lo, hi))) => {
+                        let rel = if *v != 0.0 {
+                            format!(" ({:.2} %)", 100.0 * s / v.abs())
+                        } else {
+                            String::new()
+                        };
+                        writeln!(f, "  {n:width$} = {v:.6e} ± {s:.2e}{rel:10}  95 % [{lo:.4e}, {hi:.4e}]")?
+                    }
+                    _ => writeln!(f, "  {n:width$} = {v:.6e} ± ?  (not identifiable)")?,
+                },
+            }
+        }
+        for (n, v) in &self.text.fixed {
+            writeln!(f, "  {n:width$} = {v:.6e} (fixed)")?;
+        }
+        if let Some(u) = self.text.uncertainty.as_ref().filter(|u| u.params.len() > 1) {
+            writeln!(
+                f,
+                "  correlation (N = {} residuals, lag-1 autocorrelation {:.2}, effective N {:.0}):",
+                u.samples, u.lag1_autocorrelation, u.effective_samples
+            )?;
+            for (i, p) in u.params.iter().enumerate() {
+                write!(f, "  {:>2} {:width$}", i + 1, p.bound.name, width = width - 3)?;
+                for rho in &u.correlation[i][..=i] {
+                    if rho.is_finite() {
+                        write!(f, " {rho:+.2}")?;
+                    } else {
+                        write!(f, "     ?")?;
+                    }
+                }
+                writeln!(f)?;
+            }
+            write!(f, "  {:width$}", "")?;
+            for i in 0..u.params.len() {
+                write!(f, " {:>5}", i + 1)?;
+            }
+            writeln!(f)?;
         }
         for r in &self.files {
             writeln!(

@@ -31,6 +31,22 @@ pub enum Warning {
         /// Why.
         why: String,
     },
+    /// Two parameters' estimates are almost interchangeable (|ρ| > 0.95).
+    Correlated {
+        /// One parameter.
+        a: &'static str,
+        /// The other.
+        b: &'static str,
+        /// Their correlation.
+        rho: f64,
+    },
+    /// The data do not determine these parameters (the Jacobian is rank-deficient there).
+    NotIdentifiable {
+        /// Their names.
+        params: Vec<&'static str>,
+        /// Condition number of the column-normalised Jacobian.
+        condition: f64,
+    },
     /// `--time-limit` stopped the search: the best point so far.
     TimeLimit {
         /// The limit [s].
@@ -59,6 +75,17 @@ impl fmt::Display for Warning {
             Warning::IntegrationFailed { file, why } => {
                 write!(f, "{file}: the model integration failed at the best parameters: {why}")
             }
+            Warning::Correlated { a, b, rho } => write!(
+                f,
+                "`{a}` and `{b}` are correlated (ρ = {rho:+.3}): the data barely tell them apart; \
+                 consider --fix on one of them or data that separate them"
+            ),
+            Warning::NotIdentifiable { params, condition } => write!(
+                f,
+                "not identifiable from these files: {} (Jacobian condition {condition:.2e}); their \
+                 values are one of many that fit equally well: --fix them or add data that excite them",
+                params.iter().map(|p| format!("`{p}`")).collect::<Vec<_>>().join(", ")
+            ),
             Warning::TimeLimit { seconds } => write!(
                 f,
                 "--time-limit {seconds} s reached: the result is the best found so far, not a converged fit"

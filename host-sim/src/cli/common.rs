@@ -8,6 +8,7 @@ use anyhow::{bail, Result};
 use clap::Args;
 use model_core::{ActuatorParams, ModelSpec};
 
+use crate::columns::ReadOptions;
 use crate::files::{check_outputs, open_all, Input};
 use crate::fit::{self, FitOptions};
 use crate::loops::{self, LoopFile};
@@ -55,6 +56,41 @@ pub struct ModelFiles {
     /// still read and checked to the end, and the first this many samples are used, with a warning.
     #[arg(long, default_value_t = DEFAULT_MAX_SAMPLES, value_name = "N")]
     pub max_samples: usize,
+    /// How the recordings (fit and validation files alike) are read.
+    #[command(flatten)]
+    pub read: ReadArgs,
+}
+
+/// How measurement CSVs are read when their columns are not as `gma` writes them; shared by
+/// fit, diagnose, report and compare, applied to every recording (fit and `--val` files).
+#[derive(Args, Clone, Debug, Default)]
+pub struct ReadArgs {
+    /// Read the file's column HEADER as the recognised column CANONICAL, converting from UNIT,
+    /// e.g. `--column time_s=time_ms:ms`, `--column displacement_um=x_mm:mm`, `--column
+    /// current_A=I:mA`. Units: time_s s|ms|us|µs; displacement_um m|mm|um|µm|nm; current_A A|mA;
+    /// command_V V|mV; force_N N|kN; temperature_C °C|C|K. No UNIT: the canonical unit (a
+    /// rename). Repeat for several columns. Nothing is guessed: unmapped columns are read by
+    /// their exact names as before.
+    #[arg(long = "column", value_name = "CANONICAL=HEADER[:UNIT]")]
+    pub columns: Vec<String>,
+    /// Put the recordings onto a uniform time grid: `linear` interpolates every channel linearly
+    /// at the median time step, from the first sample to the last. Lets time stamps jitter by
+    /// more than 1 % of the median step (refused without it); gaps over 5 median steps are
+    /// still refused.
+    #[arg(long, value_name = "METHOD")]
+    pub resample: Option<String>,
+    /// Drop the samples before t0 + SECONDS (t0: the file's first time stamp), e.g. a start-up
+    /// transient; ≥ 0, and at least 3 samples must remain. Applied before `--max-samples` and
+    /// `--resample`.
+    #[arg(long, value_name = "SECONDS")]
+    pub trim_start: Option<f64>,
+}
+
+impl ReadArgs {
+    /// The options, checked (each message names its option).
+    pub fn options(&self) -> Result<ReadOptions> {
+        ReadOptions::new(&self.columns, self.resample.as_deref(), self.trim_start)
+    }
 }
 
 /// The inputs, read: displacement recordings or magnetization loops (never a mix).
@@ -94,12 +130,13 @@ impl ModelFiles {
             bail!("--effort must be in (0, 20], got {}", self.effort);
         }
         let time_limit = self.time_limit.map(time_limit).transpose()?;
+        let read_opts = self.read.options()?;
         let params_input = self.params.as_deref().map(Input::open).transpose()?;
         let (fit_in, val_in) = (open_all(&self.files)?, open_all(&self.val)?);
         let all: Vec<_> = fit_in.iter().chain(&val_in).chain(params_input.as_ref()).map(Input::id).collect();
         check_outputs(outputs, &all)?;
         let init = params::load_input(params_input, spec)?;
-        let data = read_data(fit_in, val_in, self.max_samples)?;
+        let data = read_data(fit_in, val_in, self.max_samples, &read_opts)?;
         if let Data::Recordings(fit_files, val_files) = &data {
             for r in fit_files.iter().chain(val_files) {
                 fit::drive_for(spec, r)?;
@@ -139,10 +176,17 @@ pub fn check_max_samples(n: usize) -> Result<()> {
     Ok(())
 }
 
-/// Reads opened inputs: all recordings or all loop files (decided by each first line).
-pub fn read_data(fit_in: Vec<Input>, val_in: Vec<Input>, max_samples: usize) -> Result<Data> {
-    let kinds: Vec<bool> =
-        fit_in.iter().chain(&val_in).map(|i| loops::looks_like_loop(&i.first_line())).collect();
+/// Reads opened inputs: all recordings or all loop files (decided by each first line; a first
+/// line with a `--column` header is a recording's). `opts` applies to recordings only.
+pub fn read_data(
+    fit_in: Vec<Input>,
+    val_in: Vec<Input>,
+    max_samples: usize,
+    opts: &ReadOptions,
+) -> Result<Data> {
+    let is_loop =
+        |line: &str| loops::looks_like_loop(line) && !line.split([',', '\t']).any(|h| opts.claims(h.trim()));
+    let kinds: Vec<bool> = fit_in.iter().chain(&val_in).map(|i| is_loop(&i.first_line())).collect();
     if kinds.iter().any(|k| *k) && !kinds.iter().all(|k| *k) {
         bail!(
             "mixing magnetization-loop files and displacement recordings in one fit: fit them separately \
@@ -150,25 +194,36 @@ pub fn read_data(fit_in: Vec<Input>, val_in: Vec<Input>, max_samples: usize) -> 
         );
     }
     if kinds.first().copied().unwrap_or(false) {
+        if !opts.is_default() {
+            bail!(
+                "--column, --resample and --trim-start apply to measurement recordings, not to \
+                 magnetization-loop files"
+            );
+        }
         let read = |v: Vec<Input>| {
             v.into_iter().map(|i| loops::read_input(i, max_samples)).collect::<Result<Vec<_>>>()
         };
         Ok(Data::Loops(read(fit_in)?, read(val_in)?))
     } else {
-        let read =
-            |v: Vec<Input>| v.into_iter().map(|i| read_recording(i, max_samples)).collect::<Result<Vec<_>>>();
+        let read = |v: Vec<Input>| {
+            v.into_iter().map(|i| read_recording(i, max_samples, opts)).collect::<Result<Vec<_>>>()
+        };
         Ok(Data::Recordings(read(fit_in)?, read(val_in)?))
     }
 }
 
-/// Reads one recording as a stream, keeping at most `max_samples` and saying so.
-pub fn read_recording(input: Input, max_samples: usize) -> Result<Recording> {
-    let (r, rows) = Recording::read_input(input, max_samples)?;
-    if rows > r.len() as u64 {
+/// Reads one recording as a stream (mapped, trimmed and resampled as `opts` say), keeping at
+/// most `max_samples` and saying so.
+pub fn read_recording(input: Input, max_samples: usize, opts: &ReadOptions) -> Result<Recording> {
+    let read = Recording::read_input_with(input, max_samples, opts)?;
+    let r = read.recording;
+    if read.rows > read.kept as u64 {
         eprintln!(
-            "gma: warning: {}: {rows} samples; using the first {} ({:.1} s); raise --max-samples to use more",
+            "gma: warning: {}: {} samples{}; using the first {} ({:.1} s); raise --max-samples to use more",
             r.name,
-            r.len(),
+            read.rows,
+            if opts.trim_start_s.is_some() { " after --trim-start" } else { "" },
+            read.kept,
             r.duration_s()
         );
     }

@@ -13,6 +13,7 @@ use crate::loops::{self, LoopFile};
 use crate::params;
 use crate::recording::Recording;
 use crate::results::{FileScoreRow, FitSummary, FitText};
+use crate::uncertainty;
 use crate::warning::Warning;
 
 /// Options of `gma fit`.
@@ -24,15 +25,34 @@ pub struct FitArgs {
     /// it). Written only when the fit succeeds; never one of the inputs.
     #[arg(long, value_name = "P.toml")]
     pub params_out: Option<PathBuf>,
+    /// Hold a parameter at its start value (from --params), or at VALUE, instead of fitting it
+    /// (a name as in parameter files, e.g. `ja.c`; repeat for several; displacement fits only).
+    #[arg(long, value_name = "NAME[=VALUE]")]
+    pub fix: Vec<String>,
+    /// Narrow a parameter's search range to [LO, HI] (in its unit; within its registry range,
+    /// which it can only narrow; repeat for several; displacement fits only).
+    #[arg(long, value_name = "NAME=LO:HI", allow_hyphen_values = true)]
+    pub bound: Vec<String>,
 }
 
 /// Runs `gma fit`.
 pub fn run(a: &FitArgs) -> Result<()> {
     let outputs: Vec<&std::path::Path> = a.params_out.as_deref().into_iter().collect();
-    let p = a.mf.prepare(&outputs)?;
+    let mut p = a.mf.prepare(&outputs)?;
     let (summary, params, warnings) = match &p.data {
-        Data::Loops(fit_files, val_files) => fit_loops(&p, fit_files, val_files)?,
-        Data::Recordings(fit_files, val_files) => fit_recordings(&p, fit_files, val_files)?,
+        Data::Loops(fit_files, val_files) => {
+            if !(a.fix.is_empty() && a.bound.is_empty()) {
+                bail!(
+                    "--{}: fixing or bounding parameters applies to displacement fits, not to loop files",
+                    if a.fix.is_empty() { "bound" } else { "fix" }
+                );
+            }
+            fit_loops(&p, fit_files, val_files)?
+        }
+        Data::Recordings(fit_files, val_files) => {
+            let c = fit::Constraints::parse(p.spec, fit_files, &a.fix, &a.bound, &mut p.init)?;
+            fit_recordings(&p, fit_files, val_files, &c)?
+        }
     };
     let j = a.mf.json;
     say!(j, "{summary}");
@@ -46,8 +66,9 @@ pub fn run(a: &FitArgs) -> Result<()> {
         bail!("the loop fit did not produce a valid model: {}", invalid.join("; "));
     }
     if let Some(out) = &a.params_out {
+        let fixed: String = summary.text.fixed.iter().map(|(n, _)| format!("\nfixed: {n}")).collect();
         let header = format!(
-            "gma fit --model {} (seed {}) on {}\nfit NRMSE {:.4} %{}",
+            "gma fit --model {} (seed {}) on {}\nfit NRMSE {:.4} %{}{fixed}",
             summary.model,
             a.mf.seed,
             names(&a.mf.files),
@@ -72,9 +93,21 @@ fn fit_recordings(
     p: &Prepared,
     fit_files: &[Recording],
     val_files: &[Recording],
+    constraints: &fit::Constraints,
 ) -> Result<(FitSummary, model_core::ActuatorParams, Vec<Warning>)> {
     let t = Instant::now();
-    let res = fit::fit(p.spec, &p.init, fit_files, p.opts)?;
+    let res = fit::fit_constrained(p.spec, &[p.init], fit_files, p.opts, constraints)?;
+    // Analysis after the fit: the parameters' uncertainty from the Jacobian at the optimum.
+    let (uncertainty, warnings) = match uncertainty::analyse(p.spec, &res, fit_files) {
+        Ok(u) => {
+            let w = u.warnings();
+            (Some(u), w)
+        }
+        Err(e) => {
+            eprintln!("gma: warning: no parameter uncertainty: {e}");
+            (None, Vec::new())
+        }
+    };
     let mut files = rows("fit", fit_files, &res.fit.files);
     let mut nrmse_val = None;
     if !val_files.is_empty() {
@@ -91,14 +124,24 @@ fn fit_recordings(
         evaluations: res.evaluations,
         seed: p.opts.seed,
         time_limit_reached: res.time_limited,
-        warnings: None,
+        warnings: Some(warnings.iter().map(|w| w.to_string()).collect()),
+        fixed: (!res.fixed.is_empty()).then(|| res.fixed.iter().copied().collect()),
+        uncertainty: None,
+        correlation: None,
+        uncertainty_basis: None,
         text: FitText {
             params_in_order: res.identified.clone(),
             loops: false,
             seconds: t.elapsed().as_secs_f64(),
+            fixed: res.fixed.clone(),
+            uncertainty: None,
         },
     };
-    Ok((summary, res.params, Vec::new()))
+    let summary = match &uncertainty {
+        Some(u) => summary.with_uncertainty(u),
+        None => summary,
+    };
+    Ok((summary, res.params, warnings))
 }
 
 /// The contract's per-file rows: displacement, and current where the model predicts it.
@@ -155,10 +198,15 @@ fn fit_loops(
         seed: p.opts.seed,
         time_limit_reached: res.time_limited,
         warnings: Some(res.warnings.iter().filter(|w| !w.invalidates()).map(|w| w.to_string()).collect()),
+        fixed: None,
+        uncertainty: None,
+        correlation: None,
+        uncertainty_basis: None,
         text: FitText {
             params_in_order: res.params.clone(),
             loops: true,
             seconds: t.elapsed().as_secs_f64(),
+            ..FitText::default()
         },
     };
     Ok((summary, res.apply_to(&p.init), res.warnings))

@@ -1,0 +1,266 @@
+//! How a measurement file is read when its columns are not as the workbench writes them
+//! (docs/formats.md, "Columns as users have them"): `--column CANONICAL=HEADER[:UNIT]` maps a
+//! column of another name or unit onto a recognised one, `--resample linear` puts jittered time
+//! stamps onto a uniform grid, `--trim-start SECONDS` drops a start-up transient. Nothing here is
+//! ever guessed: without these options a file is read exactly as before.
+
+use anyhow::{bail, Result};
+
+use crate::recording::COLUMNS;
+
+/// A unit a column may be given in, and how it converts to the column's canonical unit:
+/// value × 10^`pow10` + `offset`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Unit {
+    /// The unit's name as written in `--column` (case-sensitive).
+    pub name: &'static str,
+    /// Decimal exponent of the scale factor (mm → µm: 3).
+    pub pow10: i32,
+    /// Offset added after scaling (K → °C: −273.15).
+    pub offset: f64,
+}
+
+const fn unit(name: &'static str, pow10: i32) -> Unit {
+    Unit { name, pow10, offset: 0.0 }
+}
+
+/// The units accepted per canonical column (same order as [`COLUMNS`]); the first is the
+/// canonical unit itself, assumed when `--column` names none.
+pub const UNITS: [&[Unit]; COLUMNS.len()] = [
+    &[unit("s", 0), unit("ms", -3), unit("us", -6), unit("µs", -6)],
+    &[unit("V", 0), unit("mV", -3)],
+    &[unit("A", 0), unit("mA", -3)],
+    &[unit("um", 0), unit("µm", 0), unit("m", 6), unit("mm", 3), unit("nm", -3)],
+    &[unit("N", 0), unit("kN", 3)],
+    &[unit("°C", 0), unit("C", 0), Unit { name: "K", pow10: 0, offset: -273.15 }],
+];
+
+/// The canonical unit of each column, as messages print it.
+const CANONICAL_UNIT: [&str; COLUMNS.len()] = ["s", "V", "A", "µm", "N", "°C"];
+
+impl Unit {
+    /// Whether this unit is the column's canonical unit (no conversion).
+    pub fn is_identity(&self) -> bool {
+        self.pow10 == 0 && self.offset == 0.0
+    }
+
+    /// Converts a cell: `raw` is its text, `v` the number it parsed to. A power of ten shifts the
+    /// cell's decimal exponent before one correctly rounded parse, so `0.5` in mm gives exactly
+    /// the number `500` in µm would (no second rounding from a multiplication).
+    pub fn convert(&self, raw: &str, v: f64) -> f64 {
+        if self.pow10 == 0 {
+            return v + self.offset;
+        }
+        let (mantissa, exp) = match raw.find(['e', 'E']) {
+            Some(i) => (&raw[..i], raw[i + 1..].parse::<i64>().ok()),
+            None => (raw, Some(0)),
+        };
+        let shifted = exp
+            .and_then(|e| e.checked_add(self.pow10 as i64))
+            .and_then(|e| format!("{mantissa}e{e}").parse::<f64>().ok());
+        shifted.unwrap_or_else(|| v * 10f64.powi(self.pow10)) + self.offset
+    }
+}
+
+/// One `--column CANONICAL=HEADER[:UNIT]`: the file's column `header`, read as canonical column
+/// `canonical` (index into [`COLUMNS`]) after converting from `unit`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ColumnMap {
+    /// Index of the canonical column in [`COLUMNS`].
+    pub canonical: usize,
+    /// The header in the file (matched exactly, spaces around it ignored).
+    pub header: String,
+    /// The unit of the file's column.
+    pub unit: Unit,
+    /// The option as given, for messages.
+    pub option: String,
+}
+
+impl ColumnMap {
+    /// Parses `CANONICAL=HEADER[:UNIT]`; the error names the option and what is accepted.
+    pub fn parse(option: &str) -> Result<Self> {
+        let shown = crate::files::echo(option);
+        let Some((canonical, rest)) = option.split_once('=') else {
+            bail!(
+                "--column `{shown}`: expected CANONICAL=HEADER[:UNIT], e.g. `--column time_s=time_ms:ms` \
+                 or `--column displacement_um=x_mm:mm`"
+            );
+        };
+        let canonical = canonical.trim();
+        let Some(k) = COLUMNS.iter().position(|c| *c == canonical) else {
+            bail!(
+                "--column `{shown}`: unknown column `{}`; the recognised columns are {}",
+                crate::files::echo(canonical),
+                COLUMNS.join(", ")
+            );
+        };
+        let (header, unit) = match rest.rsplit_once(':') {
+            Some((h, u)) => (h.trim(), Some(u.trim())),
+            None => (rest.trim(), None),
+        };
+        if header.is_empty() {
+            bail!("--column `{shown}`: no HEADER after `=` (expected CANONICAL=HEADER[:UNIT])");
+        }
+        let unit = match unit {
+            None => UNITS[k][0],
+            Some(u) => match UNITS[k].iter().find(|x| x.name == u) {
+                Some(x) => *x,
+                None => bail!(
+                    "--column `{shown}`: unknown unit `{}` for `{canonical}`; accepted: {} (a header \
+                     that contains `:` needs its unit named: HEADER:UNIT)",
+                    crate::files::echo(u),
+                    unit_names(k)
+                ),
+            },
+        };
+        Ok(Self { canonical: k, header: header.to_string(), unit, option: option.to_string() })
+    }
+
+    /// How messages name the column: `` `x_mm` (read as `displacement_um`, mm → µm) ``.
+    pub fn label(&self) -> String {
+        let name = COLUMNS[self.canonical];
+        let header = crate::files::echo(&self.header);
+        if self.unit.is_identity() {
+            format!("`{header}` (read as `{name}`)")
+        } else {
+            format!("`{header}` (read as `{name}`, {} → {})", self.unit.name, CANONICAL_UNIT[self.canonical])
+        }
+    }
+}
+
+/// The accepted unit names of canonical column `k`, for messages and docs.
+pub fn unit_names(k: usize) -> String {
+    UNITS[k].iter().map(|u| u.name).collect::<Vec<_>>().join(", ")
+}
+
+/// How irregular time stamps are put onto a uniform grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Resample {
+    /// Every channel linearly interpolated at the median time step, from the first sample to the
+    /// last.
+    Linear,
+}
+
+impl Resample {
+    /// Parses a `--resample` value.
+    pub fn parse(method: &str) -> Result<Self> {
+        match method.trim() {
+            "linear" => Ok(Resample::Linear),
+            other => bail!(
+                "--resample `{}`: unknown method; the only method is `linear` (linear interpolation of \
+                 every channel at the median time step)",
+                crate::files::echo(other)
+            ),
+        }
+    }
+}
+
+/// Largest time step [median steps] that `--resample` interpolates across; a longer one is a
+/// gap (lost samples), refused even when resampling.
+pub const MAX_GAP_STEPS: f64 = 5.0;
+
+/// How measurement files are read: column mapping, resampling, trimming. The default reads a
+/// file exactly as docs/formats.md describes without these options.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ReadOptions {
+    /// `--column` mappings, at most one per canonical column.
+    pub columns: Vec<ColumnMap>,
+    /// `--resample`.
+    pub resample: Option<Resample>,
+    /// `--trim-start` [s]: samples before t0 + this are dropped.
+    pub trim_start_s: Option<f64>,
+}
+
+impl ReadOptions {
+    /// Parses and checks the options (each message names its option).
+    pub fn new(columns: &[String], resample: Option<&str>, trim_start_s: Option<f64>) -> Result<Self> {
+        let mut maps: Vec<ColumnMap> = Vec::new();
+        for c in columns {
+            let m = ColumnMap::parse(c)?;
+            if let Some(first) = maps.iter().find(|x| x.canonical == m.canonical) {
+                bail!(
+                    "--column `{}`: `{}` is already mapped by --column `{}` (one column per canonical name)",
+                    crate::files::echo(c),
+                    COLUMNS[m.canonical],
+                    crate::files::echo(&first.option)
+                );
+            }
+            if let Some(first) = maps.iter().find(|x| x.header == m.header) {
+                bail!(
+                    "--column `{}`: column `{}` is already read by --column `{}`",
+                    crate::files::echo(c),
+                    crate::files::echo(&m.header),
+                    crate::files::echo(&first.option)
+                );
+            }
+            maps.push(m);
+        }
+        if let Some(t) = trim_start_s {
+            if !(t.is_finite() && t >= 0.0) {
+                bail!("--trim-start must be a finite number of seconds ≥ 0, got {t}");
+            }
+        }
+        Ok(Self { columns: maps, resample: resample.map(Resample::parse).transpose()?, trim_start_s })
+    }
+
+    /// Whether no option is set (files are read as they are).
+    pub fn is_default(&self) -> bool {
+        self.columns.is_empty() && self.resample.is_none() && self.trim_start_s.is_none()
+    }
+
+    /// The mapping of canonical column `k`, if any.
+    pub fn map_of(&self, k: usize) -> Option<&ColumnMap> {
+        self.columns.iter().find(|m| m.canonical == k)
+    }
+
+    /// Whether `header` is claimed by a mapping (and so not read under its own name).
+    pub fn claims(&self, header: &str) -> bool {
+        self.columns.iter().any(|m| m.header == header)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn options_parse_with_and_without_unit() {
+        let m = ColumnMap::parse("time_s=time_ms:ms").unwrap();
+        assert_eq!((m.canonical, m.header.as_str(), m.unit.name), (0, "time_ms", "ms"));
+        let m = ColumnMap::parse("current_A=I").unwrap();
+        assert_eq!((m.canonical, m.header.as_str(), m.unit.name), (2, "I", "A"));
+        let m = ColumnMap::parse("displacement_um = x [mm] : mm").unwrap();
+        assert_eq!((m.header.as_str(), m.unit.pow10), ("x [mm]", 3));
+        let m = ColumnMap::parse("temperature_C=T:K").unwrap();
+        assert!((m.unit.convert("300", 300.0) - 26.85).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bad_options_name_themselves() {
+        let e = |s: &str| format!("{}", ColumnMap::parse(s).unwrap_err());
+        assert!(e("time_ms").contains("expected CANONICAL=HEADER[:UNIT]"));
+        assert!(e("time=t:ms").contains("unknown column `time`"));
+        assert!(e("time_s=t:h").contains("unknown unit `h` for `time_s`; accepted: s, ms, us, µs"));
+        assert!(e("current_A=I:mm").contains("accepted: A, mA"));
+        assert!(e("time_s=:ms").contains("no HEADER"));
+        let dup =
+            ReadOptions::new(&["time_s=a:ms".to_string(), "time_s=b".to_string()], None, None).unwrap_err();
+        assert!(dup.to_string().contains("already mapped"), "{dup}");
+        assert!(ReadOptions::new(&[], Some("cubic"), None).unwrap_err().to_string().contains("--resample"));
+        assert!(ReadOptions::new(&[], None, Some(-1.0)).unwrap_err().to_string().contains("--trim-start"));
+    }
+
+    #[test]
+    fn powers_of_ten_convert_exactly() {
+        for (raw, unit, canonical) in [
+            ("0.1234", unit("ms", -3), "0.0001234"),
+            ("0.0007938876", unit("mm", 3), "0.7938876"),
+            ("-7.5e-4", unit("mm", 3), "-0.75"),
+            ("+12E2", unit("nm", -3), "1.2"),
+            ("1.1", unit("m", 6), "1100000"),
+        ] {
+            let v: f64 = raw.parse().unwrap();
+            assert_eq!(unit.convert(raw, v), canonical.parse::<f64>().unwrap(), "{raw} {}", unit.name);
+        }
+    }
+}
