@@ -3,27 +3,9 @@
 //! or parameter) — never a panic, never a silently dropped row, never an output file.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn gma(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_gma")).args(args).output().expect("run gma")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).to_string()
-}
-
-/// The command failed cleanly: exit code 1, a `gma: error:` line, every `expected` fragment in
-/// the message, and no panic.
-fn refused(o: &Output, expected: &[&str], what: &str) {
-    let err = stderr(o);
-    assert_eq!(o.status.code(), Some(1), "{what}: exit code {:?}\n{err}", o.status.code());
-    assert!(err.contains("gma: error: "), "{what}: no error line\n{err}");
-    assert!(!err.contains("panicked") && !err.contains("RUST_BACKTRACE"), "{what}: panic\n{err}");
-    for e in expected {
-        assert!(err.contains(e), "{what}: message lacks `{e}`\n{err}");
-    }
-}
+mod common;
+use common::{err as stderr, gma, refused};
 
 /// A 50 Hz, 40 ms sine recording (two cycles) as rows of `time_s,current_A,displacement_um`.
 fn good_rows() -> Vec<String> {

@@ -1,10 +1,7 @@
 //! The `gma` binary as a user runs it: real files, exit codes and messages.
 
-use std::process::Command;
-
-fn gma(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_gma")).args(args).output().expect("run gma")
-}
+mod common;
+use common::gma;
 
 #[test]
 fn simulate_writes_the_csv_contract() {

@@ -4,25 +4,10 @@
 //! are refused unless resampling is asked for; bad options are refused with the option named.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
-fn gma(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_gma")).args(args).output().expect("run gma")
-}
-
-fn err(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).to_string()
-}
-
-/// Exit 1, a `gma: error:` line with every fragment, no panic.
-fn refused(o: &Output, fragments: &[&str], what: &str) {
-    let e = err(o);
-    assert_eq!(o.status.code(), Some(1), "{what}: exit {:?}\n{e}", o.status.code());
-    assert!(e.contains("gma: error: ") && !e.contains("panicked"), "{what}:\n{e}");
-    for f in fragments {
-        assert!(e.contains(f), "{what}: message lacks `{f}`\n{e}");
-    }
-}
+mod common;
+use common::{err, gma, refused};
 
 /// The one JSON object on stdout of a successful run.
 fn json(o: &Output) -> serde_json::Value {

@@ -8,11 +8,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-const GMA: &str = env!("CARGO_BIN_EXE_gma");
+mod common;
+use common::{err, gma, refused};
 
-fn gma(args: &[&str]) -> Output {
-    Command::new(GMA).args(args).output().expect("run gma")
-}
+const GMA: &str = env!("CARGO_BIN_EXE_gma");
 
 /// Runs gma with `input` on its standard input.
 fn gma_stdin(args: &[&str], input: &[u8]) -> Output {
@@ -31,20 +30,6 @@ fn gma_stdin(args: &[&str], input: &[u8]) -> Output {
     let out = child.wait_with_output().unwrap();
     writer.join().unwrap();
     out
-}
-
-fn err(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).to_string()
-}
-
-/// Exit 1, a `gma: error:` line with every fragment, no panic.
-fn refused(o: &Output, fragments: &[&str], what: &str) {
-    let e = err(o);
-    assert_eq!(o.status.code(), Some(1), "{what}: exit {:?}\n{e}", o.status.code());
-    assert!(e.contains("gma: error: ") && !e.contains("panicked"), "{what}:\n{e}");
-    for f in fragments {
-        assert!(e.contains(f), "{what}: message lacks `{f}`\n{e}");
-    }
 }
 
 fn json(o: &Output) -> serde_json::Value {

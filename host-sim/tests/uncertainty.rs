@@ -2,8 +2,6 @@
 //! cover the true parameters of a SIMULATED rig in at least 90 % of noisy repetitions, and
 //! `gma fit --fix/--bound` hold and narrow parameters (and refuse bad options by name).
 
-use std::process::Command;
-
 use host_sim::excitation::Excitation;
 use host_sim::fit::{fit, FitOptions};
 use host_sim::plant::Plant;
@@ -12,6 +10,9 @@ use host_sim::uncertainty::analyse;
 use model_core::magnetization::JaParams;
 use model_core::{ActuatorParams, ModelSpec};
 use rayon::prelude::*;
+
+mod common;
+use common::gma;
 
 /// The rig's true parameters (002's rod 3 J–A set, as in tests/identification.rs).
 fn truth() -> ActuatorParams {
@@ -91,10 +92,6 @@ fn the_95_percent_intervals_cover_the_true_parameters() {
     let overall = inside as f64 / total as f64;
     println!("coverage: overall {:.1} %", 100.0 * overall);
     assert!(overall >= 0.90, "overall coverage {:.1} % < 90 %", 100.0 * overall);
-}
-
-fn gma(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_gma")).args(args).output().expect("run gma")
 }
 
 fn json(o: &std::process::Output) -> serde_json::Value {

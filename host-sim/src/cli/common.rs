@@ -52,10 +52,6 @@ pub struct ModelFiles {
     /// Print exactly one JSON object on stdout (human text goes to stderr).
     #[arg(long)]
     pub json: bool,
-    /// Samples (or loop points) kept per file (memory ≈ 50 bytes per sample); longer files are
-    /// still read and checked to the end, and the first this many samples are used, with a warning.
-    #[arg(long, default_value_t = DEFAULT_MAX_SAMPLES, value_name = "N")]
-    pub max_samples: usize,
     /// How the recordings (fit and validation files alike) are read.
     #[command(flatten)]
     pub read: ReadArgs,
@@ -63,8 +59,12 @@ pub struct ModelFiles {
 
 /// How measurement CSVs are read when their columns are not as `gma` writes them; shared by
 /// fit, diagnose, report and compare, applied to every recording (fit and `--val` files).
-#[derive(Args, Clone, Debug, Default)]
+#[derive(Args, Clone, Debug)]
 pub struct ReadArgs {
+    /// Samples (or loop points) kept per file (memory ≈ 50 bytes per sample); longer files are
+    /// still read and checked to the end, and the first this many samples are used, with a warning.
+    #[arg(long, default_value_t = DEFAULT_MAX_SAMPLES, value_name = "N")]
+    pub max_samples: usize,
     /// Read the file's column HEADER as the recognised column CANONICAL, converting from UNIT,
     /// e.g. `--column time_s=time_ms:ms`, `--column displacement_um=x_mm:mm`, `--column
     /// current_A=I:mA`. Units: time_s s|ms|us|µs; displacement_um m|mm|um|µm|nm; current_A A|mA;
@@ -125,7 +125,7 @@ impl ModelFiles {
     /// may be an input, a link or a device; their folders must take files), then reads the data.
     pub fn prepare(&self, outputs: &[&Path]) -> Result<Prepared> {
         let spec = params::parse_spec(&self.model)?;
-        check_max_samples(self.max_samples)?;
+        check_max_samples(self.read.max_samples)?;
         if !(self.effort.is_finite() && self.effort > 0.0 && self.effort <= 20.0) {
             bail!("--effort must be in (0, 20], got {}", self.effort);
         }
@@ -136,7 +136,7 @@ impl ModelFiles {
         let all: Vec<_> = fit_in.iter().chain(&val_in).chain(params_input.as_ref()).map(Input::id).collect();
         check_outputs(outputs, &all)?;
         let init = params::load_input(params_input, spec)?;
-        let data = read_data(fit_in, val_in, self.max_samples, &read_opts)?;
+        let data = read_data(fit_in, val_in, self.read.max_samples, &read_opts)?;
         if let Data::Recordings(fit_files, val_files) = &data {
             for r in fit_files.iter().chain(val_files) {
                 fit::drive_for(spec, r)?;

@@ -7,7 +7,7 @@ use anyhow::Result;
 use clap::Args;
 use model_core::{ActuatorParams, ModelSpec};
 
-use super::common::{check_max_samples, read_data, Data, ReadArgs, DEFAULT_MAX_SAMPLES};
+use super::common::{check_max_samples, read_data, Data, ReadArgs};
 use crate::files::{check_outputs, display, open_all, output_folder, unique_stems, Input};
 use crate::fit;
 use crate::loops::{self, LoopFile};
@@ -40,9 +40,6 @@ pub struct CompareArgs {
     /// Print exactly one JSON object on stdout.
     #[arg(long)]
     pub json: bool,
-    /// Samples kept per file (see `gma fit --help`).
-    #[arg(long, default_value_t = DEFAULT_MAX_SAMPLES, value_name = "N")]
-    pub max_samples: usize,
     /// How the recordings are read (see `gma fit --help`).
     #[command(flatten)]
     pub read: ReadArgs,
@@ -51,7 +48,7 @@ pub struct CompareArgs {
 /// Runs `gma compare`.
 pub fn run(a: &CompareArgs) -> Result<()> {
     let spec = params::parse_spec(&a.model)?;
-    check_max_samples(a.max_samples)?;
+    check_max_samples(a.read.max_samples)?;
     let read_opts = a.read.options()?;
     let params_input = a.params.as_deref().map(Input::open).transpose()?;
     let inputs = open_all(&a.files)?;
@@ -65,7 +62,7 @@ pub fn run(a: &CompareArgs) -> Result<()> {
     let planned: Vec<PathBuf> =
         stems.iter().flat_map(|s| ["loop", "time", "residual"].map(|k| plot_path(a, s, k))).collect();
     check_outputs(&planned.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &ids)?;
-    match read_data(inputs, Vec::new(), a.max_samples, &read_opts)? {
+    match read_data(inputs, Vec::new(), a.read.max_samples, &read_opts)? {
         Data::Loops(files, _) => compare_loops(a, spec, &p, &files, &stems),
         Data::Recordings(files, _) => compare_recordings(a, spec, &p, &files, &stems),
     }
