@@ -346,6 +346,8 @@ pub fn diagnose(
     let nrmse_val = if val_files.is_empty() { None } else { Some(before) };
 
     // Evidence on the fit files' residuals.
+    let evidence_phase =
+        progress::Phase::start(opts.progress, "diagnose: residual evidence and trends across files", 0);
     let sigs: Vec<Signals> = fit_files
         .iter()
         .zip(&base.fit.files)
@@ -391,13 +393,15 @@ pub fn diagnose(
     findings.extend(trend(|r| r.0, "excitation frequency", "Hz"));
     findings.extend(trend(|r| r.1, "drive amplitude (rms)", "A or V"));
     findings.extend(trend(|r| r.2, "record length", "s"));
+    evidence_phase.finish();
 
     // Refit every candidate (in parallel), warm-started from the baseline.
     let cands = candidates_for(spec, fit_files);
     let refit_opts = FitOptions { progress: false, ..opts };
-    progress::phase(
+    let refitting = progress::Phase::start(
         opts.progress,
         &format!("diagnose: refitting `{spec}` plus each of {} candidate effects", cands.len()),
+        cands.len() as u64,
     );
     let done = AtomicUsize::new(0);
     // Per candidate: its refit and validation NRMSE, or None when the time limit left it out.
@@ -416,20 +420,22 @@ pub fn diagnose(
                 .and_then(|f| Ok((evaluate(s2, &f.params, score_files)?.mean_nrmse(), f)))
                 .map(|(after, f)| (f, after));
             let k = done.fetch_add(1, Ordering::Relaxed) + 1;
-            if let Ok((_, after)) = &r {
-                progress::phase(
-                    opts.progress,
-                    &format!(
+            let note = match &r {
+                Ok((_, after)) => {
+                    format!(
                         "diagnose: refit {k}/{} done: `+{}` {:.2} %",
                         cands.len(),
                         e.name(),
                         after * 100.0
-                    ),
-                );
-            }
+                    )
+                }
+                Err(_) => String::new(),
+            };
+            refitting.step(&note);
             (e, Some(r))
         })
         .collect();
+    refitting.finish();
     let mut candidates = Vec::new();
     let mut skipped = Vec::new();
     for (e, r) in results {

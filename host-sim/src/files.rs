@@ -66,7 +66,9 @@ impl Input {
             let f = std::fs::File::open(path).with_context(|| format!("{name}: cannot read"))?;
             (name, Box::new(f), identity(&meta))
         };
-        // The first line (with its newline), bounded like every other line.
+        // Hashed as it streams (provenance), the first line (with its newline) bounded like
+        // every other line.
+        let reader: Box<dyn Read + Send> = Box::new(crate::provenance::hashing(&name, reader));
         let mut rest = std::io::BufReader::with_capacity(1 << 16, LineBounded::new(reader));
         let mut head = Vec::new();
         rest.read_until(b'\n', &mut head).map_err(|e| read_error(&name, e))?;

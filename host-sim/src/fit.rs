@@ -61,6 +61,13 @@ pub fn drive_for(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
             rec.name
         );
     }
+    model_input(spec, rec)
+}
+
+/// Which of `rec`'s columns drives `spec`: `command_V` through the amplifier dynamics when the
+/// model has `amp`; otherwise the measured `current_A`, or, without it, `command_V` through the
+/// ideal amplifier (gain `amp.gain_a_per_v`).
+pub fn model_input(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
     if spec.has(Effect::AmplifierDynamics) {
         if rec.command_v.is_none() {
             bail!("{}: the model has amplifier_dynamics, which needs a `command_V` column", rec.name);
@@ -68,8 +75,20 @@ pub fn drive_for(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
         Ok(Drive::CommandDynamic)
     } else if rec.current_a.is_some() {
         Ok(Drive::Current)
-    } else {
+    } else if rec.command_v.is_some() {
         Ok(Drive::CommandIdeal)
+    } else {
+        bail!("{}: no drive column: the model needs `current_A` or `command_V`", rec.name)
+    }
+}
+
+impl Drive {
+    /// The column that carries this drive.
+    pub fn column(self) -> &'static str {
+        match self {
+            Drive::Current => "current_A",
+            Drive::CommandIdeal | Drive::CommandDynamic => "command_V",
+        }
     }
 }
 
@@ -120,6 +139,17 @@ pub fn prepare(spec: ModelSpec, files: &[Recording]) -> Result<Vec<Prepared<'_>>
 /// after integrating the drive up to t_k.
 pub fn simulate(spec: ModelSpec, params: &ActuatorParams, rec: &Recording) -> Result<Simulation> {
     run_model(spec, params, &Prepared::new(spec, rec)?, true)
+}
+
+/// Runs `spec` with `params` over the drive of `rec` (which needs no displacement column; the
+/// drive column as [`model_input`] picks it), at the file's own sample period.
+pub fn simulate_drive(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    rec: &Recording,
+) -> Result<(Simulation, Drive)> {
+    let prep = Prepared { rec, dt_s: rec.dt_s(), drive: model_input(spec, rec)? };
+    Ok((run_model(spec, params, &prep, false)?, prep.drive))
 }
 
 /// [`simulate`]; `all_channels: false` keeps only displacement and current (the fit's inner loop).

@@ -16,6 +16,7 @@ pub mod params;
 pub mod plant;
 pub mod plots;
 pub mod progress;
+pub mod provenance;
 pub mod record;
 pub mod recording;
 pub mod report;

@@ -88,20 +88,42 @@ pub fn scanned_params(spec: ModelSpec) -> Vec<&'static Param> {
 /// Loads a parameter file (TOML as `--params-out` writes), or the built-in demo set, and checks
 /// it for `spec` (every stage the spec uses must be valid).
 pub fn load(path: Option<&Path>, spec: ModelSpec) -> Result<ActuatorParams> {
-    load_input(path.map(Input::open).transpose()?, spec)
+    Ok(load_input(path.map(Input::open).transpose()?, spec, "the parameter set")?.0)
 }
 
-/// As [`load`], from an opened input.
-pub fn load_input(input: Option<Input>, spec: ModelSpec) -> Result<ActuatorParams> {
+/// Where a command's parameters came from, so no default is silent: said on stderr when loaded
+/// and carried into the JSON (`parameters_source`, `parameters_defaulted`).
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct ParamSource {
+    /// The parameter file as given, or [`DEMO_SET`].
+    pub parameters_source: String,
+    /// Tables the model uses that the file left out: the demo set's values stand in.
+    pub parameters_defaulted: Vec<&'static str>,
+}
+
+/// `parameters_source` when no parameter file was given.
+pub const DEMO_SET: &str = "built-in demo set";
+
+/// As [`load`], from an opened input, saying on stderr when the built-in demo set (or part of
+/// it) stands in; `role` names what the parameters are for (e.g. "start values").
+pub fn load_input(
+    input: Option<Input>,
+    spec: ModelSpec,
+    role: &str,
+) -> Result<(ActuatorParams, ParamSource)> {
     match input {
-        None => Ok(ActuatorParams::TERFENOL_DEMO),
+        None => {
+            eprintln!("gma: note: no --params: {role} are the built-in Terfenol-D demo set");
+            let source = ParamSource { parameters_source: DEMO_SET.into(), parameters_defaulted: Vec::new() };
+            Ok((ActuatorParams::TERFENOL_DEMO, source))
+        }
         Some(input) => {
             let name = input.name.clone();
             let f = parse_file(&name, &input.into_text(MAX_PARAM_FILE_BYTES)?, spec)?;
             if let Some(note) = defaulted_note(&name, &f.defaulted) {
                 eprintln!("gma: note: {note}");
             }
-            Ok(f.params)
+            Ok((f.params, ParamSource { parameters_source: name, parameters_defaulted: f.defaulted }))
         }
     }
 }

@@ -3,7 +3,7 @@
 
 use std::io::IsTerminal as _;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Mutex;
+use std::sync::{mpsc, Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressStyle};
@@ -83,5 +83,124 @@ impl Progress {
 pub fn phase(enabled: bool, text: &str) {
     if enabled {
         eprintln!("gma: {text}");
+    }
+}
+
+/// A phase of long work that has no evaluation counter of its own (refits in parallel, the
+/// uncertainty, drawing a report): off a terminal a start line, a line every [`LINE_EVERY`]
+/// while it runs (steps done, time) and a done line; on a terminal a spinner. Nothing when not
+/// `enabled`.
+pub struct Phase {
+    label: String,
+    steps: u64,
+    done: Arc<AtomicU64>,
+    start: Instant,
+    show: Show,
+}
+
+enum Show {
+    Hidden,
+    Bar(ProgressBar),
+    /// The heartbeat thread; dropping the sender stops it.
+    Lines(Option<(mpsc::Sender<()>, std::thread::JoinHandle<()>)>),
+}
+
+impl Phase {
+    /// Starts `label`, a phase of `steps` steps (0: not counted).
+    pub fn start(enabled: bool, label: &str, steps: u64) -> Self {
+        let done = Arc::new(AtomicU64::new(0));
+        let start = Instant::now();
+        let show = if !enabled {
+            Show::Hidden
+        } else if std::io::stderr().is_terminal() {
+            let b = if steps > 0 { ProgressBar::new(steps) } else { ProgressBar::new_spinner() };
+            let template = if steps > 0 {
+                "{msg} [{bar:30}] {pos}/{len}, {elapsed}"
+            } else {
+                "{spinner} {msg}, {elapsed}"
+            };
+            b.set_style(
+                ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            b.set_message(label.to_string());
+            b.enable_steady_tick(Duration::from_millis(200));
+            Show::Bar(b)
+        } else {
+            eprintln!("gma: {label}: started");
+            let (tx, rx) = mpsc::channel::<()>();
+            let (l, d) = (label.to_string(), done.clone());
+            let beat = std::thread::spawn(move || {
+                while let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(LINE_EVERY) {
+                    let counted = if steps > 0 {
+                        format!("{}/{steps} done, ", d.load(Ordering::Relaxed))
+                    } else {
+                        String::new()
+                    };
+                    eprintln!("gma: {l}: {counted}{:.0} s", start.elapsed().as_secs_f64());
+                }
+            });
+            Show::Lines(Some((tx, beat)))
+        };
+        Self { label: label.into(), steps, done, start, show }
+    }
+
+    /// One step done; `note` (if not empty) is said on its own line.
+    pub fn step(&self, note: &str) {
+        let k = self.done.fetch_add(1, Ordering::Relaxed) + 1;
+        match &self.show {
+            Show::Hidden => {}
+            Show::Bar(b) => {
+                b.set_position(k);
+                if !note.is_empty() {
+                    b.println(format!("gma: {note}"));
+                }
+            }
+            Show::Lines(_) => {
+                if !note.is_empty() {
+                    eprintln!("gma: {note}");
+                }
+            }
+        }
+    }
+
+    /// Done: the done line (or the spinner cleared) with the phase's time.
+    pub fn finish(mut self) {
+        self.stop();
+        match &self.show {
+            Show::Hidden => {}
+            Show::Bar(b) => b.finish_and_clear(),
+            Show::Lines(_) => {
+                let counted = if self.steps > 0 {
+                    format!("{}/{} ", self.done.load(Ordering::Relaxed), self.steps)
+                } else {
+                    String::new()
+                };
+                eprintln!(
+                    "gma: {}: done {counted}in {:.1} s",
+                    self.label,
+                    self.start.elapsed().as_secs_f64()
+                );
+            }
+        }
+    }
+
+    /// Stops the heartbeat (and waits for it, so no line comes after the phase ended).
+    fn stop(&mut self) {
+        if let Show::Lines(beat) = &mut self.show {
+            if let Some((tx, handle)) = beat.take() {
+                drop(tx);
+                let _ = handle.join();
+            }
+        }
+    }
+}
+
+impl Drop for Phase {
+    /// A phase left by an error stops its heartbeat too (the error says what happened).
+    fn drop(&mut self) {
+        self.stop();
+        if let Show::Bar(b) = &self.show {
+            b.finish_and_clear();
+        }
     }
 }

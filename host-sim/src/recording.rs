@@ -97,7 +97,8 @@ impl Recording {
         self.time_s.last().copied().unwrap_or(0.0) - self.time_s.first().copied().unwrap_or(0.0)
     }
 
-    fn column(&self, name: &str) -> Option<&Vec<f64>> {
+    /// A channel by its canonical name (`time_s`, `current_A`, …), when the recording has it.
+    pub fn column(&self, name: &str) -> Option<&Vec<f64>> {
         match name {
             "time_s" => Some(&self.time_s),
             "command_V" => self.command_v.as_ref(),

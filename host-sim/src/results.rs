@@ -127,12 +127,23 @@ pub struct UncertaintyBasis {
     pub condition: Option<f64>,
 }
 
-impl FitSummary {
-    /// Adds a fit's uncertainty (JSON fields and text).
-    pub fn with_uncertainty(mut self, u: &Uncertainty) -> Self {
+/// A fit's uncertainty as its JSON fields: per parameter, the correlations, the basis.
+#[derive(Debug, Clone, Serialize)]
+pub struct UncertaintyFields {
+    /// Per identified continuous parameter: value, standard deviation, 95 % interval.
+    pub uncertainty: BTreeMap<&'static str, ParamEstimate>,
+    /// Correlations of those parameters.
+    pub correlation: Correlation,
+    /// What the uncertainty rests on.
+    pub uncertainty_basis: UncertaintyBasis,
+}
+
+impl From<&Uncertainty> for UncertaintyFields {
+    fn from(u: &Uncertainty) -> Self {
         let finite = |x: f64| x.is_finite().then_some(x);
-        self.uncertainty = Some(
-            u.params
+        UncertaintyFields {
+            uncertainty: u
+                .params
                 .iter()
                 .map(|p| {
                     let e = ParamEstimate {
@@ -144,17 +155,27 @@ impl FitSummary {
                     (p.bound.name, e)
                 })
                 .collect(),
-        );
-        self.correlation = Some(Correlation {
-            names: u.params.iter().map(|p| p.bound.name).collect(),
-            matrix: u.correlation.iter().map(|row| row.iter().map(|&x| finite(x)).collect()).collect(),
-        });
-        self.uncertainty_basis = Some(UncertaintyBasis {
-            samples: u.samples,
-            effective_samples: u.effective_samples,
-            lag1_autocorrelation: u.lag1_autocorrelation,
-            condition: finite(u.condition),
-        });
+            correlation: Correlation {
+                names: u.params.iter().map(|p| p.bound.name).collect(),
+                matrix: u.correlation.iter().map(|row| row.iter().map(|&x| finite(x)).collect()).collect(),
+            },
+            uncertainty_basis: UncertaintyBasis {
+                samples: u.samples,
+                effective_samples: u.effective_samples,
+                lag1_autocorrelation: u.lag1_autocorrelation,
+                condition: finite(u.condition),
+            },
+        }
+    }
+}
+
+impl FitSummary {
+    /// Adds a fit's uncertainty (JSON fields and text).
+    pub fn with_uncertainty(mut self, u: &Uncertainty) -> Self {
+        let f = UncertaintyFields::from(u);
+        self.uncertainty = Some(f.uncertainty);
+        self.correlation = Some(f.correlation);
+        self.uncertainty_basis = Some(f.uncertainty_basis);
         self.text.uncertainty = Some(u.clone());
         self
     }

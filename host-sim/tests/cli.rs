@@ -231,15 +231,23 @@ fn every_command_explains_its_options_with_units() {
 fn demo_finds_the_hidden_effects_and_writes_the_report() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo");
-    let o = gma(&["demo", "--out-dir", out.to_str().unwrap()]);
+    let o = gma(&["demo", "--json", "--out-dir", out.to_str().unwrap()]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let text = String::from_utf8_lossy(&o.stdout);
+    // With --json the narrative is on stderr, and stdout is the one JSON object.
+    let text = String::from_utf8_lossy(&o.stderr);
     assert!(
         text.contains("missing: `mechanical_dynamics`") && text.contains("missing: `eddy_current`"),
         "{text}"
     );
+    let j = json(&o);
+    let ladder = j["ladder"].as_array().unwrap();
+    assert_eq!(ladder.last().unwrap()["model"], "eddy+ja+mech", "{j}");
+    assert_eq!(ladder[0]["verdict"], "mechanical_dynamics", "{j}");
+    assert_eq!(j["parameter_files"].as_array().unwrap().len(), ladder.len());
+    assert_eq!(j["provenance"]["seed"], 1);
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("<svg") && html.contains("Model ladder") && html.contains("eddy+ja+mech"));
+    assert!(html.contains("Parameter uncertainty") && html.contains("Provenance"));
 }
 
 #[test]

@@ -9,6 +9,7 @@ use std::sync::Arc;
 
 use gma_control::telemetry::{Frame, MAX_ENCODED};
 use host_sim::cli::simulate::{run, SimulateArgs, Waveform};
+use host_sim::cli::ReadArgs;
 use host_sim::plant::EddyModel;
 use host_sim::recording::Recording;
 use proptest::prelude::*;
@@ -57,7 +58,7 @@ proptest! {
         let args = SimulateArgs {
             model: model.into(), params: None, waveform, freq_hz, amplitude, bias, duration_s, noise_um,
             quantum_um, offset_um, oversample, eddy_model: EddyModel::Distributed, no_current: false, seed: 7,
-            out: out.clone(),
+            out: out.clone(), drive: None, json: false, read: ReadArgs::default(),
         };
         match run(&args) {
             Err(e) => {

@@ -12,7 +12,7 @@ use crate::columns::ReadOptions;
 use crate::files::{check_outputs, open_all, Input};
 use crate::fit::{self, FitOptions};
 use crate::loops::{self, LoopFile};
-use crate::params;
+use crate::params::{self, ParamSource};
 use crate::recording::Recording;
 use crate::search::SearchOptions;
 use crate::warning::Warning;
@@ -86,7 +86,22 @@ pub struct ReadArgs {
     pub trim_start: Option<f64>,
 }
 
+impl Default for ReadArgs {
+    /// Files read as `gma` writes them: no mapping, no resampling, no trimming.
+    fn default() -> Self {
+        Self { max_samples: DEFAULT_MAX_SAMPLES, columns: Vec::new(), resample: None, trim_start: None }
+    }
+}
+
 impl ReadArgs {
+    /// Whether every option is at its default (nothing to apply).
+    pub fn is_default(&self) -> bool {
+        self.max_samples == DEFAULT_MAX_SAMPLES
+            && self.columns.is_empty()
+            && self.resample.is_none()
+            && self.trim_start.is_none()
+    }
+
     /// The options, checked (each message names its option).
     pub fn options(&self) -> Result<ReadOptions> {
         ReadOptions::new(&self.columns, self.resample.as_deref(), self.trim_start)
@@ -111,6 +126,8 @@ pub struct Prepared {
     pub data: Data,
     /// Search settings (the deadline runs from when the inputs were read).
     pub opts: FitOptions,
+    /// Where the start values came from (a file or the built-in demo set).
+    pub params_source: ParamSource,
 }
 
 impl Prepared {
@@ -135,7 +152,7 @@ impl ModelFiles {
         let (fit_in, val_in) = (open_all(&self.files)?, open_all(&self.val)?);
         let all: Vec<_> = fit_in.iter().chain(&val_in).chain(params_input.as_ref()).map(Input::id).collect();
         check_outputs(outputs, &all)?;
-        let init = params::load_input(params_input, spec)?;
+        let (init, params_source) = params::load_input(params_input, spec, "start values")?;
         let data = read_data(fit_in, val_in, self.read.max_samples, &read_opts)?;
         if let Data::Recordings(fit_files, val_files) = &data {
             for r in fit_files.iter().chain(val_files) {
@@ -144,7 +161,7 @@ impl ModelFiles {
         }
         let deadline = time_limit.map(|t| Instant::now() + t);
         let opts = FitOptions { seed: self.seed, progress: true, effort: self.effort, deadline };
-        Ok(Prepared { spec, init, data, opts })
+        Ok(Prepared { spec, init, data, opts, params_source })
     }
 }
 

@@ -53,19 +53,21 @@ pub fn run(a: &CompareArgs) -> Result<()> {
     let params_input = a.params.as_deref().map(Input::open).transpose()?;
     let inputs = open_all(&a.files)?;
     let ids: Vec<_> = inputs.iter().chain(params_input.as_ref()).map(Input::id).collect();
-    if params_input.is_none() {
-        eprintln!("gma: note: no --params: comparing the built-in Terfenol-D demo parameter set");
-    }
-    let p = params::load_input(params_input, spec)?;
+    let (p, source) = params::load_input(params_input, spec, "the compared parameters")?;
     output_folder(&a.out_dir)?;
     let stems = unique_stems(&a.files);
     let planned: Vec<PathBuf> =
         stems.iter().flat_map(|s| ["loop", "time", "residual"].map(|k| plot_path(a, s, k))).collect();
     check_outputs(&planned.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &ids)?;
-    match read_data(inputs, Vec::new(), a.read.max_samples, &read_opts)? {
-        Data::Loops(files, _) => compare_loops(a, spec, &p, &files, &stems),
-        Data::Recordings(files, _) => compare_recordings(a, spec, &p, &files, &stems),
+    let summary = match read_data(inputs, Vec::new(), a.read.max_samples, &read_opts)? {
+        Data::Loops(files, _) => compare_loops(a, spec, &p, &files, &stems)?,
+        Data::Recordings(files, _) => compare_recordings(a, spec, &p, &files, &stems)?,
+    };
+    say!(a.json, "{summary}");
+    if a.json {
+        out!("{}", super::merged_json(&summary, &source)?);
     }
+    Ok(())
 }
 
 fn plot_path(a: &CompareArgs, stem: &str, kind: &str) -> PathBuf {
@@ -78,7 +80,7 @@ fn compare_recordings(
     p: &ActuatorParams,
     recs: &[Recording],
     stems: &[String],
-) -> Result<()> {
+) -> Result<CompareSummary> {
     for r in recs {
         fit::drive_for(spec, r)?;
     }
@@ -111,23 +113,18 @@ fn compare_recordings(
         }
     }
     report_all(
-        a,
         &charts,
         CompareSummary { model: spec.to_string(), nrmse: total / recs.len() as f64, files: rows },
     )
 }
 
 /// Writes every chart (only now that all were drawn: a failing file leaves no partial set of
-/// plots), then the summary.
-fn report_all(a: &CompareArgs, charts: &[(PathBuf, Chart)], summary: CompareSummary) -> Result<()> {
+/// plots) and hands back the summary.
+fn report_all(charts: &[(PathBuf, Chart)], summary: CompareSummary) -> Result<CompareSummary> {
     for (path, chart) in charts {
         plots::write(path, chart)?;
     }
-    say!(a.json, "{summary}");
-    if a.json {
-        out!("{}", serde_json::to_string(&summary)?);
-    }
-    Ok(())
+    Ok(summary)
 }
 
 /// Loop files: measured and model loops overlaid, and coercivity, remanence and largest
@@ -138,7 +135,7 @@ fn compare_loops(
     p: &ActuatorParams,
     files: &[LoopFile],
     stems: &[String],
-) -> Result<()> {
+) -> Result<CompareSummary> {
     let model = loops::LoopModel::from_spec(spec)?;
     let values = model.values_of(p);
     let mut rows = Vec::new();
@@ -160,7 +157,6 @@ fn compare_loops(
         charts.push((out, loops::chart(f, &m, &spec.to_string())));
     }
     report_all(
-        a,
         &charts,
         CompareSummary { model: spec.to_string(), nrmse: total / files.len() as f64, files: rows },
     )

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
+use serde_json::json;
 
 use crate::files::{display, output_folder, write_atomic};
 use crate::fit::FitOptions;
@@ -18,14 +19,19 @@ pub struct DemoArgs {
     /// Seed of the simulated rig's noise and of the fits.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Print exactly one JSON object on stdout (the narrative goes to stderr).
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Runs `gma demo`.
 pub fn run(a: &DemoArgs) -> Result<()> {
     let t = std::time::Instant::now();
+    let j = a.json;
     let case = cases::demo();
     output_folder(&a.out_dir)?;
-    out!(
+    say!(
+        j,
         "gma demo: a SIMULATED Terfenol-D rig with {}, unknown to the engineer, whose model is `{}`.",
         case.plant.describe(),
         case.model
@@ -35,7 +41,8 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         let p = a.out_dir.join(&r.name);
         r.write(&p)?;
     }
-    out!(
+    say!(
+        j,
         "  recordings: {} fit, {} validation (different frequencies and amplitudes) in {}",
         fit_files.len(),
         val_files.len(),
@@ -44,9 +51,10 @@ pub fn run(a: &DemoArgs) -> Result<()> {
     let opts = FitOptions { seed: a.seed, ..FitOptions::default() };
     let rungs = report::ladder(case.model, &case.init, &fit_files, &val_files, opts, |r| {
         let d = &r.diagnosis;
-        out!("\n  model `{}`: validation NRMSE {:.2} %", r.spec, r.headline() * 100.0);
+        say!(j, "\n  model `{}`: validation NRMSE {:.2} %", r.spec, r.headline() * 100.0);
         for c in d.candidates.iter().take(3) {
-            out!(
+            say!(
+                j,
                 "    {:22} {:.2} % → {:.2} % after adding it",
                 c.effect,
                 c.nrmse_before * 100.0,
@@ -54,13 +62,15 @@ pub fn run(a: &DemoArgs) -> Result<()> {
             );
         }
         match d.verdict {
-            Some(v) => out!("    → missing: `{v}`; adding it"),
-            None => out!("    → nothing significant is missing"),
+            Some(v) => say!(j, "    → missing: `{v}`; adding it"),
+            None => say!(j, "    → nothing significant is missing"),
         }
     })?;
+    let mut param_files = Vec::new();
     for (k, r) in rungs.iter().enumerate() {
         let p = a.out_dir.join(format!("params-{k}-{}.toml", r.spec.to_string().replace('+', "_")));
         write_atomic(&p, params::to_toml(&r.params, &format!("gma demo, model {}", r.spec))?.as_bytes())?;
+        param_files.push(display(&p));
     }
     let html = a.out_dir.join("report.html");
     let note = format!(
@@ -75,10 +85,19 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         &val_files,
         &note,
     )?;
-    write_atomic(&html, page.as_bytes())?;
+    let uncertainties = report::rung_uncertainties(&rungs, &fit_files, || {});
+    let provenance = crate::provenance::Provenance::now(Some(a.seed));
+    let start = params::ParamSource {
+        parameters_source: "the demo case's start values".into(),
+        parameters_defaulted: Vec::new(),
+    };
+    let sections =
+        report::uncertainty_html(&rungs, &uncertainties) + &report::provenance_html(&provenance, &start);
+    write_atomic(&html, report::with_sections(page, &sections).as_bytes())?;
     let first = rungs.first().map(|r| r.headline()).unwrap_or(f64::NAN);
     let last = rungs.last().map(|r| r.headline()).unwrap_or(f64::NAN);
-    out!(
+    say!(
+        j,
         "\n  validation NRMSE {:.2} % (`{}`) → {:.2} % (`{}`), {:.0}× lower; report: {} ({:.1} s)",
         first * 100.0,
         case.model,
@@ -88,5 +107,28 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         display(&html),
         t.elapsed().as_secs_f64()
     );
+    if j {
+        let mean = |v: &[f64]| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+        out!(
+            "{}",
+            json!({
+                "simulated": true,
+                "hidden_effects": case.plant.describe(),
+                "start_model": case.model.to_string(),
+                "seed": a.seed,
+                "recordings": fit_files.iter().chain(&val_files).map(|r| display(&a.out_dir.join(&r.name))).collect::<Vec<_>>(),
+                "ladder": rungs.iter().map(|r| json!({
+                    "model": r.spec.to_string(),
+                    "nrmse_fit": mean(&r.fit_nrmse),
+                    "nrmse_val": mean(&r.val_nrmse),
+                    "verdict": r.diagnosis.verdict,
+                })).collect::<Vec<_>>(),
+                "parameter_files": param_files,
+                "report": display(&html),
+                "seconds": t.elapsed().as_secs_f64(),
+                "provenance": provenance,
+            })
+        );
+    }
     Ok(())
 }

@@ -23,7 +23,7 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
     say!(a.mf.json, "{d}");
     a.mf.warn_if_time_limited(d.time_limited);
     if a.mf.json {
-        out!("{}", serde_json::to_string(&d)?);
+        out!("{}", super::merged_json(&d, &p.params_source)?);
     }
     Ok(())
 }

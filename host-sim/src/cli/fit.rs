@@ -83,7 +83,7 @@ pub fn run(a: &FitArgs) -> Result<()> {
         say!(j, "  parameters written to {}", display(out));
     }
     if j {
-        out!("{}", serde_json::to_string(&summary)?);
+        out!("{}", super::merged_json(&summary, &p.params_source)?);
     }
     Ok(())
 }

@@ -3,6 +3,7 @@
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use model_core::mechanics::{MassSpringDamper, MechState, SecondOrderZoh};
+use serde_json::json;
 
 /// Options of `gma mechanics`.
 #[derive(Args)]
@@ -22,7 +23,13 @@ pub struct MechanicsArgs {
     /// Step force [N] for the printed step response.
     #[arg(long, default_value_t = 100.0)]
     pub force_n: f32,
+    /// Print exactly one JSON object on stdout (the text goes to stderr).
+    #[arg(long)]
+    pub json: bool,
 }
+
+/// Samples of the printed step response.
+const STEP_SAMPLES: u32 = 20;
 
 /// Runs `gma mechanics`.
 pub fn run(a: &MechanicsArgs) -> Result<()> {
@@ -47,14 +54,32 @@ pub fn run(a: &MechanicsArgs) -> Result<()> {
         stiffness_n_per_m: a.stiffness_n_per_m,
     };
     let zoh = SecondOrderZoh::new(p, 1.0 / a.sample_rate_hz).context("mechanics parameters")?;
-    out!("natural frequency f_n = {:.1} Hz", p.natural_frequency_hz());
-    out!("damping ratio     ζ   = {:.3}", p.damping_ratio());
-    out!("static compliance     = {:.4e} m/N", 1.0 / a.stiffness_n_per_m);
-    out!("time_s,displacement_um");
+    let j = a.json;
+    let compliance_m_per_n = 1.0 / a.stiffness_n_per_m;
+    say!(j, "natural frequency f_n = {:.1} Hz", p.natural_frequency_hz());
+    say!(j, "damping ratio     ζ   = {:.3}", p.damping_ratio());
+    say!(j, "static compliance     = {compliance_m_per_n:.4e} m/N");
+    say!(j, "time_s,displacement_um");
     let mut s = MechState::default();
-    for n in 0..20 {
-        let y = zoh.step(&mut s, a.force_n);
-        out!("{:.6},{:.6}", (n + 1) as f32 / a.sample_rate_hz, y * 1e6);
+    let mut step = Vec::new();
+    for n in 0..STEP_SAMPLES {
+        let y_um = zoh.step(&mut s, a.force_n) * 1e6;
+        let t_s = (n + 1) as f32 / a.sample_rate_hz;
+        say!(j, "{t_s:.6},{y_um:.6}");
+        step.push(json!({"time_s": t_s, "displacement_um": y_um}));
+    }
+    if j {
+        out!(
+            "{}",
+            json!({
+                "natural_frequency_hz": p.natural_frequency_hz(),
+                "damping_ratio": p.damping_ratio(),
+                "static_compliance_m_per_n": compliance_m_per_n,
+                "sample_rate_hz": a.sample_rate_hz,
+                "force_n": a.force_n,
+                "step_response": step,
+            })
+        );
     }
     Ok(())
 }

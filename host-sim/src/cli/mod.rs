@@ -37,6 +37,8 @@ mod record;
 mod report;
 pub mod simulate;
 
+pub use common::ReadArgs;
+
 /// Exit status of a command that failed (bad input, a model that cannot follow the data, …).
 const EXIT_FAILURE: u8 = 1;
 /// Exit status of a command line that cannot be parsed (clap's usage code).
@@ -96,7 +98,9 @@ impl Command {
             Command::Compare(a) => a.json,
             Command::Record(a) => a.json,
             Command::Effects(a) => a.json,
-            Command::Demo(_) | Command::Simulate(_) | Command::Mechanics(_) => false,
+            Command::Demo(a) => a.json,
+            Command::Simulate(a) => a.json,
+            Command::Mechanics(a) => a.json,
         }
     }
 }
@@ -149,6 +153,16 @@ pub fn main() -> ExitCode {
             ExitCode::from(EXIT_FAILURE)
         }
     }
+}
+
+/// `base` and `extra` (both serialising to JSON objects) as one JSON object: a command's result
+/// with the fields every command adds (parameter source, provenance).
+fn merged_json(base: &impl serde::Serialize, extra: &impl serde::Serialize) -> Result<serde_json::Value> {
+    let mut v = serde_json::to_value(base)?;
+    if let (Some(o), serde_json::Value::Object(e)) = (v.as_object_mut(), serde_json::to_value(extra)?) {
+        o.extend(e);
+    }
+    Ok(v)
 }
 
 /// Writes one line to stdout; exits at once (status 0) when the reader has closed the pipe.

@@ -8,6 +8,9 @@ use serde_json::json;
 
 use super::common::{Data, ModelFiles};
 use crate::files::{display, write_atomic};
+use crate::progress::Phase;
+use crate::provenance::Provenance;
+use crate::results::UncertaintyFields;
 use crate::{loops, report};
 
 /// Options of `gma report`.
@@ -25,34 +28,58 @@ pub fn run(a: &ReportArgs) -> Result<()> {
     let p = a.mf.prepare(&[a.out.as_path()])?;
     let j = a.mf.json;
     let spec = p.spec;
+    // Every input has been read to its end: their digests are final.
+    let provenance = Provenance::now(Some(a.mf.seed));
+    let provenance_section = report::provenance_html(&provenance, &p.params_source);
+    let extra = json!({"provenance": provenance, "parameters_source": p.params_source.parameters_source,
+                       "parameters_defaulted": p.params_source.parameters_defaulted});
     match &p.data {
         Data::Loops(files, _) => {
             let res = loops::fit(loops::LoopModel::from_spec(spec)?, files, p.search_options())?;
-            write_atomic(&a.out, loops::html(&spec.to_string(), &res, files)?.as_bytes())?;
+            let page = loops::html(&spec.to_string(), &res, files)?;
+            write_atomic(&a.out, report::with_sections(page, &provenance_section).as_bytes())?;
             a.mf.warn_if_time_limited(res.time_limited);
             say!(j, "loop report written to {}", display(&a.out));
             if j {
-                out!(
-                    "{}",
-                    json!({"report": display(&a.out), "nrmse": res.nrmse, "warnings": res.warnings.iter().map(|w| w.to_string()).collect::<Vec<_>>(),
-                           "time_limit_reached": res.time_limited})
-                );
+                let result = json!({"report": display(&a.out), "nrmse": res.nrmse, "warnings": res.warnings.iter().map(|w| w.to_string()).collect::<Vec<_>>(),
+                           "time_limit_reached": res.time_limited});
+                out!("{}", super::merged_json(&result, &extra)?);
             }
         }
         Data::Recordings(fit_files, val_files) => {
             let rungs =
                 report::ladder(spec, &p.init, fit_files, val_files, p.opts, |r| say!(j, "{}", r.diagnosis))?;
             let time_limited = rungs.iter().any(|r| r.diagnosis.time_limited);
+            let phase = Phase::start(
+                p.opts.progress,
+                &format!("report: parameter uncertainty of {} model(s)", rungs.len()),
+                rungs.len() as u64,
+            );
+            let uncertainties = report::rung_uncertainties(&rungs, fit_files, || phase.step(""));
+            phase.finish();
+            let phase =
+                Phase::start(p.opts.progress, "report: drawing the page (each model on each file)", 0);
             let html = report::html(&format!("gma report — {spec}"), &rungs, fit_files, val_files, "")?;
-            write_atomic(&a.out, html.as_bytes())?;
+            let sections = report::uncertainty_html(&rungs, &uncertainties) + &provenance_section;
+            write_atomic(&a.out, report::with_sections(html, &sections).as_bytes())?;
+            phase.finish();
             a.mf.warn_if_time_limited(time_limited);
             say!(j, "report written to {}", display(&a.out));
             if j {
-                out!(
-                    "{}",
-                    json!({"report": display(&a.out), "time_limit_reached": time_limited,
-                    "ladder": rungs.iter().map(|r| json!({"model": r.spec.to_string(), "nrmse_fit": r.fit_nrmse, "nrmse_val": r.val_nrmse, "verdict": r.diagnosis.verdict})).collect::<Vec<_>>()})
-                );
+                let ladder: Vec<_> = rungs
+                    .iter()
+                    .zip(&uncertainties)
+                    .map(|(r, u)| {
+                        let rung = json!({"model": r.spec.to_string(), "nrmse_fit": r.fit_nrmse, "nrmse_val": r.val_nrmse, "verdict": r.diagnosis.verdict});
+                        match u {
+                            Ok(u) => super::merged_json(&rung, &UncertaintyFields::from(u)),
+                            Err(e) => super::merged_json(&rung, &json!({"uncertainty_error": e})),
+                        }
+                    })
+                    .collect::<Result<_>>()?;
+                let result =
+                    json!({"report": display(&a.out), "time_limit_reached": time_limited, "ladder": ladder});
+                out!("{}", super::merged_json(&result, &extra)?);
             }
         }
     }

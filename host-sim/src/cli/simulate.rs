@@ -1,15 +1,22 @@
-//! `gma simulate`: a SIMULATED rig (the plant simulator) under a standard excitation, written as
-//! a measurement CSV with the contract columns. The command says on stderr that the data are
-//! simulated.
+//! `gma simulate`: a SIMULATED rig (the plant simulator) under a standard excitation, or a
+//! parameter set run on a measured drive (`--drive FILE`), written as a measurement CSV with the
+//! contract columns. The command says on stderr that the data are simulated.
 
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
+use model_core::{ActuatorParams, ModelSpec};
+use rand::SeedableRng as _;
+use rand_distr::{Distribution as _, Normal};
+use serde_json::json;
 
+use super::common::{read_recording, ReadArgs};
 use crate::excitation::Excitation;
 use crate::files::{check_outputs, display, Input};
+use crate::fit::{self, Drive};
 use crate::params;
 use crate::plant::{EddyModel, Plant};
+use crate::recording::Recording;
 
 /// Most samples one run writes (about 1 GB of CSV).
 pub const MAX_SAMPLES: f64 = 2.0e7;
@@ -43,9 +50,17 @@ pub struct SimulateArgs {
     /// Effects present in the simulated actuator, e.g. `ja+mech+eddy` (names: `gma --help`).
     #[arg(long, default_value = "ja+mech")]
     pub model: String,
-    /// Parameter file (TOML, as `gma fit --params-out` writes); default: a Terfenol-D demo set.
+    /// Parameter file (TOML, as `gma fit --params-out` writes); default: the built-in
+    /// Terfenol-D demo set (said so on stderr and in the JSON's `parameters_source`).
     #[arg(long)]
     pub params: Option<PathBuf>,
+    /// Run the model on a measured drive instead of a waveform: the recording's `current_A`
+    /// drives it (its `command_V` when the model has `amp`, or when there is no `current_A`:
+    /// through the amplifier gain `amp.gain_a_per_v`). The output is on the file's own time
+    /// base; the model is the lumped one `gma fit` identifies (eddy currents as a first-order
+    /// lag). Excludes the waveform options; the reading options below apply to this file.
+    #[arg(long, value_name = "FILE", conflicts_with_all = DRIVE_EXCLUDES)]
+    pub drive: Option<PathBuf>,
     /// Excitation waveform.
     #[arg(long, value_enum, default_value = "sine")]
     pub waveform: Waveform,
@@ -86,14 +101,137 @@ pub struct SimulateArgs {
     /// Output CSV (written atomically: temporary file, then rename).
     #[arg(long, short)]
     pub out: PathBuf,
+    /// Print exactly one JSON object on stdout (what was written and from what).
+    #[arg(long)]
+    pub json: bool,
+    /// How the `--drive` recording is read (see `gma fit --help`).
+    #[command(flatten)]
+    pub read: ReadArgs,
 }
+
+/// The options that make the waveform, which `--drive` replaces.
+const DRIVE_EXCLUDES: [&str; 7] =
+    ["waveform", "freq_hz", "amplitude", "bias", "duration_s", "oversample", "eddy_model"];
 
 /// Runs the simulation and writes the CSV.
 pub fn run(a: &SimulateArgs) -> Result<()> {
     let spec = params::parse_spec(&a.model)?;
+    if a.drive.is_none() && !a.read.is_default() {
+        bail!("--column, --resample, --trim-start and --max-samples apply to the --drive FILE recording");
+    }
+    let read_opts = a.read.options()?;
+    super::common::check_max_samples(a.read.max_samples)?;
     let params_input = a.params.as_deref().map(Input::open).transpose()?;
-    check_outputs(&[a.out.as_path()], &params_input.iter().map(Input::id).collect::<Vec<_>>())?;
-    let p = params::load_input(params_input, spec)?;
+    let drive_input = a.drive.as_deref().map(Input::open).transpose()?;
+    let ids: Vec<_> = params_input.iter().chain(&drive_input).map(Input::id).collect();
+    check_outputs(&[a.out.as_path()], &ids)?;
+    let (p, source) = params::load_input(params_input, spec, "the simulated rig's parameters")?;
+    for (name, v) in [("--noise-um", a.noise_um), ("--quantum-um", a.quantum_um)] {
+        if !(v.is_finite() && (0.0..=MAX_SENSOR_UM).contains(&v)) {
+            bail!("{name} must be in [0, {MAX_SENSOR_UM:e}] µm, got {v}");
+        }
+    }
+    if !(a.offset_um.is_finite() && a.offset_um.abs() <= MAX_SENSOR_UM) {
+        bail!("--offset-um must be within ±{MAX_SENSOR_UM:e} µm, got {}", a.offset_um);
+    }
+    if a.no_current && !spec.has(model_core::Effect::AmplifierDynamics) {
+        bail!("--no-current needs a model with `amp` (without it the current is the drive)");
+    }
+    let name = display(&a.out);
+    let (rec, what, drive) = match drive_input {
+        Some(input) => {
+            let measured = read_recording(input, a.read.max_samples, &read_opts)?;
+            let (rec, drive) = run_on_drive(a, spec, &p, &measured, &name)?;
+            let what = format!(
+                "model `{spec}` driven by {}'s measured `{}` on its own time base",
+                measured.name,
+                drive.column()
+            );
+            (rec, what, Some((measured.name, drive.column())))
+        }
+        None => {
+            let (rec, what) = run_waveform(a, spec, p, &name)?;
+            (rec, what, None)
+        }
+    };
+    // Write only what the reader accepts (gma fit must read back every file gma writes).
+    rec.check_plausible().context(if drive.is_some() {
+        "the model left the plausible range on this drive (check the drive's column and unit)"
+    } else {
+        "the simulated rig left the plausible range (lower --amplitude or --bias?)"
+    })?;
+    rec.write(&a.out).with_context(|| format!("writing {name}"))?;
+    eprintln!("gma: wrote {} samples of SIMULATED data ({what}) to {name}", rec.len());
+    if a.json {
+        let (drive_file, drive_column) = drive.unzip();
+        let result = json!({
+            "out": name,
+            "simulated": true,
+            "model": spec.to_string(),
+            "samples": rec.len(),
+            "duration_s": rec.duration_s(),
+            "dt_s": rec.dt_s(),
+            "columns": crate::recording::COLUMNS.iter().filter(|c| rec.column(c).is_some()).collect::<Vec<_>>(),
+            "drive_file": drive_file,
+            "drive_column": drive_column,
+            "seed": a.seed,
+            "description": what,
+        });
+        out!("{}", super::merged_json(&result, &source)?);
+    }
+    Ok(())
+}
+
+/// The model run on `measured`'s drive: the file's time and command, the drive current (the
+/// measured one, or the model's when the command drives), and the model's displacement through
+/// the sensor options.
+fn run_on_drive(
+    a: &SimulateArgs,
+    spec: ModelSpec,
+    p: &ActuatorParams,
+    measured: &Recording,
+    name: &str,
+) -> Result<(Recording, Drive)> {
+    let (sim, drive) = fit::simulate_drive(spec, p, measured)?;
+    let current = match drive {
+        Drive::Current => measured.current_a.clone(),
+        Drive::CommandIdeal | Drive::CommandDynamic => Some(sim.current_a),
+    };
+    let mut rng = rand::rngs::StdRng::seed_from_u64(a.seed);
+    let noise = Normal::new(0.0, a.noise_um).context("--noise-um")?;
+    let displacement = sim
+        .displacement_um
+        .iter()
+        .map(|y| {
+            let mut y = y + a.offset_um;
+            if a.noise_um > 0.0 {
+                y += noise.sample(&mut rng);
+            }
+            if a.quantum_um > 0.0 {
+                y = (y / a.quantum_um).round() * a.quantum_um;
+            }
+            y
+        })
+        .collect();
+    let rec = Recording {
+        name: name.into(),
+        time_s: measured.time_s.clone(),
+        command_v: measured.command_v.clone(),
+        current_a: if a.no_current { None } else { current },
+        displacement_um: Some(displacement),
+        force_n: None,
+        temperature_c: None,
+    };
+    Ok((rec, drive))
+}
+
+/// The plant simulator under the waveform options, and what it ran in words.
+fn run_waveform(
+    a: &SimulateArgs,
+    spec: ModelSpec,
+    p: ActuatorParams,
+    name: &str,
+) -> Result<(Recording, String)> {
     let (dt, dt32) = (p.dt_s as f64, p.dt_s);
     for (name, v) in [("--freq-hz", a.freq_hz), ("--duration-s", a.duration_s)] {
         if !(v.is_finite() && v > 0.0) {
@@ -132,17 +270,6 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     if !(1..=MAX_OVERSAMPLE).contains(&a.oversample) {
         bail!("--oversample must be in [1, {MAX_OVERSAMPLE}], got {}", a.oversample);
     }
-    for (name, v) in [("--noise-um", a.noise_um), ("--quantum-um", a.quantum_um)] {
-        if !(v.is_finite() && (0.0..=MAX_SENSOR_UM).contains(&v)) {
-            bail!("{name} must be in [0, {MAX_SENSOR_UM:e}] µm, got {v}");
-        }
-    }
-    if !(a.offset_um.is_finite() && a.offset_um.abs() <= MAX_SENSOR_UM) {
-        bail!("--offset-um must be within ±{MAX_SENSOR_UM:e} µm, got {}", a.offset_um);
-    }
-    if a.no_current && !spec.has(model_core::Effect::AmplifierDynamics) {
-        bail!("--no-current needs a model with `amp` (without it the current is the drive)");
-    }
     let (f, amp, bias) = (a.freq_hz, a.amplitude, a.bias);
     let exc = match a.waveform {
         Waveform::Sine => Excitation::Sine { freq_hz: f, amplitude: amp, bias },
@@ -162,17 +289,6 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     plant.oversample = a.oversample;
     plant.log_current = !a.no_current;
     plant.eddy = a.eddy_model;
-    let name = display(&a.out);
-    let rec = plant.record(&name, &exc, a.duration_s, a.seed)?;
-    // Write only what the reader accepts (gma fit must read back every file gma writes).
-    rec.check_plausible()
-        .context("the simulated rig left the plausible range (lower --amplitude or --bias?)")?;
-    rec.write(&a.out).with_context(|| format!("writing {name}"))?;
-    eprintln!(
-        "gma: wrote {} samples of SIMULATED data (plant {}, {}) to {name}",
-        rec.len(),
-        plant.describe(),
-        exc.describe()
-    );
-    Ok(())
+    let rec = plant.record(name, &exc, a.duration_s, a.seed)?;
+    Ok((rec, format!("plant {}, {}", plant.describe(), exc.describe())))
 }
