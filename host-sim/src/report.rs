@@ -299,7 +299,8 @@ pub fn rung_uncertainties(
 }
 
 /// The report's uncertainty section: per rung, each identified parameter's value ± standard
-/// deviation and 95 % interval, and the pairs correlated beyond |ρ| > [`CORRELATION_WARNING`].
+/// deviation and 95 % interval, the pairs correlated beyond |ρ| > [`CORRELATION_WARNING`] and
+/// the correlation matrix (lower triangle).
 pub fn uncertainty_html(
     rungs: &[Rung],
     uncertainties: &[std::result::Result<Uncertainty, String>],
@@ -354,6 +355,21 @@ pub fn uncertainty_html(
             u.lag1_autocorrelation,
             u.effective_samples
         );
+        h.push_str("<details><summary>correlation matrix</summary><table><tr><th></th>");
+        for k in 1..=u.params.len() {
+            let _ = write!(h, "<th>{k}</th>");
+        }
+        h.push_str("</tr>");
+        for (i, p) in u.params.iter().enumerate() {
+            let _ = write!(h, "<tr><td class=l>{} {}</td>", i + 1, p.bound.name);
+            for rho in &u.correlation[i][..=i] {
+                // Not identifiable: no correlation.
+                let cell = if rho.is_finite() { format!("{rho:+.2}") } else { "?".into() };
+                let _ = write!(h, "<td>{cell}</td>");
+            }
+            h.push_str("</tr>");
+        }
+        h.push_str("</table></details>");
     }
     h
 }

@@ -155,7 +155,11 @@ fn the_report_carries_provenance_uncertainty_and_shows_every_phase() {
     }
     assert!(page.contains("Provenance") && page.contains("built-in demo set") && page.contains(date));
     // Uncertainty: in the page and per rung in the JSON, each interval around its value.
-    assert!(page.contains("Parameter uncertainty") && page.contains("95 % interval"));
+    assert!(
+        page.contains("Parameter uncertainty")
+            && page.contains("95 % interval")
+            && page.contains("correlation matrix")
+    );
     let rung = &j["ladder"][0];
     let u = rung["uncertainty"].as_object().unwrap_or_else(|| panic!("no uncertainty in {rung}"));
     assert!(!u.is_empty());

@@ -98,7 +98,14 @@ fn fit_recordings(
     let t = Instant::now();
     let res = fit::fit_constrained(p.spec, &[p.init], fit_files, p.opts, constraints)?;
     // Analysis after the fit: the parameters' uncertainty from the Jacobian at the optimum.
-    let (uncertainty, warnings) = match uncertainty::analyse(p.spec, &res, fit_files) {
+    let phase = crate::progress::Phase::start(
+        p.opts.progress,
+        "fit: parameter uncertainty (Jacobian at the optimum)",
+        0,
+    );
+    let analysed = uncertainty::analyse(p.spec, &res, fit_files);
+    phase.finish();
+    let (uncertainty, warnings) = match analysed {
         Ok(u) => {
             let w = u.warnings();
             (Some(u), w)
