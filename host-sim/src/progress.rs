@@ -101,18 +101,21 @@ pub struct Phase {
 enum Show {
     Hidden,
     Bar(ProgressBar),
-    /// The heartbeat thread; dropping the sender stops it.
-    Lines(Option<(mpsc::Sender<()>, std::thread::JoinHandle<()>)>),
+    /// Where lines go, and the heartbeat thread (dropping the sender stops it).
+    Lines(Say, Option<(mpsc::Sender<()>, std::thread::JoinHandle<()>)>),
 }
+
+/// Where a line log goes (stderr; a buffer in tests).
+type Say = Arc<dyn Fn(&str) + Send + Sync>;
 
 impl Phase {
     /// Starts `label`, a phase of `steps` steps (0: not counted).
     pub fn start(enabled: bool, label: &str, steps: u64) -> Self {
-        let done = Arc::new(AtomicU64::new(0));
-        let start = Instant::now();
-        let show = if !enabled {
-            Show::Hidden
-        } else if std::io::stderr().is_terminal() {
+        let terminal = std::io::stderr().is_terminal();
+        if enabled && !terminal {
+            return Self::lines(label, steps, LINE_EVERY, Arc::new(|line: &str| eprintln!("{line}")));
+        }
+        let show = if enabled {
             let b = if steps > 0 { ProgressBar::new(steps) } else { ProgressBar::new_spinner() };
             let template = if steps > 0 {
                 "{msg} [{bar:30}] {pos}/{len}, {elapsed}"
@@ -126,22 +129,30 @@ impl Phase {
             b.enable_steady_tick(Duration::from_millis(200));
             Show::Bar(b)
         } else {
-            eprintln!("gma: {label}: started");
-            let (tx, rx) = mpsc::channel::<()>();
-            let (l, d) = (label.to_string(), done.clone());
-            let beat = std::thread::spawn(move || {
-                while let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(LINE_EVERY) {
-                    let counted = if steps > 0 {
-                        format!("{}/{steps} done, ", d.load(Ordering::Relaxed))
-                    } else {
-                        String::new()
-                    };
-                    eprintln!("gma: {l}: {counted}{:.0} s", start.elapsed().as_secs_f64());
-                }
-            });
-            Show::Lines(Some((tx, beat)))
+            Show::Hidden
         };
+        let (done, start) = (Arc::new(AtomicU64::new(0)), Instant::now());
         Self { label: label.into(), steps, done, start, show }
+    }
+
+    /// The line log: a start line, a line every `every` with the steps done, then (from
+    /// [`Phase::finish`]) a done line, each handed to `say`.
+    fn lines(label: &str, steps: u64, every: Duration, say: Say) -> Self {
+        let (done, start) = (Arc::new(AtomicU64::new(0)), Instant::now());
+        say(&format!("gma: {label}: started"));
+        let (tx, rx) = mpsc::channel::<()>();
+        let (l, d, beat_say) = (label.to_string(), done.clone(), say.clone());
+        let beat = std::thread::spawn(move || {
+            while let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(every) {
+                let counted = if steps > 0 {
+                    format!("{}/{steps} done, ", d.load(Ordering::Relaxed))
+                } else {
+                    String::new()
+                };
+                beat_say(&format!("gma: {l}: {counted}{:.0} s", start.elapsed().as_secs_f64()));
+            }
+        });
+        Self { label: label.into(), steps, done, start, show: Show::Lines(say, Some((tx, beat))) }
     }
 
     /// One step done; `note` (if not empty) is said on its own line.
@@ -155,9 +166,9 @@ impl Phase {
                     b.println(format!("gma: {note}"));
                 }
             }
-            Show::Lines(_) => {
+            Show::Lines(say, _) => {
                 if !note.is_empty() {
-                    eprintln!("gma: {note}");
+                    say(&format!("gma: {note}"));
                 }
             }
         }
@@ -169,24 +180,24 @@ impl Phase {
         match &self.show {
             Show::Hidden => {}
             Show::Bar(b) => b.finish_and_clear(),
-            Show::Lines(_) => {
+            Show::Lines(say, _) => {
                 let counted = if self.steps > 0 {
                     format!("{}/{} ", self.done.load(Ordering::Relaxed), self.steps)
                 } else {
                     String::new()
                 };
-                eprintln!(
+                say(&format!(
                     "gma: {}: done {counted}in {:.1} s",
                     self.label,
                     self.start.elapsed().as_secs_f64()
-                );
+                ));
             }
         }
     }
 
     /// Stops the heartbeat (and waits for it, so no line comes after the phase ended).
     fn stop(&mut self) {
-        if let Show::Lines(beat) = &mut self.show {
+        if let Show::Lines(_, beat) = &mut self.show {
             if let Some((tx, handle)) = beat.take() {
                 drop(tx);
                 let _ = handle.join();
@@ -202,5 +213,30 @@ impl Drop for Phase {
         if let Show::Bar(b) = &self.show {
             b.finish_and_clear();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_line_log_has_a_start_a_heartbeat_with_the_count_and_a_done_line() {
+        let log = Arc::new(Mutex::new(Vec::<String>::new()));
+        let sink = log.clone();
+        let say: Say = Arc::new(move |l: &str| sink.lock().unwrap().push(l.to_string()));
+        let phase = Phase::lines("refits", 3, Duration::from_millis(10), say);
+        phase.step("refit 1 done");
+        std::thread::sleep(Duration::from_millis(200));
+        phase.step("");
+        phase.finish();
+        let log = log.lock().unwrap().clone();
+        assert_eq!(log.first().map(String::as_str), Some("gma: refits: started"), "{log:?}");
+        assert!(log.contains(&"gma: refit 1 done".to_string()), "{log:?}");
+        assert!(log.iter().any(|l| l.starts_with("gma: refits: 1/3 done, ")), "no heartbeat: {log:?}");
+        let last = log.last().unwrap();
+        assert!(last.starts_with("gma: refits: done 2/3 in "), "{log:?}");
+        // Nothing after the done line: the heartbeat stopped with the phase.
+        assert_eq!(log.iter().filter(|l| l.contains("done 2/3")).count(), 1);
     }
 }
