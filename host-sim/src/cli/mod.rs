@@ -75,8 +75,8 @@ enum Command {
     /// SIGTERM) ends a live recording with its files and summary complete.
     #[command(allow_negative_numbers = true)]
     Record(record::RecordArgs),
-    /// Simulate a rig (plant simulator) and write a measurement CSV. SIMULATED data, for tests
-    /// and demos.
+    /// Simulate a rig (plant simulator) and write a measurement CSV, or run a parameter set on a
+    /// measured drive (`--drive FILE`). SIMULATED data, for tests, demos and model checks.
     #[command(allow_negative_numbers = true)]
     Simulate(simulate::SimulateArgs),
     /// The physical effects a model spec can name: what each adds, where it acts, and the

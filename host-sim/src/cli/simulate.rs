@@ -125,7 +125,8 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     let drive_input = a.drive.as_deref().map(Input::open).transpose()?;
     let ids: Vec<_> = params_input.iter().chain(&drive_input).map(Input::id).collect();
     check_outputs(&[a.out.as_path()], &ids)?;
-    let (p, source) = params::load_input(params_input, spec, "the simulated rig's parameters")?;
+    let role = if a.drive.is_some() { "the model's parameters" } else { "the simulated rig's parameters" };
+    let (p, source) = params::load_input(params_input, spec, role)?;
     for (name, v) in [("--noise-um", a.noise_um), ("--quantum-um", a.quantum_um)] {
         if !(v.is_finite() && (0.0..=MAX_SENSOR_UM).contains(&v)) {
             bail!("{name} must be in [0, {MAX_SENSOR_UM:e}] µm, got {v}");
