@@ -74,9 +74,26 @@ fn the_demo_set_and_defaulted_stages_are_said_in_text_and_json() {
     assert_eq!(j["parameters_source"], p.to_str().unwrap(), "{j}");
     assert_eq!(j["parameters_defaulted"], serde_json::json!(["mech"]), "{j}");
     // Fitting commands say where their start values came from, too.
-    let o = gma(&["fit", "--model", "ja", "--json", "--effort", "0.2", &rec]);
+    let fitted = dir.path().join("fitted.toml");
+    let o = gma(&[
+        "fit",
+        "--model",
+        "ja",
+        "--json",
+        "--effort",
+        "0.2",
+        "--params-out",
+        fitted.to_str().unwrap(),
+        &rec,
+    ]);
     assert!(err(&o).contains("start values are the built-in"), "{}", err(&o));
-    assert_eq!(one_json(&o)["parameters_source"], "built-in demo set");
+    let j = one_json(&o);
+    assert_eq!(j["parameters_source"], "built-in demo set");
+    // The parameter file names what it was made from, as the JSON does.
+    let digest = j["provenance"]["inputs"][0]["sha256"].as_str().unwrap();
+    assert_eq!(digest.len(), 64);
+    let header = std::fs::read_to_string(&fitted).unwrap();
+    assert!(header.contains(&format!("# input {rec} sha256 {digest}")), "{header}");
 }
 
 #[test]

@@ -13,6 +13,7 @@ use crate::fit;
 use crate::loops::{self, LoopFile};
 use crate::params;
 use crate::plots::{self, Chart};
+use crate::provenance::Provenance;
 use crate::recording::Recording;
 use crate::report;
 use crate::results::{CompareSummary, FileScoreRow};
@@ -65,7 +66,7 @@ pub fn run(a: &CompareArgs) -> Result<()> {
     };
     say!(a.json, "{summary}");
     if a.json {
-        out!("{}", super::merged_json(&summary, &source)?);
+        out!("{}", super::merged_json(&summary, &super::context_json(&source, &Provenance::now(None)))?);
     }
     Ok(())
 }

@@ -5,6 +5,7 @@ use clap::Args;
 
 use super::common::{Data, ModelFiles};
 use crate::diagnose::diagnose;
+use crate::provenance::Provenance;
 
 /// Options of `gma diagnose`.
 #[derive(Args)]
@@ -23,7 +24,13 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
     say!(a.mf.json, "{d}");
     a.mf.warn_if_time_limited(d.time_limited);
     if a.mf.json {
-        out!("{}", super::merged_json(&d, &p.params_source)?);
+        out!(
+            "{}",
+            super::merged_json(
+                &d,
+                &super::context_json(&p.params_source, &Provenance::now(Some(a.mf.seed)))
+            )?
+        );
     }
     Ok(())
 }

@@ -11,6 +11,7 @@ use crate::files::{display, names, write_atomic};
 use crate::fit;
 use crate::loops::{self, LoopFile};
 use crate::params;
+use crate::provenance::Provenance;
 use crate::recording::Recording;
 use crate::results::{FileScoreRow, FitSummary, FitText};
 use crate::uncertainty;
@@ -67,8 +68,12 @@ pub fn run(a: &FitArgs) -> Result<()> {
     }
     if let Some(out) = &a.params_out {
         let fixed: String = summary.text.fixed.iter().map(|(n, _)| format!("\nfixed: {n}")).collect();
+        // Where the set came from, in the file itself: version, date and every input's digest.
+        let made = Provenance::now(Some(a.mf.seed));
+        let inputs: String =
+            made.inputs.iter().map(|i| format!("\ninput {} sha256 {}", i.file, i.sha256)).collect();
         let header = format!(
-            "gma fit --model {} (seed {}) on {}\nfit NRMSE {:.4} %{}{fixed}",
+            "gma fit --model {} (seed {}) on {}\nfit NRMSE {:.4} %{}{fixed}\nmade by gma {} on {}{inputs}",
             summary.model,
             a.mf.seed,
             names(&a.mf.files),
@@ -77,13 +82,21 @@ pub fn run(a: &FitArgs) -> Result<()> {
                 "\nstopped by --time-limit: the best set found so far"
             } else {
                 ""
-            }
+            },
+            made.gma_version,
+            made.date_utc
         );
         write_atomic(out, params::to_toml(&params, &header)?.as_bytes())?;
         say!(j, "  parameters written to {}", display(out));
     }
     if j {
-        out!("{}", super::merged_json(&summary, &p.params_source)?);
+        out!(
+            "{}",
+            super::merged_json(
+                &summary,
+                &super::context_json(&p.params_source, &Provenance::now(Some(a.mf.seed)))
+            )?
+        );
     }
     Ok(())
 }

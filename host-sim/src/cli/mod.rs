@@ -10,6 +10,7 @@ use serde_json::json;
 
 use crate::error::Located;
 use crate::files::escape_control;
+use crate::provenance::Provenance;
 
 /// A line on stdout. A reader that goes away (`gma … | head`) ends the command quietly instead
 /// of a panic on the broken pipe.
@@ -163,6 +164,17 @@ fn merged_json(base: &impl serde::Serialize, extra: &impl serde::Serialize) -> R
         o.extend(e);
     }
     Ok(v)
+}
+
+/// The fields every command that reads inputs adds to its JSON: where its parameters came from
+/// (`parameters_source`, `parameters_defaulted`) and its `provenance` (version, command line,
+/// seed, date, the SHA-256 of every input; the caller takes it once the inputs have been read).
+fn context_json(source: &crate::params::ParamSource, provenance: &Provenance) -> serde_json::Value {
+    json!({
+        "parameters_source": source.parameters_source,
+        "parameters_defaulted": source.parameters_defaulted,
+        "provenance": provenance,
+    })
 }
 
 /// Writes one line to stdout; exits at once (status 0) when the reader has closed the pipe.

@@ -31,8 +31,7 @@ pub fn run(a: &ReportArgs) -> Result<()> {
     // Every input has been read to its end: their digests are final.
     let provenance = Provenance::now(Some(a.mf.seed));
     let provenance_section = report::provenance_html(&provenance, &p.params_source);
-    let extra = json!({"provenance": provenance, "parameters_source": p.params_source.parameters_source,
-                       "parameters_defaulted": p.params_source.parameters_defaulted});
+    let extra = super::context_json(&p.params_source, &provenance);
     match &p.data {
         Data::Loops(files, _) => {
             let res = loops::fit(loops::LoopModel::from_spec(spec)?, files, p.search_options())?;

@@ -16,6 +16,7 @@ use crate::files::{check_outputs, display, Input};
 use crate::fit::{self, Drive};
 use crate::params;
 use crate::plant::{EddyModel, Plant};
+use crate::provenance::Provenance;
 use crate::recording::Recording;
 
 /// Most samples one run writes (about 1 GB of CSV).
@@ -178,7 +179,10 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
             "seed": a.seed,
             "description": what,
         });
-        out!("{}", super::merged_json(&result, &source)?);
+        out!(
+            "{}",
+            super::merged_json(&result, &super::context_json(&source, &Provenance::now(Some(a.seed))))?
+        );
     }
     Ok(())
 }
