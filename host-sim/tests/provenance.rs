@@ -199,6 +199,8 @@ fn the_report_carries_provenance_uncertainty_and_shows_every_phase() {
         "gma: report: parameter uncertainty of",
         "gma: report: drawing the page (each model on each file): started",
         "gma: report: drawing the page (each model on each file): done",
+        // The text (on stderr with --json) has the uncertainty too.
+        "parameters of `ja` (± std, 95 % interval):",
     ] {
         assert!(log.contains(line), "no `{line}` in the log:\n{log}");
     }

@@ -63,6 +63,29 @@ pub fn run(a: &ReportArgs) -> Result<()> {
             write_atomic(&a.out, report::with_sections(html, &sections).as_bytes())?;
             phase.finish();
             a.mf.warn_if_time_limited(time_limited);
+            for (r, u) in rungs.iter().zip(&uncertainties) {
+                say!(j, "parameters of `{}` (± std, 95 % interval):", r.spec);
+                match u {
+                    Ok(u) => {
+                        for p in &u.params {
+                            match (p.std, p.ci95) {
+                                (Some(s), Some((lo, hi))) => {
+                                    say!(
+                                        j,
+                                        "  {:28} = {:.6e} ± {s:.2e}  [{lo:.4e}, {hi:.4e}]",
+                                        p.bound.name,
+                                        p.value
+                                    )
+                                }
+                                _ => {
+                                    say!(j, "  {:28} = {:.6e} ± ?  (not identifiable)", p.bound.name, p.value)
+                                }
+                            }
+                        }
+                    }
+                    Err(e) => say!(j, "  no uncertainty: {e}"),
+                }
+            }
             say!(j, "report written to {}", display(&a.out));
             if j {
                 let ladder: Vec<_> = rungs
