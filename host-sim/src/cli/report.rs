@@ -27,7 +27,8 @@ pub fn run(a: &ReportArgs) -> Result<()> {
     let spec = p.spec;
     match &p.data {
         Data::Loops(files, _) => {
-            let res = loops::fit(loops::LoopModel::from_spec(spec)?, files, p.search_options())?;
+            let res =
+                loops::fit(loops::LoopModel::from_spec(spec, &p.init)?, files, &p.init, p.search_options())?;
             write_atomic(&a.out, loops::html(&spec.to_string(), &res, files)?.as_bytes())?;
             a.mf.warn_if_time_limited(res.time_limited);
             say!(j, "loop report written to {}", display(&a.out));
