@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Rebuilds the loop files of this folder from the two source repositories (see README.md).
+"""Rebuilds the loop files of this folder (and of ../jamodel-simulated) from the two source
+repositories (see README.md).
 
 Usage: convert.py JAMODEL_CHECKOUT JAFIT_CHECKOUT   (needs numpy and scipy for the .mat files)
 
@@ -21,6 +22,12 @@ JAMODEL = {
     "jamodel-mit/ferrite-mnzn-a2018-jamodel.csv": ("12_Automation2018/Characterisitcs_isotropic_mat", "MnZn_ferrite"),
     "jamodel-mit/amorphous-alloy-jamodel.csv": ("2_anisotropic/Characterisitcs_anisotropic_mat", "amorf"),
 }
+# The JAmodel code's OWN SIMULATION (BsimT4) of the major loop at its published coefficient set:
+# the reference our `szewczyk` variant is checked against (not a measurement).
+SIMULATED = {
+    "../jamodel-simulated/ferrite-mnzn-a2018-simulated-by-jamodel.csv": "12_Automation2018/ResultsJA.mat",
+    "../jamodel-simulated/ferrite-mnzn-hp-simulated-by-jamodel.csv": "11_TwoStepSolver/Results.mat",
+}
 JAFIT = {
     "jafit-gpl-3.0/soft-steel-altair-jafit.csv": "data/B(H).Altair_Flux.Example.csv",
     "jafit-gpl-3.0/alnico5-campbell-jafit.csv": "data/B(H).Campbell.AlNiCo_5.tab",
@@ -41,6 +48,10 @@ def main(jamodel, jafit):
         b = scipy.io.loadmat(os.path.join(jamodel, folder, f"B_{stem}.mat"))["BmeasT"]
         col = abs(h).max(axis=0).argmax()  # the major (largest-amplitude) loop
         write(name, zip(h[:, col], b[:, col]))
+    for name, path in SIMULATED.items():
+        d = scipy.io.loadmat(os.path.join(jamodel, path))
+        col = abs(d["HmeasT"]).max(axis=0).argmax()
+        write(name, zip(d["HmeasT"][:, col], d["BsimT4"][:, col]))
     for name, path in JAFIT.items():
         rows = []
         with open(os.path.join(jafit, path)) as f:
