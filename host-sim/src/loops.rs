@@ -349,6 +349,29 @@ impl LoopModel {
         }
     }
 
+    /// A start read off the loops' shape (search parameters), as Jiles, Thoelke & Devine (1992)
+    /// seed J–A from measured loop features: M_s just above the largest |M|, the pinning k at
+    /// the coercivity and a at the field of half the largest |M|, a middling mean-field ratio and
+    /// reversibility. `None` for other models or loops that show no coercivity.
+    fn start_from_features(self, files: &[LoopFile]) -> Option<Vec<f64>> {
+        if !matches!(self, LoopModel::JilesAtherton(_)) {
+            return None;
+        }
+        let f = files.first()?;
+        let m = f.magnetization();
+        let feat = features(&f.h, &m);
+        let m_max = feat.max_magnetization_a_per_m;
+        let h_half =
+            f.h.iter()
+                .zip(&m)
+                .filter(|(_, m)| m.abs() >= 0.5 * m_max)
+                .map(|(h, _)| h.abs())
+                .fold(f64::INFINITY, f64::min);
+        let hc = feat.coercivity_a_per_m;
+        (hc.is_finite() && hc > 0.0 && h_half.is_finite() && h_half > 0.0)
+            .then(|| vec![1.05 * m_max, h_half, 0.5, hc, 0.2])
+    }
+
     /// The model's parameter names, in [`run`]'s order.
     fn names(self) -> &'static [&'static str] {
         match self {
@@ -546,10 +569,11 @@ pub fn fit(
         )),
         None => mean_nrmse(model, &start_values, files, h_max).map_err(|e| e.0),
     };
-    let starts: Vec<Start<()>> = match &start_score {
+    let mut starts: Vec<Start<()>> = match &start_score {
         Ok(_) => vec![Start { values: model.search_values(&start_values), context: () }],
         Err(_) => Vec::new(),
     };
+    starts.extend(model.start_from_features(files).map(|values| Start { values, context: () }));
     let found = minimize(&bounds, &cost, &(), &starts, &PLAN, opts, &Progress::new("", 0, false))?;
     let mut best = model.model_values(&found.best);
     let mut warnings = Vec::new();
