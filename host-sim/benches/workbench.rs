@@ -84,11 +84,17 @@ fn main() {
         let truth = [6.0e5, 6512.0, -0.035, 4000.0, 0.2];
         let h: Vec<f64> =
             (0..=300).map(|k| 1.2e5 * (2.0 * std::f64::consts::PI * k as f64 / 300.0).cos()).collect();
-        let m = loops::run(LoopModel::JilesAtherton, &truth, &h, 1.2e5).unwrap();
+        let model = LoopModel::JilesAtherton(model_core::magnetization::JaVariant::Bulk);
+        let m = loops::run(model, &truth, &h, 1.2e5).unwrap();
         let f = LoopFile { name: "bench".into(), h, value: m, channel: LoopChannel::Magnetization };
         let t = Instant::now();
-        let r =
-            loops::fit(LoopModel::JilesAtherton, &[f], host_sim::search::SearchOptions::default()).unwrap();
+        let r = loops::fit(
+            model,
+            &[f],
+            &ActuatorParams::TERFENOL_DEMO,
+            host_sim::search::SearchOptions::default(),
+        )
+        .unwrap();
         println!(
             "| loop fit J–A, 300-point major loop | {:.1} s | {} evaluations, NRMSE {:.3} % |",
             t.elapsed().as_secs_f64(),

@@ -66,6 +66,7 @@ fn rig() -> ActuatorParams {
         alpha: -0.01,
         k_a_per_m: 4283.0,
         c: 0.18,
+        variant: model_core::magnetization::JaVariant::Bulk,
     };
     base.anhysteretic.a_a_per_m = 7500.0;
     base.magnetostriction.lambda_s = 1.2e-3;

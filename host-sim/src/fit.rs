@@ -17,6 +17,7 @@ use rayon::prelude::*;
 use crate::params::{free_params, scanned_params, FreeParam};
 use crate::progress::Progress;
 use crate::recording::Recording;
+use crate::results::StartScore;
 use crate::search::{minimize, scan, Bound, Fidelity, Plan, SearchOptions, Start};
 
 /// How a file drives the model.
@@ -460,6 +461,23 @@ pub struct FitResult {
     pub free: Vec<FreeParam>,
     /// Parameters held fixed by [`Constraints`], with their values.
     pub fixed: Vec<(&'static str, f64)>,
+    /// The first start's score (its identified values clamped into the search ranges), and
+    /// whether the fit returned it because the search ended worse.
+    pub start: StartScore,
+}
+
+/// Why a parameter set cannot be a J–A fit result: α·M_s/(3a) ≥ 1 makes the anhysteretic
+/// curve multivalued, where a J–A loop is an artefact of the integration (and of the sample
+/// rate), not physics. `None` for other laws.
+pub fn multivalued_ja(spec: ModelSpec, p: &ActuatorParams) -> Option<String> {
+    let ratio = p.ja.mean_field_ratio();
+    (spec.law() == model_core::MagnetizationLaw::JilesAtherton && ratio >= 1.0).then(|| {
+        format!(
+            "J–A α·M_s/(3a) = {ratio:.2} ≥ 1 (α = {}, M_s = {} A/m, a = {} A/m): the anhysteretic curve is \
+             multivalued there and the loop an artefact of the integration",
+            p.ja.alpha, p.ja.ms_a_per_m, p.ja.a_a_per_m
+        )
+    })
 }
 
 /// `gma fit --fix/--bound`: parameters held at their start value, and narrowed search ranges.
@@ -696,8 +714,13 @@ pub fn fit_constrained(
         }
         p
     };
+    // A point with α·M_s/(3a) ≥ 1 is refused like one the model cannot run.
     let cost = |base: &ActuatorParams, values: &[f64], fidelity: Fidelity| {
-        projected_cost(spec, &with_values(base, values), data(fidelity), lambda_range)
+        let p = with_values(base, values);
+        if multivalued_ja(spec, &p).is_some() {
+            return FAILED_COST;
+        }
+        projected_cost(spec, &p, data(fidelity), lambda_range)
     };
     // Integer parameters (the sensor delay): scanned with everything else fixed.
     let scan_integers = |p: &mut ActuatorParams| {
@@ -734,11 +757,35 @@ pub fn fit_constrained(
     let mut params = with_values(&found.context, &found.best);
     scan_integers(&mut params);
     bar.finish_and_clear();
-    let lambda = match lambda_range {
-        Some(range) => evaluate_projected_in(spec, &params, &full, range)?.1,
-        None => params.magnetostriction.lambda_s as f64,
+    let with_lambda = |mut p: ActuatorParams| -> Result<ActuatorParams> {
+        let lambda = match lambda_range {
+            Some(range) => evaluate_projected_in(spec, &p, &full, range)?.1,
+            None => p.magnetostriction.lambda_s as f64,
+        };
+        p.magnetostriction.lambda_s = lambda as f32;
+        Ok(p)
     };
-    params.magnetostriction.lambda_s = lambda as f32;
+    params = with_lambda(params)?;
+    // The first start, as the search began from it: scored on all files (NRMSE as reported).
+    let start_params = bases[0].context;
+    let start_score = match multivalued_ja(spec, &start_params) {
+        Some(why) => Err(why),
+        None => with_lambda(start_params)
+            .and_then(|p| Ok((evaluate(spec, &p, files)?.mean_nrmse(), p)))
+            .map_err(|e| format!("the model cannot be run there: {e}")),
+    };
+    let mut kept = false;
+    if let Ok((start_nrmse, start_set)) = &start_score {
+        let found_nrmse = evaluate(spec, &params, files).map(|e| e.mean_nrmse()).unwrap_or(f64::NAN);
+        if start_nrmse.is_finite() && (found_nrmse.is_nan() || found_nrmse > *start_nrmse) {
+            kept = true;
+            params = *start_set;
+        }
+    }
+    if let Some(why) = multivalued_ja(spec, &params) {
+        bail!("the fit is refused: {why}; --fix or --bound `ja.alpha`/`ja.a_a_per_m` so that α·M_s/(3a) < 1");
+    }
+    let lambda = params.magnetostriction.lambda_s as f64;
     // Never hand back NaN or an invalid set: say the fit failed instead.
     model_core::Actuator::new(spec, &params).map_err(|e| {
         anyhow::anyhow!(
@@ -769,5 +816,9 @@ pub fn fit_constrained(
         time_limited: found.time_limited,
         free,
         fixed,
+        start: match start_score {
+            Ok((e, _)) => StartScore { nrmse: Some(e).filter(|e| e.is_finite()), kept, refused: None },
+            Err(why) => StartScore { nrmse: None, kept: false, refused: Some(why) },
+        },
     })
 }

@@ -7,15 +7,16 @@ use std::path::Path;
 use anyhow::{bail, Result};
 use model_core::field::MU0;
 use model_core::magnetization::{
-    Anhysteretic, AnhystereticParams, JaParams, JaState, JilesAtherton, LinearMagnetization, Preisach,
-    PreisachParams,
+    Anhysteretic, AnhystereticParams, JaParams, JaState, JaVariant, JilesAtherton, LinearMagnetization,
+    Preisach, PreisachParams,
 };
 use model_core::{ActuatorParams, MagnetizationLaw, ModelSpec};
 
 use crate::files::{echo, Input};
 use crate::located;
 use crate::progress::Progress;
-use crate::search::{minimize, Bound, Fidelity, Plan, SearchOptions};
+use crate::results::StartScore;
+use crate::search::{minimize, Bound, Fidelity, Plan, SearchOptions, Start};
 use crate::warning::Warning;
 
 /// The loop fit's search: two swarms (seeds `seed`, `seed + 1`), each best refined by a 5 % and
@@ -254,15 +255,25 @@ pub enum LoopModel {
     Linear,
     /// Langevin.
     Anhysteretic,
-    /// Jiles–Atherton.
-    JilesAtherton,
+    /// Jiles–Atherton, in one of its variants.
+    JilesAtherton(JaVariant),
     /// Preisach.
     Preisach,
 }
 
+/// Largest saturation magnetization of any bulk material [A/m]: Fe–Co alloys, μ0 M_s ≈ 2.45 T.
+/// The loop fit's M_s range ends here (or at 1.5× the file's largest |M| if a file exceeds it).
+pub const MAX_SATURATION_A_PER_M: f64 = 1.95e6;
+
+/// The J–A mean-field ratio α·M_s/(3a) the loop fit searches, instead of α: below 1 the
+/// anhysteretic curve is single-valued (the physics limit, whatever the material's scale), and
+/// down to −1 a negative α (002) may at most halve the initial susceptibility.
+const MEAN_FIELD_RATIO: (f64, f64) = (-1.0, 0.99);
+
 impl LoopModel {
-    /// From a model spec: only the magnetization stage counts.
-    pub fn from_spec(spec: ModelSpec) -> Result<Self> {
+    /// From a model spec (only the magnetization stage counts) and the parameter set that says
+    /// which J–A variant.
+    pub fn from_spec(spec: ModelSpec, params: &ActuatorParams) -> Result<Self> {
         if let Some(e) = spec.effects().find(|e| e.info().law.is_none()) {
             bail!(
                 "a magnetization loop fits the magnetization stage only; `{e}` needs displacement recordings"
@@ -271,7 +282,7 @@ impl LoopModel {
         Ok(match spec.law() {
             MagnetizationLaw::Linear => LoopModel::Linear,
             MagnetizationLaw::Anhysteretic => LoopModel::Anhysteretic,
-            MagnetizationLaw::JilesAtherton => LoopModel::JilesAtherton,
+            MagnetizationLaw::JilesAtherton => LoopModel::JilesAtherton(params.ja.variant),
             MagnetizationLaw::Preisach => LoopModel::Preisach,
         })
     }
@@ -282,7 +293,7 @@ impl LoopModel {
         let v: Vec<f32> = match self {
             LoopModel::Linear => vec![p.linear.offset_a_per_m, p.linear.susceptibility],
             LoopModel::Anhysteretic => vec![p.anhysteretic.ms_a_per_m, p.anhysteretic.a_a_per_m],
-            LoopModel::JilesAtherton => {
+            LoopModel::JilesAtherton(_) => {
                 let j = p.ja;
                 vec![j.ms_a_per_m, j.a_a_per_m, j.alpha, j.k_a_per_m, j.c]
             }
@@ -293,26 +304,81 @@ impl LoopModel {
         v.into_iter().map(f64::from).collect()
     }
 
-    /// Parameter names, bounds (given the loop's field and magnetization scale).
+    /// The search's parameter names and bounds, given the loop's field and magnetization scale.
+    /// M_s lies between the largest measured |M| (less 10 % for noise) and the largest
+    /// saturation of any material; J–A searches the mean-field ratio α·M_s/(3a) in
+    /// [`MEAN_FIELD_RATIO`] instead of α, so no point of its box is multivalued. The field
+    /// scales (a, k, the Preisach fields) span the data's range and the model's own limits.
     fn bounds(self, h_max: f64, m_max: f64) -> Vec<Bound> {
-        let ms = Bound::log("ms_a_per_m", 0.9 * m_max, 5.0 * m_max);
+        let ms = Bound::log("ms_a_per_m", 0.9 * m_max, MAX_SATURATION_A_PER_M.max(1.5 * m_max));
+        let field = |name, lo: f64, hi: f64| Bound::log(name, lo.max(1.0), hi.max(10.0));
         match self {
             LoopModel::Linear => {
                 vec![Bound::lin("offset_a_per_m", -m_max, m_max), Bound::log("susceptibility", 1e-3, 1e6)]
             }
-            LoopModel::Anhysteretic => vec![ms, Bound::log("a_a_per_m", 1e-3 * h_max, 10.0 * h_max)],
-            LoopModel::JilesAtherton => vec![
+            LoopModel::Anhysteretic => vec![ms, field("a_a_per_m", 1e-4 * h_max, 10.0 * h_max)],
+            LoopModel::JilesAtherton(v) => vec![
                 ms,
-                Bound::log("a_a_per_m", 1e-3 * h_max, 10.0 * h_max),
-                Bound::lin("alpha", -0.5, 0.9),
-                Bound::log("k_a_per_m", 1e-4 * h_max, 5.0 * h_max),
-                Bound::lin("c", 0.0, 0.99),
+                field("a_a_per_m", 1e-4 * h_max, 10.0 * h_max),
+                Bound::lin("mean_field_ratio", MEAN_FIELD_RATIO.0, MEAN_FIELD_RATIO.1),
+                field("k_a_per_m", 1e-4 * h_max, 5.0 * h_max),
+                // The total-magnetization form weighs reversibility by c/(1 + c): c near 1 is common.
+                Bound::lin("c", 0.0, if v == JaVariant::Szewczyk { 0.9999 } else { 0.99 }),
             ],
             LoopModel::Preisach => vec![
                 ms,
-                Bound::log("coercive_a_per_m", 1e-3 * h_max, 0.8 * h_max),
-                Bound::log("spread_a_per_m", 1e-3 * h_max, 2.0 * h_max),
+                field("coercive_a_per_m", 1e-3 * h_max, 0.8 * h_max),
+                field("spread_a_per_m", 1e-3 * h_max, 2.0 * h_max),
             ],
+        }
+    }
+
+    /// The model's parameters (as [`run`] takes them) from the search's: J–A's α from the ratio.
+    fn model_values(self, v: &[f64]) -> Vec<f64> {
+        match self {
+            LoopModel::JilesAtherton(_) => vec![v[0], v[1], 3.0 * v[1] * v[2] / v[0], v[3], v[4]],
+            _ => v.to_vec(),
+        }
+    }
+
+    /// The search's parameters from the model's (the inverse of `model_values`).
+    fn search_values(self, v: &[f64]) -> Vec<f64> {
+        match self {
+            LoopModel::JilesAtherton(_) => vec![v[0], v[1], v[2] * v[0] / (3.0 * v[1]), v[3], v[4]],
+            _ => v.to_vec(),
+        }
+    }
+
+    /// A start read off the loops' shape (search parameters), as Jiles, Thoelke & Devine (1992)
+    /// seed J–A from measured loop features: M_s just above the largest |M|, the pinning k at
+    /// the coercivity and a at the field of half the largest |M|, a middling mean-field ratio and
+    /// reversibility. `None` for other models or loops that show no coercivity.
+    fn start_from_features(self, files: &[LoopFile]) -> Option<Vec<f64>> {
+        if !matches!(self, LoopModel::JilesAtherton(_)) {
+            return None;
+        }
+        let f = files.first()?;
+        let m = f.magnetization();
+        let feat = features(&f.h, &m);
+        let m_max = feat.max_magnetization_a_per_m;
+        let h_half =
+            f.h.iter()
+                .zip(&m)
+                .filter(|(_, m)| m.abs() >= 0.5 * m_max)
+                .map(|(h, _)| h.abs())
+                .fold(f64::INFINITY, f64::min);
+        let hc = feat.coercivity_a_per_m;
+        (hc.is_finite() && hc > 0.0 && h_half.is_finite() && h_half > 0.0)
+            .then(|| vec![1.05 * m_max, h_half, 0.5, hc, 0.2])
+    }
+
+    /// The model's parameter names, in [`run`]'s order.
+    fn names(self) -> &'static [&'static str] {
+        match self {
+            LoopModel::Linear => &["offset_a_per_m", "susceptibility"],
+            LoopModel::Anhysteretic => &["ms_a_per_m", "a_a_per_m"],
+            LoopModel::JilesAtherton(_) => &["ms_a_per_m", "a_a_per_m", "alpha", "k_a_per_m", "c"],
+            LoopModel::Preisach => &["ms_a_per_m", "coercive_a_per_m", "spread_a_per_m"],
         }
     }
 }
@@ -342,13 +408,14 @@ pub fn run(model: LoopModel, p: &[f64], h: &[f64], h_max: f64) -> Result<Vec<f64
                     .map_err(|e| RunError(e.to_string()))?;
             out.extend(path.map(|&x| an.magnetization(x as f32) as f64));
         }
-        LoopModel::JilesAtherton => {
+        LoopModel::JilesAtherton(variant) => {
             let jp = JaParams {
                 ms_a_per_m: p[0] as f32,
                 a_a_per_m: p[1] as f32,
                 alpha: p[2] as f32,
                 k_a_per_m: p[3] as f32,
                 c: p[4] as f32,
+                variant,
             };
             let ja = JilesAtherton::new(jp).map_err(|e| RunError(e.to_string()))?;
             let mut s = JaState::default();
@@ -394,6 +461,8 @@ pub struct LoopFit {
     pub warnings: Vec<Warning>,
     /// The search stopped at `--time-limit`: the best point so far.
     pub time_limited: bool,
+    /// How the start values scored, and whether they were returned.
+    pub start: StartScore,
 }
 
 impl LoopFit {
@@ -416,13 +485,14 @@ impl LoopFit {
                 p.anhysteretic = AnhystereticParams { ms_a_per_m: v[0] as f32, a_a_per_m: v[1] as f32 };
                 p.magnetostriction.ms_a_per_m = v[0] as f32;
             }
-            LoopModel::JilesAtherton => {
+            LoopModel::JilesAtherton(variant) => {
                 p.ja = JaParams {
                     ms_a_per_m: v[0] as f32,
                     a_a_per_m: v[1] as f32,
                     alpha: v[2] as f32,
                     k_a_per_m: v[3] as f32,
                     c: v[4] as f32,
+                    variant,
                 };
                 p.anhysteretic.ms_a_per_m = v[0] as f32;
                 p.magnetostriction.ms_a_per_m = v[0] as f32;
@@ -438,8 +508,33 @@ impl LoopFit {
     }
 }
 
-/// Fits `model` to the loops jointly.
-pub fn fit(model: LoopModel, files: &[LoopFile], opts: SearchOptions) -> Result<LoopFit> {
+/// Why J–A values cannot be used: α·M_s/(3a) ≥ 1 (the anhysteretic is multivalued).
+fn multivalued(model: LoopModel, v: &[f64]) -> Option<f64> {
+    let ratio = v[2] * v[0] / (3.0 * v[1]);
+    (matches!(model, LoopModel::JilesAtherton(_)) && ratio >= 1.0).then_some(ratio)
+}
+
+/// Mean NRMSE over `files` of the model at `values` (its own parameters), or why it cannot run.
+fn mean_nrmse(
+    model: LoopModel,
+    values: &[f64],
+    files: &[LoopFile],
+    h_max: f64,
+) -> Result<Vec<f64>, RunError> {
+    files
+        .iter()
+        .map(|f| run(model, values, &f.h, h_max).map(|m| nrmse(&f.value, &f.channel_from_m(&m))))
+        .collect()
+}
+
+/// Fits `model` to the loops jointly, starting from (and never ending worse than) the model's
+/// parameters in `start`.
+pub fn fit(
+    model: LoopModel,
+    files: &[LoopFile],
+    start: &ActuatorParams,
+    opts: SearchOptions,
+) -> Result<LoopFit> {
     let h_max = files.iter().flat_map(|f| f.h.iter()).fold(0.0f64, |a, v| a.max(v.abs()));
     let m_max = files.iter().flat_map(|f| f.magnetization()).fold(0.0f64, |a, v| a.max(v.abs()));
     if !(h_max > 0.0 && m_max > 0.0) {
@@ -447,10 +542,11 @@ pub fn fit(model: LoopModel, files: &[LoopFile], opts: SearchOptions) -> Result<
     }
     let bounds = model.bounds(h_max, m_max);
     let targets: Vec<Vec<f64>> = files.iter().map(|f| f.value.clone()).collect();
-    let cost = |_: &(), p: &[f64], _: Fidelity| -> f64 {
+    let cost = |_: &(), v: &[f64], _: Fidelity| -> f64 {
+        let p = model.model_values(v);
         let mut sum = 0.0;
         for (f, t) in files.iter().zip(&targets) {
-            match run(model, p, &f.h, h_max) {
+            match run(model, &p, &f.h, h_max) {
                 Ok(m) => {
                     let e = nrmse(t, &f.channel_from_m(&m));
                     sum += e * e;
@@ -465,8 +561,21 @@ pub fn fit(model: LoopModel, files: &[LoopFile], opts: SearchOptions) -> Result<
             f64::MAX / 4.0
         }
     };
-    let found = minimize(&bounds, &cost, &(), &[], &PLAN, opts, &Progress::new("", 0, false))?;
-    let (best, evaluations) = (found.best, found.evaluations);
+    // The start: scored as given; the search starts from it clamped into the box.
+    let start_values = model.values_of(start);
+    let start_score = match multivalued(model, &start_values) {
+        Some(ratio) => Err(format!(
+            "α·M_s/(3a) = {ratio:.2} ≥ 1: the anhysteretic curve is multivalued there, not a valid J–A model"
+        )),
+        None => mean_nrmse(model, &start_values, files, h_max).map_err(|e| e.0),
+    };
+    let mut starts: Vec<Start<()>> = match &start_score {
+        Ok(_) => vec![Start { values: model.search_values(&start_values), context: () }],
+        Err(_) => Vec::new(),
+    };
+    starts.extend(model.start_from_features(files).map(|values| Start { values, context: () }));
+    let found = minimize(&bounds, &cost, &(), &starts, &PLAN, opts, &Progress::new("", 0, false))?;
+    let mut best = model.model_values(&found.best);
     let mut warnings = Vec::new();
     let mut per_file = Vec::new();
     for f in files {
@@ -478,19 +587,42 @@ pub fn fit(model: LoopModel, files: &[LoopFile], opts: SearchOptions) -> Result<
             }
         }
     }
-    let params: Vec<(&'static str, f64)> = bounds.iter().map(|b| b.name).zip(best.iter().copied()).collect();
-    for (b, v) in bounds.iter().zip(&best) {
-        if b.at_edge(*v) {
-            warnings.push(Warning::AtEdge { param: b.name, value: *v, lo: b.lo, hi: b.hi });
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let mut kept = false;
+    if let Ok(start_nrmse) = &start_score {
+        let found_mean = mean(&per_file);
+        if found_mean.is_nan() || found_mean > mean(start_nrmse) {
+            kept = true;
+            best = start_values.clone();
+            per_file = start_nrmse.clone();
+            warnings.retain(|w| !matches!(w, Warning::IntegrationFailed { .. }));
+            warnings.push(Warning::StartKept { start_nrmse: mean(start_nrmse), found_nrmse: found_mean });
         }
     }
-    if model == LoopModel::JilesAtherton {
-        let (ms, a, alpha) = (best[0], best[1], best[2]);
-        if alpha * ms / (3.0 * a) >= 1.0 {
-            warnings.push(Warning::Multivalued { ratio: alpha * ms / (3.0 * a) });
+    let params: Vec<(&'static str, f64)> = model.names().iter().copied().zip(best.iter().copied()).collect();
+    if !kept {
+        for (b, v) in bounds.iter().zip(&found.best) {
+            if b.at_edge(*v) {
+                warnings.push(Warning::AtEdge { param: b.name, value: *v, lo: b.lo, hi: b.hi });
+            }
         }
     }
-    Ok(LoopFit { model, params, nrmse: per_file, evaluations, warnings, time_limited: found.time_limited })
+    if let Some(ratio) = multivalued(model, &best) {
+        warnings.push(Warning::Multivalued { ratio });
+    }
+    let start = match start_score {
+        Ok(e) => StartScore { nrmse: Some(mean(&e)), kept, refused: None },
+        Err(why) => StartScore { nrmse: None, kept: false, refused: Some(why) },
+    };
+    Ok(LoopFit {
+        model,
+        params,
+        nrmse: per_file,
+        evaluations: found.evaluations,
+        warnings,
+        time_limited: found.time_limited,
+        start,
+    })
 }
 
 /// The loop chart of one file: measured and modelled, H in kA/m.

@@ -344,4 +344,26 @@ mod tests {
         let line = text.lines().position(|l| l.starts_with("c = ")).unwrap() + 1;
         assert!(e.starts_with(&format!("p.toml:{line}:")), "{e}");
     }
+
+    #[test]
+    fn the_ja_variant_is_read_by_name_and_defaults_for_old_files_and_a_bad_name_is_placed() {
+        use model_core::magnetization::JaVariant;
+        // Old files (no key) mean the default, which written files then name.
+        let old = parse_file("old.toml", FORMAT_1, spec("ja")).unwrap();
+        assert_eq!(old.params.ja.variant, JaVariant::Bulk);
+        assert!(to_toml(&old.params, "t").unwrap().contains("variant = \"bulk\""));
+        for v in [JaVariant::Original1986, JaVariant::Szewczyk] {
+            let text = FORMAT_1.replace("c = 0.19454733\n", &format!("c = 0.19454733\nvariant = \"{v}\"\n"));
+            let f = parse_file("p.toml", &text, spec("ja")).unwrap();
+            assert_eq!(f.params.ja.variant, v);
+            let written = to_toml(&f.params, "t").unwrap();
+            assert!(written.contains(&format!("variant = \"{v}\"")), "{written}");
+            assert_eq!(parse_file("again.toml", &written, spec("ja")).unwrap().params, f.params);
+        }
+        let text = FORMAT_1.replace("c = 0.19454733\n", "c = 0.19454733\nvariant = \"ja-1986\"\n");
+        let e = parse_file("p.toml", &text, spec("ja")).unwrap_err().to_string();
+        let line = text.lines().position(|l| l.starts_with("variant")).unwrap() + 1;
+        assert!(e.starts_with(&format!("p.toml:{line}:")), "{e}");
+        assert!(e.contains("ja-1986") && e.contains("\"ja1986\""), "{e}");
+    }
 }

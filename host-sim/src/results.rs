@@ -87,9 +87,25 @@ pub struct FitSummary {
     /// What the uncertainty rests on (displacement fits).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub uncertainty_basis: Option<UncertaintyBasis>,
+    /// The start values' score, and whether the fit returned them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub start: Option<StartScore>,
     /// For the text: the parameters in the fit's order, whether the files are loops, the time.
     #[serde(skip)]
     pub text: FitText,
+}
+
+/// The start values of a fit: every fit evaluates them, and returns them when its search ends
+/// worse (a fit never ends worse than where it started).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct StartScore {
+    /// Mean NRMSE over the fit files at the start values; null when they cannot be used.
+    pub nrmse: Option<f64>,
+    /// The search ended worse than the start values, so the fit returned them.
+    pub kept: bool,
+    /// Why the start values cannot be used (e.g. α·M_s/(3a) ≥ 1), if so.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refused: Option<String>,
 }
 
 /// One parameter's estimate in a fit's JSON.
@@ -230,6 +246,18 @@ impl fmt::Display for FitSummary {
         }
         for (n, v) in &self.text.fixed {
             writeln!(f, "  {n:width$} = {v:.6e} (fixed)")?;
+        }
+        if let Some(s) = &self.start {
+            match (&s.refused, s.nrmse) {
+                (Some(why), _) => writeln!(f, "  start values refused: {why}")?,
+                (None, Some(e)) => writeln!(
+                    f,
+                    "  start values: fit NRMSE {:.3} %{}",
+                    e * 100.0,
+                    if s.kept { " (returned: the search did not improve on them)" } else { "" }
+                )?,
+                (None, None) => {}
+            }
         }
         if let Some(u) = self.text.uncertainty.as_ref().filter(|u| u.params.len() > 1) {
             writeln!(

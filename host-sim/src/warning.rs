@@ -47,6 +47,13 @@ pub enum Warning {
         /// Condition number of the column-normalised Jacobian.
         condition: f64,
     },
+    /// The search ended worse than the start values; the fit returned the start values.
+    StartKept {
+        /// Mean fit NRMSE at the start values.
+        start_nrmse: f64,
+        /// Mean fit NRMSE where the search ended.
+        found_nrmse: f64,
+    },
     /// `--time-limit` stopped the search: the best point so far.
     TimeLimit {
         /// The limit [s].
@@ -85,6 +92,13 @@ impl fmt::Display for Warning {
                 "not identifiable from these files: {} (Jacobian condition {condition:.2e}); their \
                  values are one of many that fit equally well: --fix them or add data that excite them",
                 params.iter().map(|p| format!("`{p}`")).collect::<Vec<_>>().join(", ")
+            ),
+            Warning::StartKept { start_nrmse, found_nrmse } => write!(
+                f,
+                "the search ended at {:.3} % NRMSE, worse than the start values' {:.3} %: the start values are \
+                 returned (a fit never ends worse than its start)",
+                found_nrmse * 100.0,
+                start_nrmse * 100.0
             ),
             Warning::TimeLimit { seconds } => write!(
                 f,

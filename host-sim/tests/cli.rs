@@ -253,12 +253,13 @@ fn demo_finds_the_hidden_effects_and_writes_the_report() {
 #[test]
 fn loop_files_fit_the_magnetization_stage_and_compare_reads_coercivity() {
     use host_sim::loops::{self, LoopModel};
+    use model_core::magnetization::JaVariant;
     let dir = tempfile::tempdir().unwrap();
     // A Terfenol-D major loop as a permeameter writes it: tab separated, H in kA/m, B in T.
     let truth = [6.0e5, 6512.0, -0.035, 4000.0, 0.2];
     let h: Vec<f64> =
         (0..=240).map(|k| 1.0e5 * (2.0 * std::f64::consts::PI * k as f64 / 240.0).cos()).collect();
-    let m = loops::run(LoopModel::JilesAtherton, &truth, &h, 1.0e5).unwrap();
+    let m = loops::run(LoopModel::JilesAtherton(JaVariant::Bulk), &truth, &h, 1.0e5).unwrap();
     let mut text = String::from("H(kA/m)\tB(T)\n");
     for (h, m) in h.iter().zip(&m) {
         text.push_str(&format!("{}\t{}\n", h * 1e-3, 4e-7 * std::f64::consts::PI * (h + m)));

@@ -11,7 +11,14 @@ use model_core::{ActuatorParams, ModelSpec};
 #[test]
 fn jiles_atherton_parameters_are_recovered_from_noisy_loops() {
     let mut truth = ActuatorParams::TERFENOL_DEMO;
-    truth.ja = JaParams { ms_a_per_m: 6.0e5, a_a_per_m: 7012.0, alpha: -0.01, k_a_per_m: 4283.0, c: 0.18 };
+    truth.ja = JaParams {
+        ms_a_per_m: 6.0e5,
+        a_a_per_m: 7012.0,
+        alpha: -0.01,
+        k_a_per_m: 4283.0,
+        c: 0.18,
+        ..JaParams::TSMA_ROD1_002
+    };
     truth.magnetostriction.lambda_s = 1.2e-3;
     let mut plant = Plant::new(ModelSpec::parse("ja").unwrap(), truth);
     plant.noise_um = 0.1; // ~0.1–0.2 % of the stroke

@@ -3,6 +3,8 @@
 
 use host_sim::loops::{self, LoopChannel, LoopFile, LoopModel};
 use host_sim::search::SearchOptions;
+use model_core::magnetization::JaVariant;
+use model_core::ActuatorParams;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
@@ -34,7 +36,7 @@ fn loop_file(m: &Material, branch_only: bool, seed: u64) -> LoopFile {
                 }
         })
         .collect();
-    let clean = loops::run(LoopModel::JilesAtherton, &m.truth, &h, m.h_max).unwrap();
+    let clean = loops::run(LoopModel::JilesAtherton(JaVariant::Bulk), &m.truth, &h, m.h_max).unwrap();
     let range = clean.iter().fold(f64::MIN, |a, &v| a.max(v)) - clean.iter().fold(f64::MAX, |a, &v| a.min(v));
     let noise = Normal::new(0.0, 0.002 * range).unwrap();
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
@@ -56,9 +58,13 @@ fn jiles_atherton_is_recovered_from_loops_of_three_materials() {
         for branch in [false, true] {
             let f = loop_file(m, branch, 5);
             let t = std::time::Instant::now();
-            let fit =
-                loops::fit(LoopModel::JilesAtherton, std::slice::from_ref(&f), SearchOptions::default())
-                    .unwrap();
+            let fit = loops::fit(
+                LoopModel::JilesAtherton(JaVariant::Bulk),
+                std::slice::from_ref(&f),
+                &ActuatorParams::TERFENOL_DEMO,
+                SearchOptions::default(),
+            )
+            .unwrap();
             let v = fit.values();
             let errs: Vec<f64> = v.iter().zip(&m.truth).map(|(g, w)| ((g - w) / w).abs()).collect();
             println!(

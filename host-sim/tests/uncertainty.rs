@@ -17,7 +17,14 @@ use common::gma;
 /// The rig's true parameters (002's rod 3 J–A set, as in tests/identification.rs).
 fn truth() -> ActuatorParams {
     let mut p = ActuatorParams::TERFENOL_DEMO;
-    p.ja = JaParams { ms_a_per_m: 6.0e5, a_a_per_m: 7012.0, alpha: -0.01, k_a_per_m: 4283.0, c: 0.18 };
+    p.ja = JaParams {
+        ms_a_per_m: 6.0e5,
+        a_a_per_m: 7012.0,
+        alpha: -0.01,
+        k_a_per_m: 4283.0,
+        c: 0.18,
+        ..JaParams::TSMA_ROD1_002
+    };
     p.magnetostriction.lambda_s = 1.2e-3;
     p.dt_s = 2.5e-4; // 4 kHz: 1700 samples over the three files
     p

@@ -111,7 +111,7 @@ impl ActuatorParams {
         eddy_tau_s: 1.5e-4,
         linear: LinearMagnetization { offset_a_per_m: 0.0, susceptibility: 7.0 },
         anhysteretic: AnhystereticParams { ms_a_per_m: 6.0e5, a_a_per_m: 9000.0 },
-        ja: JaParams { ms_a_per_m: 6.0e5, a_a_per_m: 6512.0, alpha: -0.035, k_a_per_m: 4000.0, c: 0.2 },
+        ja: JaParams::TSMA_ROD1_002,
         preisach: PreisachParams {
             ms_a_per_m: 6.0e5,
             coercive_a_per_m: 3000.0,

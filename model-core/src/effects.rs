@@ -12,6 +12,7 @@
 use core::fmt;
 
 use crate::chain::ActuatorParams;
+pub use crate::magnetization::JaVariant;
 
 /// One physical effect a model can include (serialised as its registry name).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -235,7 +236,7 @@ pub const EFFECTS: [EffectInfo; 9] = [
         effect: Effect::Hysteresis,
         name: "hysteresis",
         alias: None,
-        adds: "Jiles–Atherton hysteresis (implies `saturation`)",
+        adds: "Jiles–Atherton hysteresis (implies `saturation`; its form by `[ja] variant`, below)",
         stage: Stage::Magnetization,
         law: Some(MagnetizationLaw::JilesAtherton),
         implies: Some(Effect::Saturation),
@@ -331,6 +332,10 @@ pub const EFFECTS: [EffectInfo; 9] = [
 /// (saturation + hysteresis).
 pub const SHORTHANDS: [(&str, &[Effect]); 2] =
     [("linear", &[]), ("ja", &[Effect::Saturation, Effect::Hysteresis])];
+
+/// The parameter-file key that selects the form of the J–A equations ([`JaVariant`] by name); a
+/// file without it means the default, [`JaVariant::Bulk`], the only form before it existed.
+pub const JA_VARIANT_KEY: &str = "ja.variant";
 
 /// The strain scale λ_s: identified in every model (the workbench solves it in closed form).
 pub const STRAIN_SCALE: Param =

@@ -137,7 +137,7 @@ fn compare_loops(
     files: &[LoopFile],
     stems: &[String],
 ) -> Result<CompareSummary> {
-    let model = loops::LoopModel::from_spec(spec)?;
+    let model = loops::LoopModel::from_spec(spec, p)?;
     let values = model.values_of(p);
     let mut rows = Vec::new();
     let mut charts = Vec::new();

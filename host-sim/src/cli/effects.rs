@@ -4,8 +4,8 @@
 use anyhow::Result;
 use clap::Args;
 use model_core::effects::{
-    Candidacy, EffectInfo, Inverse, MagnetizationLaw, Param, Scale, Signature, Stage, AMPLIFIER_GAIN,
-    EFFECTS, SHORTHANDS, STRAIN_SCALE,
+    Candidacy, EffectInfo, Inverse, JaVariant, MagnetizationLaw, Param, Scale, Signature, Stage,
+    AMPLIFIER_GAIN, EFFECTS, JA_VARIANT_KEY, SHORTHANDS, STRAIN_SCALE,
 };
 use model_core::ActuatorParams;
 use serde_json::json;
@@ -41,6 +41,9 @@ pub fn run(a: &EffectsArgs) -> Result<()> {
                 "{word}: {}",
                 if names.is_empty() { "no effects (the minimal model)".into() } else { names.join(" + ") }
             );
+        }
+        for v in JaVariant::ALL {
+            out!("{JA_VARIANT_KEY} = \"{}\"{}: {} ({})", v.name(), default_mark(v), v.equation(), v.paper());
         }
     }
     Ok(())
@@ -170,8 +173,25 @@ pub fn markdown() -> String {
             ));
         }
     }
+    s.push_str(&format!(
+        "\nJ–A variants (`[ja] variant = \"…\"` in parameter files, key `{JA_VARIANT_KEY}`; δ = sign dH; \
+         δ_M = 1 when δ(M_an − M_irr) > 0, else 0; M_an = M_s L(H_e/a), H_e = H + αM):\n\n\
+         | `variant` | equations | paper |\n|---|---|---|\n"
+    ));
+    for v in JaVariant::ALL {
+        s.push_str(&format!("| `{}`{} | {} | {} |\n", v.name(), default_mark(v), v.equation(), v.paper()));
+    }
     s.pop();
     s
+}
+
+/// Marks the default J–A variant.
+fn default_mark(v: JaVariant) -> &'static str {
+    if v == JaVariant::default() {
+        " (default)"
+    } else {
+        ""
+    }
 }
 
 fn effect_row(e: &EffectInfo) -> String {
@@ -196,6 +216,7 @@ fn to_json() -> serde_json::Value {
             "params": e.params.iter().map(param).collect::<Vec<_>>(),
         })).collect::<Vec<_>>(),
         "shorthands": SHORTHANDS.iter().map(|(w, es)| json!({"word": w, "effects": es.iter().map(|e| e.name()).collect::<Vec<_>>()})).collect::<Vec<_>>(),
+        "ja_variants": JaVariant::ALL.iter().map(|v| json!({"name": v.name(), "default": *v == JaVariant::default(), "equations": v.equation(), "paper": v.paper()})).collect::<Vec<_>>(),
         "identified": identified().iter().map(|(when, ps)| json!({"when": when, "params": ps.iter().map(|p| param(p)).collect::<Vec<_>>()})).collect::<Vec<_>>(),
     })
 }

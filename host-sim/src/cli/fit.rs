@@ -149,6 +149,7 @@ fn fit_recordings(
         uncertainty: None,
         correlation: None,
         uncertainty_basis: None,
+        start: Some(res.start.clone()),
         text: FitText {
             params_in_order: res.identified.clone(),
             loops: false,
@@ -186,13 +187,13 @@ fn fit_loops(
     val_files: &[LoopFile],
 ) -> Result<(FitSummary, model_core::ActuatorParams, Vec<Warning>)> {
     let spec = p.spec;
-    let model = loops::LoopModel::from_spec(spec)?;
+    let model = loops::LoopModel::from_spec(spec, &p.init)?;
     let t = Instant::now();
     crate::progress::phase(
         true,
         &format!("fitting the magnetization model `{spec}` to {} loop file(s)", fit_files.len()),
     );
-    let res = loops::fit(model, fit_files, p.search_options())?;
+    let res = loops::fit(model, fit_files, &p.init, p.search_options())?;
     let mut files: Vec<FileScoreRow> = fit_files
         .iter()
         .zip(&res.nrmse)
@@ -222,6 +223,7 @@ fn fit_loops(
         uncertainty: None,
         correlation: None,
         uncertainty_basis: None,
+        start: Some(res.start.clone()),
         text: FitText {
             params_in_order: res.params.clone(),
             loops: true,

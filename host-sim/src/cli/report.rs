@@ -34,7 +34,8 @@ pub fn run(a: &ReportArgs) -> Result<()> {
     let extra = super::context_json(&p.params_source, &provenance);
     match &p.data {
         Data::Loops(files, _) => {
-            let res = loops::fit(loops::LoopModel::from_spec(spec)?, files, p.search_options())?;
+            let res =
+                loops::fit(loops::LoopModel::from_spec(spec, &p.init)?, files, &p.init, p.search_options())?;
             let page = loops::html(&spec.to_string(), &res, files)?;
             write_atomic(&a.out, report::with_sections(page, &provenance_section).as_bytes())?;
             a.mf.warn_if_time_limited(res.time_limited);
