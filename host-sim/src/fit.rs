@@ -123,7 +123,7 @@ pub fn simulate(spec: ModelSpec, params: &ActuatorParams, rec: &Recording) -> Re
 }
 
 /// [`simulate`]; `all_channels: false` keeps only displacement and current (the fit's inner loop).
-fn run_model(
+pub fn run_model(
     spec: ModelSpec,
     params: &ActuatorParams,
     prep: &Prepared,
