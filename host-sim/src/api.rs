@@ -8,17 +8,16 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use clap::ValueEnum;
+use clap::Parser;
 use model_core::{ActuatorParams, Effect, ModelSpec};
 
 use crate::cli::common::{self, Data, Prepared};
-use crate::cli::simulate::{SimulateArgs, Waveform};
+use crate::cli::simulate::SimulateArgs;
 use crate::columns::ReadOptions;
 use crate::diagnose::Diagnosis;
 use crate::files::{names, open_all, Input};
 use crate::fit::{self, Drive, FitOptions, Simulation};
 use crate::loops::{self, LoopFile};
-use crate::plant::EddyModel;
 use crate::recording::{self, Recording, COLUMNS};
 use crate::results::{CompareSummary, FileScoreRow, FitSummary};
 
@@ -498,73 +497,41 @@ pub fn model_response(model: &str, params: &ParamsSource, drive: &Recording) -> 
     fit::run_model(spec, &p, &prep, true)
 }
 
-/// `gma simulate`'s options (the same names, units and defaults), for a SIMULATED recording.
-#[derive(Debug, Clone)]
-pub struct RigSettings {
-    /// `sine`, `square`, `chirp`, `multisine` or `sweep`.
-    pub waveform: String,
-    /// Excitation frequency [Hz].
-    pub freq_hz: f64,
-    /// Amplitude [A], or [V] with `amp`.
-    pub amplitude: f64,
-    /// DC bias [A] or [V].
-    pub bias: f64,
-    /// Duration [s].
-    pub duration_s: f64,
-    /// Displacement sensor noise [µm].
-    pub noise_um: f64,
-    /// Displacement quantisation step [µm].
-    pub quantum_um: f64,
-    /// Displacement sensor offset [µm].
-    pub offset_um: f64,
-    /// Integration steps per sample.
-    pub oversample: u32,
-    /// `distributed` or `lumped`.
-    pub eddy_model: String,
-    /// Leave out the current (needs `amp`).
-    pub no_current: bool,
-    /// Seed of the noise generator.
-    pub seed: u64,
-}
-
-impl Default for RigSettings {
-    fn default() -> Self {
-        Self {
-            waveform: "sine".into(),
-            freq_hz: 50.0,
-            amplitude: 1.0,
-            bias: 1.0,
-            duration_s: 0.2,
-            noise_um: 0.0,
-            quantum_um: 0.0,
-            offset_um: 0.0,
-            oversample: 2,
-            eddy_model: "distributed".into(),
-            no_current: false,
-            seed: 1,
-        }
+/// `gma simulate` with `options` as on its command line (`("--freq-hz", Some("80"))`,
+/// `("--no-current", None)`; `--out` and `--params` are set here): a SIMULATED rig's recording,
+/// parsed by the CLI's own option definitions (same defaults, same refusals), written and read
+/// back as the CLI writes it (same CSV rounding), named `name`.
+pub fn simulate_rig(
+    model: Option<&str>,
+    params: &ParamsSource,
+    options: &[(String, Option<String>)],
+    name: &str,
+) -> Result<Recording> {
+    #[derive(clap::Parser)]
+    #[command(name = "gma simulate", allow_negative_numbers = true)]
+    struct SimulateCli {
+        #[command(flatten)]
+        args: SimulateArgs,
     }
-}
-
-/// The value of a clap enum option from its name, or the CLI's kind of refusal.
-fn choice<T: ValueEnum>(option: &str, value: &str) -> Result<T> {
-    T::from_str(value, false).map_err(|_| {
-        let names: Vec<String> = T::value_variants()
-            .iter()
-            .filter_map(|v| v.to_possible_value())
-            .map(|p| p.get_name().to_string())
-            .collect();
-        anyhow::anyhow!("invalid value '{value}' for '--{option}': possible values are {}", names.join(", "))
-    })
-}
-
-/// `gma simulate`: a SIMULATED rig's recording, exactly as the CLI writes and reads it back
-/// (the same checks, the same CSV rounding), named `name`.
-pub fn simulate_rig(model: &str, params: &ParamsSource, s: &RigSettings, name: &str) -> Result<Recording> {
-    // Checked here first, so that problems are reported under the names given, not the temporary files'.
-    params.load(crate::params::parse_spec(model)?)?;
+    if let Some((option, _)) =
+        options.iter().find(|(o, _)| matches!(o.as_str(), "--out" | "-o" | "--params" | "--model"))
+    {
+        bail!("{option} is set by the call itself, not as an option");
+    }
     let dir = tempfile::tempdir().context("creating a temporary folder for the simulated recording")?;
-    let params_path = match params {
+    let out = dir.path().join("simulated.csv");
+    let mut argv: Vec<std::ffi::OsString> = vec!["gma simulate".into(), "--out".into(), out.clone().into()];
+    if let Some(m) = model {
+        argv.extend(["--model".into(), m.into()]);
+    }
+    for (option, value) in options {
+        argv.push(option.into());
+        argv.extend(value.iter().map(Into::into));
+    }
+    let mut args = SimulateCli::try_parse_from(argv).map_err(|e| usage_error(&e))?.args;
+    // Checked here first, so that problems are reported under the names given, not the temporary files'.
+    params.load(crate::params::parse_spec(&args.model)?)?;
+    args.params = match params {
         ParamsSource::Demo => None,
         ParamsSource::File(p) => Some(p.clone()),
         ParamsSource::Text { text, .. } => {
@@ -573,26 +540,73 @@ pub fn simulate_rig(model: &str, params: &ParamsSource, s: &RigSettings, name: &
             Some(p)
         }
     };
-    let out = dir.path().join("simulated.csv");
-    let args = SimulateArgs {
-        model: model.into(),
-        params: params_path,
-        waveform: choice::<Waveform>("waveform", &s.waveform)?,
-        freq_hz: s.freq_hz,
-        amplitude: s.amplitude,
-        bias: s.bias,
-        duration_s: s.duration_s,
-        noise_um: s.noise_um,
-        quantum_um: s.quantum_um,
-        offset_um: s.offset_um,
-        oversample: s.oversample,
-        eddy_model: choice::<EddyModel>("eddy-model", &s.eddy_model)?,
-        no_current: s.no_current,
-        seed: s.seed,
-        out: out.clone(),
-    };
     crate::cli::simulate::run(&args)?;
     let mut rec = Recording::read(&out)?;
     rec.name = name.into();
     Ok(rec)
+}
+
+/// clap's refusal of an option as one line: what is wrong and the accepted values, without the
+/// pointer to `--help` (there is no command line to ask).
+fn usage_error(e: &clap::Error) -> anyhow::Error {
+    let text = e.to_string();
+    let text = text.split("\n\nFor more information").next().unwrap_or_default();
+    let words: Vec<&str> = text.trim_start_matches("error: ").split_whitespace().collect();
+    anyhow::anyhow!("{}", words.join(" "))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cli::common::ModelFiles;
+
+    #[derive(clap::Parser)]
+    struct FitCli {
+        #[command(flatten)]
+        mf: ModelFiles,
+    }
+
+    /// The settings a binding leaves unset are the CLI's defaults.
+    #[test]
+    fn defaults_are_the_command_lines() {
+        let cli = FitCli::try_parse_from(["gma", "--model", "ja", "rig.csv"]).unwrap().mf;
+        let (f, r) = (FitSettings::default(), ReadSettings::default());
+        assert_eq!((f.seed, f.effort, f.time_limit_s), (cli.seed, cli.effort, cli.time_limit));
+        assert_eq!(
+            (r.max_samples, r.columns, r.resample, r.trim_start_s),
+            (cli.read.max_samples, cli.read.columns, cli.read.resample, cli.read.trim_start)
+        );
+    }
+
+    /// Arrays pass where a CSV with the same numbers passes, and a bad element is named.
+    #[test]
+    fn arrays_are_read_as_the_csv_with_the_same_numbers() {
+        let t: Vec<f64> = (0..50).map(|k| k as f64 * 1e-4).collect();
+        let i: Vec<f64> = t.iter().map(|t| (300.0 * t).sin()).collect();
+        let csv: String = std::iter::once("time_s,current_A\n".to_string())
+            .chain(t.iter().zip(&i).map(|(t, i)| format!("{t:?},{i:?}\n")))
+            .collect();
+        let from_csv = Recording::parse("a", csv.as_bytes()).unwrap();
+        let arrays = vec![("time_s".to_string(), t.clone()), ("current_A".to_string(), i.clone())];
+        assert_eq!(recording_from_arrays("a", arrays).unwrap(), from_csv);
+        let mut bad = i.clone();
+        bad[7] = f64::INFINITY;
+        let e =
+            recording_from_arrays("a", vec![("time_s".into(), t), ("current_A".into(), bad)]).unwrap_err();
+        let at = e.downcast_ref::<ArrayError>().unwrap();
+        assert_eq!((at.array.as_str(), at.index), ("current_A", Some(7)));
+    }
+
+    /// `simulate_rig` takes the CLI's option names and refuses as the CLI does.
+    #[test]
+    fn rig_options_are_the_command_lines() {
+        let opt = |o: &str, v: &str| (o.to_string(), Some(v.to_string()));
+        let r = simulate_rig(None, &ParamsSource::Demo, &[opt("--duration-s", "0.01")], "s").unwrap();
+        assert_eq!((r.len(), r.name.as_str()), (100, "s"));
+        let e =
+            simulate_rig(Some("ja"), &ParamsSource::Demo, &[opt("--waveform", "triangle")], "s").unwrap_err();
+        assert!(e.to_string().contains("'triangle'") && e.to_string().contains("multisine"), "{e}");
+        let e = simulate_rig(Some("ja"), &ParamsSource::Demo, &[opt("--freq-hz", "-5")], "s").unwrap_err();
+        assert!(e.to_string().contains("--freq-hz must be a positive number"), "{e}");
+    }
 }

@@ -5,9 +5,7 @@
 
 use std::path::PathBuf;
 
-use host_sim::api::{
-    self, ArrayError, FitSettings, ParamsSource, Prediction, ReadSettings, RigSettings, Source,
-};
+use host_sim::api::{self, ArrayError, FitSettings, ParamsSource, Prediction, ReadSettings, Source};
 use host_sim::error::Located;
 use host_sim::files::escape_control;
 use host_sim::loops::{LoopChannel, LoopFile};
@@ -191,13 +189,27 @@ fn loop_dict<'py>(py: Python<'py>, f: &LoopFile) -> PyResult<Bound<'py, PyDict>>
     Ok(d)
 }
 
+/// The read options; None is the CLI's default.
 fn read_settings(
-    max_samples: usize,
+    max_samples: Option<usize>,
     columns: Vec<String>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
 ) -> ReadSettings {
-    ReadSettings { max_samples, columns, resample, trim_start_s }
+    let d = ReadSettings::default();
+    ReadSettings { max_samples: max_samples.unwrap_or(d.max_samples), columns, resample, trim_start_s }
+}
+
+/// The search options; None is the CLI's default.
+fn fit_settings(
+    seed: Option<u64>,
+    effort: Option<f64>,
+    time_limit_s: Option<f64>,
+    fix: Vec<String>,
+    bound: Vec<String>,
+) -> FitSettings {
+    let d = FitSettings::default();
+    FitSettings { seed: seed.unwrap_or(d.seed), effort: effort.unwrap_or(d.effort), time_limit_s, fix, bound }
 }
 
 /// Reads a measurement CSV (docs/formats.md) as the CLI does: a dict with `name` and one
@@ -205,14 +217,14 @@ fn read_settings(
 /// `displacement_um` [µm], `force_N`, `temperature_C`). `columns`, `resample`, `trim_start_s`
 /// and `max_samples` are the CLI's `--column`, `--resample`, `--trim-start`, `--max-samples`.
 #[pyfunction]
-#[pyo3(signature = (path, *, columns=Vec::new(), resample=None, trim_start_s=None, max_samples=2_000_000))]
+#[pyo3(signature = (path, *, columns=Vec::new(), resample=None, trim_start_s=None, max_samples=None))]
 fn read_recording<'py>(
     py: Python<'py>,
     path: PathBuf,
     columns: Vec<String>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
-    max_samples: usize,
+    max_samples: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let read = read_settings(max_samples, columns, resample, trim_start_s);
     let r = run(py, || api::read_recording(path, &read))?;
@@ -223,8 +235,12 @@ fn read_recording<'py>(
 /// (`flux_density` or `magnetization`), `field_A_per_m` and `flux_density_T` or
 /// `magnetization_A_per_m` (SI units, converted from the file's).
 #[pyfunction]
-#[pyo3(signature = (path, *, max_samples=2_000_000))]
-fn read_loop<'py>(py: Python<'py>, path: PathBuf, max_samples: usize) -> PyResult<Bound<'py, PyDict>> {
+#[pyo3(signature = (path, *, max_samples=None))]
+fn read_loop<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    max_samples: Option<usize>,
+) -> PyResult<Bound<'py, PyDict>> {
     let read = read_settings(max_samples, Vec::new(), None, None);
     let f = run(py, || api::read_loop(path, &read))?;
     loop_dict(py, &f)
@@ -235,8 +251,8 @@ fn read_loop<'py>(py: Python<'py>, path: PathBuf, max_samples: usize) -> PyResul
 /// `gma fit --json` object as a dict, plus `params_toml` (the parameter file `--params-out`
 /// writes; pass the result as `params=` to compare, diagnose, simulate).
 #[pyfunction]
-#[pyo3(signature = (model, files, *, val=None, params=None, seed=1, effort=1.0, time_limit_s=None,
-    fix=Vec::new(), bound=Vec::new(), columns=Vec::new(), resample=None, trim_start_s=None, max_samples=2_000_000))]
+#[pyo3(signature = (model, files, *, val=None, params=None, seed=None, effort=None, time_limit_s=None,
+    fix=Vec::new(), bound=Vec::new(), columns=Vec::new(), resample=None, trim_start_s=None, max_samples=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit<'py>(
     py: Python<'py>,
@@ -244,15 +260,15 @@ fn fit<'py>(
     files: &Bound<'py, PyAny>,
     val: Option<&Bound<'py, PyAny>>,
     params: Option<&Bound<'py, PyAny>>,
-    seed: u64,
-    effort: f64,
+    seed: Option<u64>,
+    effort: Option<f64>,
     time_limit_s: Option<f64>,
     fix: Vec<String>,
     bound: Vec<String>,
     columns: Vec<String>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
-    max_samples: usize,
+    max_samples: Option<usize>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let fit_src = sources(py, files, 0)?;
     let val_src = match val {
@@ -260,7 +276,7 @@ fn fit<'py>(
         _ => Vec::new(),
     };
     let ps = params_source(py, params)?;
-    let settings = FitSettings { seed, effort, time_limit_s, fix, bound };
+    let settings = fit_settings(seed, effort, time_limit_s, fix, bound);
     let read = read_settings(max_samples, columns, resample, trim_start_s);
     let out = run(py, || api::fit(&model, &fit_src, &val_src, &ps, &settings, &read))?;
     let d = json_to_py(py, &out.summary)?;
@@ -274,7 +290,7 @@ fn fit<'py>(
 /// `magnetization_A_per_m`; for a loop file `field_A_per_m` and the model's `flux_density_T` or
 /// `magnetization_A_per_m`.
 #[pyfunction]
-#[pyo3(signature = (model, files, *, params=None, columns=Vec::new(), resample=None, trim_start_s=None, max_samples=2_000_000))]
+#[pyo3(signature = (model, files, *, params=None, columns=Vec::new(), resample=None, trim_start_s=None, max_samples=None))]
 #[allow(clippy::too_many_arguments)]
 fn compare<'py>(
     py: Python<'py>,
@@ -284,7 +300,7 @@ fn compare<'py>(
     columns: Vec<String>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
-    max_samples: usize,
+    max_samples: Option<usize>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let src = sources(py, files, 0)?;
     let ps = params_source(py, params)?;
@@ -326,8 +342,8 @@ fn simulation_items(py: Python<'_>, d: &Bound<'_, PyDict>, sim: &host_sim::fit::
 /// Fits `model`, analyses what it leaves unexplained and names the missing effect: the `gma
 /// diagnose --json` object as a dict (`verdict`, `candidates`, `findings`, …).
 #[pyfunction]
-#[pyo3(signature = (model, files, *, val=None, params=None, seed=1, effort=1.0, time_limit_s=None,
-    columns=Vec::new(), resample=None, trim_start_s=None, max_samples=2_000_000))]
+#[pyo3(signature = (model, files, *, val=None, params=None, seed=None, effort=None, time_limit_s=None,
+    columns=Vec::new(), resample=None, trim_start_s=None, max_samples=None))]
 #[allow(clippy::too_many_arguments)]
 fn diagnose<'py>(
     py: Python<'py>,
@@ -335,13 +351,13 @@ fn diagnose<'py>(
     files: &Bound<'py, PyAny>,
     val: Option<&Bound<'py, PyAny>>,
     params: Option<&Bound<'py, PyAny>>,
-    seed: u64,
-    effort: f64,
+    seed: Option<u64>,
+    effort: Option<f64>,
     time_limit_s: Option<f64>,
     columns: Vec<String>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
-    max_samples: usize,
+    max_samples: Option<usize>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let fit_src = sources(py, files, 0)?;
     let val_src = match val {
@@ -349,53 +365,59 @@ fn diagnose<'py>(
         _ => Vec::new(),
     };
     let ps = params_source(py, params)?;
-    let settings = FitSettings { seed, effort, time_limit_s, ..FitSettings::default() };
+    let settings = fit_settings(seed, effort, time_limit_s, Vec::new(), Vec::new());
     let read = read_settings(max_samples, columns, resample, trim_start_s);
     let d = run(py, || api::diagnose(&model, &fit_src, &val_src, &ps, &settings, &read))?;
     json_to_py(py, &d)
 }
 
-/// A SIMULATED rig (the plant simulator, as `gma simulate`: same options, units, defaults and
-/// checks) under a standard excitation: a recording dict as `read_recording` returns.
+/// A SIMULATED rig (the plant simulator) under a standard excitation: `gma simulate` with the
+/// same options, units, defaults (an option left at None is the CLI's default) and refusals.
+/// Returns a recording dict as `read_recording` does, named `name`.
 #[pyfunction]
-#[pyo3(signature = (model="ja+mech", *, params=None, waveform="sine", freq_hz=50.0, amplitude=1.0, bias=1.0,
-    duration_s=0.2, noise_um=0.0, quantum_um=0.0, offset_um=0.0, oversample=2, eddy_model="distributed",
-    no_current=false, seed=1, name="simulated"))]
+#[pyo3(signature = (model=None, *, params=None, waveform=None, freq_hz=None, amplitude=None, bias=None,
+    duration_s=None, noise_um=None, quantum_um=None, offset_um=None, oversample=None, eddy_model=None,
+    no_current=false, seed=None, name="simulated"))]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
     py: Python<'py>,
-    model: &str,
+    model: Option<&str>,
     params: Option<&Bound<'py, PyAny>>,
-    waveform: &str,
-    freq_hz: f64,
-    amplitude: f64,
-    bias: f64,
-    duration_s: f64,
-    noise_um: f64,
-    quantum_um: f64,
-    offset_um: f64,
-    oversample: u32,
-    eddy_model: &str,
+    waveform: Option<&str>,
+    freq_hz: Option<f64>,
+    amplitude: Option<f64>,
+    bias: Option<f64>,
+    duration_s: Option<f64>,
+    noise_um: Option<f64>,
+    quantum_um: Option<f64>,
+    offset_um: Option<f64>,
+    oversample: Option<u32>,
+    eddy_model: Option<&str>,
     no_current: bool,
-    seed: u64,
+    seed: Option<u64>,
     name: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     let ps = params_source(py, params)?;
-    let s = RigSettings {
-        waveform: waveform.into(),
-        freq_hz,
-        amplitude,
-        bias,
-        duration_s,
-        noise_um,
-        quantum_um,
-        offset_um,
-        oversample,
-        eddy_model: eddy_model.into(),
-        no_current,
-        seed,
-    };
-    let r = run(py, || api::simulate_rig(model, &ps, &s, name))?;
+    let numbers = [
+        ("--freq-hz", freq_hz),
+        ("--amplitude", amplitude),
+        ("--bias", bias),
+        ("--duration-s", duration_s),
+        ("--noise-um", noise_um),
+        ("--quantum-um", quantum_um),
+        ("--offset-um", offset_um),
+    ];
+    let mut options: Vec<(String, Option<String>)> =
+        numbers.iter().filter_map(|(o, v)| v.map(|v| (o.to_string(), Some(v.to_string())))).collect();
+    for (o, v) in [("--waveform", waveform), ("--eddy-model", eddy_model)] {
+        options.extend(v.map(|v| (o.to_string(), Some(v.to_string()))));
+    }
+    options.extend(oversample.map(|v| ("--oversample".to_string(), Some(v.to_string()))));
+    options.extend(seed.map(|v| ("--seed".to_string(), Some(v.to_string()))));
+    if no_current {
+        options.push(("--no-current".into(), None));
+    }
+    let r = run(py, || api::simulate_rig(model, &ps, &options, name))?;
     recording_dict(py, &r)
 }
 

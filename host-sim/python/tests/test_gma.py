@@ -219,4 +219,14 @@ def test_bad_option_values_are_the_clis_errors():
     assert "--freq-hz must be a positive number" in str(e.value)
     with pytest.raises(gma.GmaError) as e:
         gma.simulate("ja", waveform="triangle")
-    assert "triangle" in str(e.value) and "sine" in str(e.value)
+    assert "'triangle'" in str(e.value) and "multisine" in str(e.value)
+
+
+def test_simulate_takes_the_clis_defaults():
+    # Our own plant simulator: the defaults of `gma simulate` (0.2 s, 1 A bias + 1 A sine, 50 Hz).
+    rec = gma.simulate()
+    assert len(rec["time_s"]) == 2000
+    assert rec["current_A"].min() == pytest.approx(0.0, abs=1e-3)
+    assert rec["current_A"].max() == pytest.approx(2.0, abs=1e-3)
+    sq = gma.simulate("ja", waveform="square", amplitude=0.5, bias=0.0, freq_hz=10.0)
+    assert set(np.round(sq["current_A"], 6)) == {-0.5, 0.5}
