@@ -100,12 +100,23 @@ def test_fit_on_independent_data_reports_the_clis_result_fields(fitted):
         assert key in fitted
     assert fitted["model"] == "ja+mech" and fitted["seed"] == QUICK["seed"]
     # The reference rig has eddy currents, two resonances, heating and drift that ja+mech lacks:
-    # a fit within 15 % on the sine it saw, and a validation error that is worse but bounded.
-    assert 0 < fitted["nrmse_fit"] < 0.15, fitted["nrmse_fit"]
-    assert fitted["nrmse_val"] < 0.5, fitted["nrmse_val"]
+    # within 5 % on the sine it saw (2.6–3.3 % over seeds 1–4 at this effort) and within 10 % on
+    # the multisine it did not see (5.3–6.6 %).
+    assert 0 < fitted["nrmse_fit"] < 0.05, fitted["nrmse_fit"]
+    assert fitted["nrmse_fit"] < fitted["nrmse_val"] < 0.10, fitted["nrmse_val"]
     assert [r["split"] for r in fitted["files"]] == ["fit", "val"]
     for name, e in fitted["uncertainty"].items():
         assert e["value"] == pytest.approx(fitted["params"][name])
+
+
+def test_fit_is_the_clis_fit(fitted):
+    if not GMA_BIN:
+        pytest.skip("GMA_BIN not set: no CLI to compare with")
+    args = ["fit", "--model", "ja+mech", "--seed", "3", "--effort", "0.3", "--val", VAL_CSV, FIT_CSV, "--json"]
+    p = subprocess.run([GMA_BIN, *map(str, args)], capture_output=True, text=True, check=True)
+    cli = json.loads(p.stdout)
+    for key in ("params", "nrmse_fit", "nrmse_val", "files", "uncertainty", "correlation", "evaluations"):
+        assert fitted[key] == cli[key], key
 
 
 def test_fit_from_arrays_equals_fit_from_the_file(fitted):
@@ -128,7 +139,7 @@ def test_compare_with_the_fitted_set_reproduces_the_fit_scores(fitted):
     assert nrmse == pytest.approx(res["files"][1]["nrmse"], rel=1e-9)
 
 
-def test_model_response_is_comparess_prediction_without_the_offset(fitted):
+def test_model_response_is_the_compare_prediction_without_the_offset(fitted):
     rec = gma.read_recording(FIT_CSV)
     drive = {"time_s": rec["time_s"], "current_A": rec["current_A"]}
     resp = gma.model_response("ja+mech", drive, params=fitted)
@@ -154,6 +165,10 @@ def test_diagnose_returns_the_clis_diagnosis_object():
     assert d["model"] == "ja" and d["candidates"]
     assert {"verdict", "findings", "time_limit_reached", "nrmse_fit"} <= set(d)
     assert all(math.isfinite(c["nrmse_after"]) for c in d["candidates"])
+    # ja alone lacks the rig's rate-dependent effects: the best candidate's refit cuts the
+    # validation error by a fifth at least (7.9 % -> 4.6-5.2 % over seeds 1-4).
+    best = d["candidates"][0]
+    assert best["nrmse_after"] < 0.8 * best["nrmse_before"], best
 
 
 def test_missing_file_is_the_clis_error(tmp_path):
