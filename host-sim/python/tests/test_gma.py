@@ -95,6 +95,21 @@ def test_read_loop_converts_the_files_units_to_si():
     np.testing.assert_array_equal(lp["flux_density_T"][:3], [-1.0, -0.8, -0.1])
 
 
+def test_loop_fit_and_compare_agree_on_a_hand_written_loop():
+    loop_file = CORPUS / "loop_units.csv"
+    # Seed 1: at seed 3 this 8-point loop's search ends in the multivalued J–A region, which the
+    # CLI (and so the package) refuses as an invalid model.
+    fitted = gma.fit("ja", loop_file, seed=1, effort=0.3)
+    res = gma.compare("ja", loop_file, params=fitted)
+    assert res["nrmse"] == pytest.approx(fitted["nrmse_fit"], rel=1e-9)
+    assert fitted["nrmse_fit"] < 0.10, fitted["nrmse_fit"]
+    measured = gma.read_loop(loop_file)["flux_density_T"]
+    model = res["predictions"][0]["flux_density_T"]
+    nrmse = np.sqrt(np.mean((measured - model) ** 2)) / (measured.max() - measured.min())
+    assert nrmse == pytest.approx(res["nrmse"], rel=1e-6)
+    assert set(res["files"][0]["measured"]) == {"coercivity_a_per_m", "remanence_a_per_m", "max_magnetization_a_per_m"}
+
+
 def test_fit_on_independent_data_reports_the_clis_result_fields(fitted):
     for key in ("model", "params", "nrmse_fit", "nrmse_val", "files", "uncertainty", "params_toml"):
         assert key in fitted
