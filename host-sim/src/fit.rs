@@ -154,7 +154,7 @@ pub fn simulate_drive(
 }
 
 /// [`simulate`]; `all_channels: false` keeps only displacement and current (the fit's inner loop).
-fn run_model(
+pub fn run_model(
     spec: ModelSpec,
     params: &ActuatorParams,
     prep: &Prepared,

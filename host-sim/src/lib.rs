@@ -3,6 +3,7 @@
 //! subcommand; `src/main.rs` only calls it. Papers are cited as 000–003: the list, and what the
 //! code takes from each, is docs/references.md.
 
+pub mod api;
 pub mod cases;
 pub mod cli;
 pub mod columns;

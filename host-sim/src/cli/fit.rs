@@ -102,7 +102,7 @@ pub fn run(a: &FitArgs) -> Result<()> {
 }
 
 /// The fit of displacement recordings.
-fn fit_recordings(
+pub(crate) fn fit_recordings(
     p: &Prepared,
     fit_files: &[Recording],
     val_files: &[Recording],
@@ -181,7 +181,7 @@ fn rows(split: &'static str, recs: &[Recording], scores: &[fit::FileScore]) -> V
 }
 
 /// The magnetization stage alone, on loop files.
-fn fit_loops(
+pub(crate) fn fit_loops(
     p: &Prepared,
     fit_files: &[LoopFile],
     val_files: &[LoopFile],

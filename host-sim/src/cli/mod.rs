@@ -27,12 +27,12 @@ macro_rules! say {
     };
 }
 
-mod common;
+pub(crate) mod common;
 mod compare;
 mod demo;
 mod diagnose;
 mod effects;
-mod fit;
+pub(crate) mod fit;
 mod mechanics;
 mod record;
 mod report;

@@ -1,0 +1,465 @@
+//! `gma` for Python: the workbench's read, fit, compare, diagnose and simulate with NumPy arrays
+//! in and out. Every call goes through `host_sim::api`, so the checks, messages and result
+//! fields are the CLI's; a refusal raises `gma.GmaError` (a `ValueError`) carrying the CLI's
+//! message and where it points (`file`, `line`, `column`; `array`, `index` for array inputs).
+
+use std::path::PathBuf;
+
+use host_sim::api::{self, ArrayError, FitSettings, ParamsSource, Prediction, ReadSettings, Source};
+use host_sim::error::Located;
+use host_sim::files::escape_control;
+use host_sim::loops::{LoopChannel, LoopFile};
+use host_sim::recording::{Recording, COLUMNS};
+use numpy::{PyArray1, PyReadonlyArray1};
+use pyo3::create_exception;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyMapping};
+use pyo3::BoundObject;
+
+create_exception!(
+    gma,
+    GmaError,
+    PyValueError,
+    "A refused input or a failed command: the message is the `gma` CLI's; `file`, `line`, \
+     `column` say where it points (None when it does not), `array` and `index` name the element \
+     of an input array, `exit_code` is the CLI's exit status."
+);
+
+/// The CLI's exit status for a failed command.
+const EXIT_FAILURE: u8 = 1;
+
+/// A workbench error as `gma.GmaError`, with the fields of the CLI's `--json` error object.
+fn to_py_err(py: Python<'_>, e: anyhow::Error) -> PyErr {
+    let message = escape_control(&format!("{e:#}"));
+    let located = e.chain().find_map(|c| c.downcast_ref::<Located>());
+    let array = e.chain().find_map(|c| c.downcast_ref::<ArrayError>());
+    let err = GmaError::new_err(message.clone());
+    let value = err.value(py);
+    let file = located.map(|l| l.file.clone()).or_else(|| array.map(|a| a.file.clone()));
+    let attrs: [(&str, Py<PyAny>); 7] = [
+        ("message", opt(py, Some(message))),
+        ("file", opt(py, file.map(|f| escape_control(&f)))),
+        ("line", opt(py, located.and_then(|l| l.line))),
+        ("column", opt(py, located.and_then(|l| l.column))),
+        ("array", opt(py, array.map(|a| a.array.clone()))),
+        ("index", opt(py, array.and_then(|a| a.index))),
+        ("exit_code", opt(py, Some(EXIT_FAILURE))),
+    ];
+    for (name, v) in attrs {
+        if let Err(set_failed) = value.setattr(name, v) {
+            return set_failed;
+        }
+    }
+    err
+}
+
+fn opt<'py, T: IntoPyObject<'py>>(py: Python<'py>, v: Option<T>) -> Py<PyAny> {
+    v.and_then(|v| v.into_pyobject(py).ok()).map(|o| o.into_any().unbind()).unwrap_or_else(|| py.None())
+}
+
+/// Runs `f` without holding the GIL and maps its error to `gma.GmaError`.
+fn run<T: Send>(py: Python<'_>, f: impl FnOnce() -> anyhow::Result<T> + Send) -> PyResult<T> {
+    py.detach(f).map_err(|e| to_py_err(py, e))
+}
+
+/// An array-like as a 1-D float64 vector, or a `GmaError` naming it.
+fn float_vec(py: Python<'_>, name: &str, array: &str, v: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
+    let bad = |why: String| {
+        to_py_err(py, ArrayError { file: name.into(), array: array.into(), index: None, message: why }.into())
+    };
+    let np = py.import("numpy")?;
+    let kwargs = PyDict::new(py);
+    kwargs.set_item("dtype", np.getattr("float64")?)?;
+    let converted = np
+        .call_method("asarray", (v,), Some(&kwargs))
+        .map_err(|e| bad(format!("not an array of numbers ({e})")))?;
+    let arr: PyReadonlyArray1<'_, f64> = converted
+        .extract()
+        .map_err(|_| bad(format!("must be one-dimensional, got {} dimensions", dims(&converted))))?;
+    Ok(arr.as_array().to_vec())
+}
+
+fn dims(a: &Bound<'_, PyAny>) -> String {
+    a.getattr("ndim").map(|d| d.to_string()).unwrap_or_else(|_| "?".into())
+}
+
+/// A recording given as a mapping of arrays named as the CSV columns (and an optional `name`).
+fn recording_from_mapping(
+    py: Python<'_>,
+    m: &Bound<'_, PyMapping>,
+    default_name: &str,
+) -> PyResult<Recording> {
+    let name = match m.get_item("name") {
+        Ok(n) => n.extract::<String>()?,
+        Err(_) => default_name.to_string(),
+    };
+    let mut arrays = Vec::new();
+    for item in m.items()?.iter() {
+        let (key, value): (String, Bound<'_, PyAny>) = item.extract()?;
+        if key != "name" {
+            let v = float_vec(py, &name, &key, &value)?;
+            arrays.push((key, v));
+        }
+    }
+    run(py, || api::recording_from_arrays(&name, arrays))
+}
+
+/// A fit or comparison input: a path, or a mapping of arrays.
+fn source(py: Python<'_>, obj: &Bound<'_, PyAny>, k: usize) -> PyResult<Source> {
+    if let Ok(m) = obj.cast::<PyMapping>() {
+        return Ok(Source::Arrays(recording_from_mapping(py, m, &format!("<arrays {k}>"))?));
+    }
+    match obj.extract::<PathBuf>() {
+        Ok(p) => Ok(Source::File(p)),
+        Err(_) => Err(to_py_err(
+            py,
+            anyhow::anyhow!(
+                "input {k}: expected a file path or a mapping of arrays (time_s, current_A, displacement_um, …), got {}",
+                obj.get_type().name().map(|n| n.to_string()).unwrap_or_default()
+            ),
+        )),
+    }
+}
+
+fn sources(py: Python<'_>, objs: &Bound<'_, PyAny>, first: usize) -> PyResult<Vec<Source>> {
+    // A single path or mapping is one input, not a sequence of characters or keys.
+    if objs.extract::<PathBuf>().is_ok() || objs.cast::<PyMapping>().is_ok() {
+        return Ok(vec![source(py, objs, first)?]);
+    }
+    objs.try_iter()?.enumerate().map(|(k, o)| source(py, &o?, first + k)).collect()
+}
+
+/// `params`: None (the demo set), a parameter-file path, or a fit result (its `params_toml`).
+fn params_source(py: Python<'_>, params: Option<&Bound<'_, PyAny>>) -> PyResult<ParamsSource> {
+    let Some(p) = params.filter(|p| !p.is_none()) else { return Ok(ParamsSource::Demo) };
+    if let Ok(m) = p.cast::<PyMapping>() {
+        let text = m.get_item("params_toml").and_then(|t| t.extract::<String>()).map_err(|_| {
+            to_py_err(
+                py,
+                anyhow::anyhow!("params: a mapping must be a fit result with a `params_toml` entry"),
+            )
+        })?;
+        return Ok(ParamsSource::Text { name: "<fit result params_toml>".into(), text });
+    }
+    p.extract::<PathBuf>().map(ParamsSource::File).map_err(|_| {
+        to_py_err(py, anyhow::anyhow!("params: expected None, a parameter-file path or a fit result"))
+    })
+}
+
+/// A serialisable result as Python objects (through JSON: the fields of the CLI's `--json`).
+fn json_to_py<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<'py, PyAny>> {
+    let text = serde_json::to_string(v).map_err(|e| to_py_err(py, e.into()))?;
+    py.import("json")?.call_method1("loads", (text,))
+}
+
+fn array<'py>(py: Python<'py>, v: &[f64]) -> Bound<'py, PyArray1<f64>> {
+    PyArray1::from_slice(py, v)
+}
+
+fn recording_dict<'py>(py: Python<'py>, r: &Recording) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("name", &r.name)?;
+    let cols = [
+        Some(&r.time_s),
+        r.command_v.as_ref(),
+        r.current_a.as_ref(),
+        r.displacement_um.as_ref(),
+        r.force_n.as_ref(),
+        r.temperature_c.as_ref(),
+    ];
+    for (name, col) in COLUMNS.iter().zip(cols) {
+        if let Some(c) = col {
+            d.set_item(*name, array(py, c))?;
+        }
+    }
+    Ok(d)
+}
+
+fn loop_dict<'py>(py: Python<'py>, f: &LoopFile) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("name", &f.name)?;
+    d.set_item("channel", f.channel.name())?;
+    d.set_item("field_A_per_m", array(py, &f.h))?;
+    let key = match f.channel {
+        LoopChannel::FluxDensity => "flux_density_T",
+        LoopChannel::Magnetization => "magnetization_A_per_m",
+    };
+    d.set_item(key, array(py, &f.value))?;
+    Ok(d)
+}
+
+/// The read options; None is the CLI's default.
+fn read_settings(
+    max_samples: Option<usize>,
+    columns: Vec<String>,
+    resample: Option<String>,
+    trim_start_s: Option<f64>,
+) -> ReadSettings {
+    let d = ReadSettings::default();
+    ReadSettings { max_samples: max_samples.unwrap_or(d.max_samples), columns, resample, trim_start_s }
+}
+
+/// The search options; None is the CLI's default.
+fn fit_settings(
+    seed: Option<u64>,
+    effort: Option<f64>,
+    time_limit_s: Option<f64>,
+    fix: Vec<String>,
+    bound: Vec<String>,
+) -> FitSettings {
+    let d = FitSettings::default();
+    FitSettings { seed: seed.unwrap_or(d.seed), effort: effort.unwrap_or(d.effort), time_limit_s, fix, bound }
+}
+
+/// Reads a measurement CSV (docs/formats.md) as the CLI does: a dict with `name` and one
+/// float64 array per column present (`time_s` [s], `command_V`, `current_A` [A],
+/// `displacement_um` [µm], `force_N`, `temperature_C`). `columns`, `resample`, `trim_start_s`
+/// and `max_samples` are the CLI's `--column`, `--resample`, `--trim-start`, `--max-samples`.
+#[pyfunction]
+#[pyo3(signature = (path, *, columns=Vec::new(), resample=None, trim_start_s=None, max_samples=None))]
+fn read_recording<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    columns: Vec<String>,
+    resample: Option<String>,
+    trim_start_s: Option<f64>,
+    max_samples: Option<usize>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let read = read_settings(max_samples, columns, resample, trim_start_s);
+    let r = run(py, || api::read_recording(path, &read))?;
+    recording_dict(py, &r)
+}
+
+/// Reads a magnetization-loop file (B–H or M–H) as the CLI does: a dict with `name`, `channel`
+/// (`flux_density` or `magnetization`), `field_A_per_m` and `flux_density_T` or
+/// `magnetization_A_per_m` (SI units, converted from the file's).
+#[pyfunction]
+#[pyo3(signature = (path, *, max_samples=None))]
+fn read_loop<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    max_samples: Option<usize>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let read = read_settings(max_samples, Vec::new(), None, None);
+    let f = run(py, || api::read_loop(path, &read))?;
+    loop_dict(py, &f)
+}
+
+/// Identifies `model` (a spec such as `ja+mech`) from `files` jointly — paths of recordings or
+/// loop files, or dicts of arrays as `read_recording` returns — scored on `val`. Returns the
+/// `gma fit --json` object as a dict, plus `params_toml` (the parameter file `--params-out`
+/// writes; pass the result as `params=` to compare, diagnose, simulate).
+#[pyfunction]
+#[pyo3(signature = (model, files, *, val=None, params=None, seed=None, effort=None, time_limit_s=None,
+    fix=Vec::new(), bound=Vec::new(), columns=Vec::new(), resample=None, trim_start_s=None, max_samples=None))]
+#[allow(clippy::too_many_arguments)]
+fn fit<'py>(
+    py: Python<'py>,
+    model: String,
+    files: &Bound<'py, PyAny>,
+    val: Option<&Bound<'py, PyAny>>,
+    params: Option<&Bound<'py, PyAny>>,
+    seed: Option<u64>,
+    effort: Option<f64>,
+    time_limit_s: Option<f64>,
+    fix: Vec<String>,
+    bound: Vec<String>,
+    columns: Vec<String>,
+    resample: Option<String>,
+    trim_start_s: Option<f64>,
+    max_samples: Option<usize>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let fit_src = sources(py, files, 0)?;
+    let val_src = match val {
+        Some(v) if !v.is_none() => sources(py, v, fit_src.len())?,
+        _ => Vec::new(),
+    };
+    let ps = params_source(py, params)?;
+    let settings = fit_settings(seed, effort, time_limit_s, fix, bound);
+    let read = read_settings(max_samples, columns, resample, trim_start_s);
+    let out = run(py, || api::fit(&model, &fit_src, &val_src, &ps, &settings, &read))?;
+    let d = json_to_py(py, &out.summary)?;
+    d.set_item("params_toml", out.params_toml)?;
+    Ok(d)
+}
+
+/// Compares `model` with `params` against `files` (as `fit` takes them): the `gma compare
+/// --json` object as a dict, plus `predictions`, one dict per input: for a recording `time_s`,
+/// `displacement_um` (model, with the fitted offset), `current_A`, `field_A_per_m`,
+/// `magnetization_A_per_m`; for a loop file `field_A_per_m` and the model's `flux_density_T` or
+/// `magnetization_A_per_m`.
+#[pyfunction]
+#[pyo3(signature = (model, files, *, params=None, columns=Vec::new(), resample=None, trim_start_s=None, max_samples=None))]
+#[allow(clippy::too_many_arguments)]
+fn compare<'py>(
+    py: Python<'py>,
+    model: String,
+    files: &Bound<'py, PyAny>,
+    params: Option<&Bound<'py, PyAny>>,
+    columns: Vec<String>,
+    resample: Option<String>,
+    trim_start_s: Option<f64>,
+    max_samples: Option<usize>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let src = sources(py, files, 0)?;
+    let ps = params_source(py, params)?;
+    let read = read_settings(max_samples, columns, resample, trim_start_s);
+    let (summary, predictions) = run(py, || api::compare(&model, &ps, &src, &read))?;
+    let d = json_to_py(py, &summary)?;
+    let list: Vec<Bound<'py, PyDict>> =
+        predictions.iter().map(|p| prediction_dict(py, p)).collect::<PyResult<_>>()?;
+    d.set_item("predictions", list)?;
+    Ok(d)
+}
+
+fn prediction_dict<'py>(py: Python<'py>, p: &Prediction) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    match p {
+        Prediction::Recording { name, time_s, sim } => {
+            d.set_item("name", name)?;
+            d.set_item("time_s", array(py, time_s))?;
+            simulation_items(py, &d, sim)?;
+        }
+        Prediction::Loop { name, field_a_per_m, channel, value } => {
+            d.set_item("name", name)?;
+            d.set_item("channel", *channel)?;
+            d.set_item("field_A_per_m", array(py, field_a_per_m))?;
+            let key = if *channel == "flux_density" { "flux_density_T" } else { "magnetization_A_per_m" };
+            d.set_item(key, array(py, value))?;
+        }
+    }
+    Ok(d)
+}
+
+fn simulation_items(py: Python<'_>, d: &Bound<'_, PyDict>, sim: &host_sim::fit::Simulation) -> PyResult<()> {
+    d.set_item("displacement_um", array(py, &sim.displacement_um))?;
+    d.set_item("current_A", array(py, &sim.current_a))?;
+    d.set_item("field_A_per_m", array(py, &sim.field_a_per_m))?;
+    d.set_item("magnetization_A_per_m", array(py, &sim.magnetization_a_per_m))
+}
+
+/// Fits `model`, analyses what it leaves unexplained and names the missing effect: the `gma
+/// diagnose --json` object as a dict (`verdict`, `candidates`, `findings`, …).
+#[pyfunction]
+#[pyo3(signature = (model, files, *, val=None, params=None, seed=None, effort=None, time_limit_s=None,
+    columns=Vec::new(), resample=None, trim_start_s=None, max_samples=None))]
+#[allow(clippy::too_many_arguments)]
+fn diagnose<'py>(
+    py: Python<'py>,
+    model: String,
+    files: &Bound<'py, PyAny>,
+    val: Option<&Bound<'py, PyAny>>,
+    params: Option<&Bound<'py, PyAny>>,
+    seed: Option<u64>,
+    effort: Option<f64>,
+    time_limit_s: Option<f64>,
+    columns: Vec<String>,
+    resample: Option<String>,
+    trim_start_s: Option<f64>,
+    max_samples: Option<usize>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let fit_src = sources(py, files, 0)?;
+    let val_src = match val {
+        Some(v) if !v.is_none() => sources(py, v, fit_src.len())?,
+        _ => Vec::new(),
+    };
+    let ps = params_source(py, params)?;
+    let settings = fit_settings(seed, effort, time_limit_s, Vec::new(), Vec::new());
+    let read = read_settings(max_samples, columns, resample, trim_start_s);
+    let d = run(py, || api::diagnose(&model, &fit_src, &val_src, &ps, &settings, &read))?;
+    json_to_py(py, &d)
+}
+
+/// A SIMULATED rig (the plant simulator) under a standard excitation: `gma simulate` with the
+/// same options, units, defaults (an option left at None is the CLI's default) and refusals.
+/// Returns a recording dict as `read_recording` does, named `name`.
+#[pyfunction]
+#[pyo3(signature = (model=None, *, params=None, waveform=None, freq_hz=None, amplitude=None, bias=None,
+    duration_s=None, noise_um=None, quantum_um=None, offset_um=None, oversample=None, eddy_model=None,
+    no_current=false, seed=None, name="simulated"))]
+#[allow(clippy::too_many_arguments)]
+fn simulate<'py>(
+    py: Python<'py>,
+    model: Option<&str>,
+    params: Option<&Bound<'py, PyAny>>,
+    waveform: Option<&str>,
+    freq_hz: Option<f64>,
+    amplitude: Option<f64>,
+    bias: Option<f64>,
+    duration_s: Option<f64>,
+    noise_um: Option<f64>,
+    quantum_um: Option<f64>,
+    offset_um: Option<f64>,
+    oversample: Option<u32>,
+    eddy_model: Option<&str>,
+    no_current: bool,
+    seed: Option<u64>,
+    name: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    let ps = params_source(py, params)?;
+    let numbers = [
+        ("--freq-hz", freq_hz),
+        ("--amplitude", amplitude),
+        ("--bias", bias),
+        ("--duration-s", duration_s),
+        ("--noise-um", noise_um),
+        ("--quantum-um", quantum_um),
+        ("--offset-um", offset_um),
+    ];
+    let mut options: Vec<(String, Option<String>)> =
+        numbers.iter().filter_map(|(o, v)| v.map(|v| (o.to_string(), Some(v.to_string())))).collect();
+    for (o, v) in [("--waveform", waveform), ("--eddy-model", eddy_model)] {
+        options.extend(v.map(|v| (o.to_string(), Some(v.to_string()))));
+    }
+    options.extend(oversample.map(|v| ("--oversample".to_string(), Some(v.to_string()))));
+    options.extend(seed.map(|v| ("--seed".to_string(), Some(v.to_string()))));
+    if no_current {
+        options.push(("--no-current".into(), None));
+    }
+    let r = run(py, || api::simulate_rig(model, &ps, &options, name))?;
+    recording_dict(py, &r)
+}
+
+/// The model's response to a drive given as arrays: `drive` is a dict with `time_s` [s] and
+/// `current_A` [A] (or `command_V` [V] for a model with `amp`). Returns `time_s`,
+/// `displacement_um`, `current_A`, `field_A_per_m`, `magnetization_A_per_m`.
+#[pyfunction]
+#[pyo3(signature = (model, drive, *, params=None))]
+fn model_response<'py>(
+    py: Python<'py>,
+    model: String,
+    drive: &Bound<'py, PyAny>,
+    params: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let m = drive.cast::<PyMapping>().map_err(|_| {
+        to_py_err(
+            py,
+            anyhow::anyhow!(
+                "drive: expected a mapping of arrays with `time_s` and `current_A` or `command_V`"
+            ),
+        )
+    })?;
+    let rec = recording_from_mapping(py, m, "<drive>")?;
+    let ps = params_source(py, params)?;
+    let sim = run(py, || api::model_response(&model, &ps, &rec))?;
+    let d = PyDict::new(py);
+    d.set_item("time_s", array(py, &rec.time_s))?;
+    simulation_items(py, &d, &sim)?;
+    Ok(d)
+}
+
+/// The module `gma`.
+#[pymodule]
+fn gma(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("GmaError", m.py().get_type::<GmaError>())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add_function(wrap_pyfunction!(read_recording, m)?)?;
+    m.add_function(wrap_pyfunction!(read_loop, m)?)?;
+    m.add_function(wrap_pyfunction!(fit, m)?)?;
+    m.add_function(wrap_pyfunction!(compare, m)?)?;
+    m.add_function(wrap_pyfunction!(diagnose, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(model_response, m)?)?;
+    Ok(())
+}

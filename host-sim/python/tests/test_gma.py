@@ -1,0 +1,262 @@
+"""The `gma` Python package against the repository's bundled data and against the `gma` CLI.
+
+Data: `examples/data/refrig-*.csv` are SIMULATED by the independent reference rig
+(tests/reference-rig, which shares no code with the workbench); `tests/fuzz/corpus/csv_reader/`
+holds small hand-written files. Where the package's output comes from our own plant simulator
+(`gma.simulate`), the test says so and checks only properties, never the physics.
+
+Set GMA_BIN to a `gma` binary (scripts/test does) to check that every refusal carries exactly
+the CLI's message and location.
+"""
+
+import csv
+import json
+import math
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import gma
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parents[2]
+DATA = HERE.parent / "examples" / "data"
+FIT_CSV = DATA / "refrig-sine-fit.csv"
+VAL_CSV = DATA / "refrig-multisine-val.csv"
+CORPUS = REPO / "tests" / "fuzz" / "corpus" / "csv_reader"
+GMA_BIN = os.environ.get("GMA_BIN")
+# Short searches: the tests check the plumbing and the contract, not the optimiser's best effort.
+QUICK = {"seed": 3, "effort": 0.3}
+
+
+def cli_error(*args):
+    """The `gma --json` error object for `args` (the CLI's exit status must be 1)."""
+    if not GMA_BIN:
+        pytest.skip("GMA_BIN not set: no CLI to compare the error with")
+    p = subprocess.run([GMA_BIN, *map(str, args), "--json"], capture_output=True, text=True)
+    assert p.returncode == 1, p.stderr
+    return json.loads(p.stdout)["error"]
+
+
+def assert_same_error(err, cli):
+    """A GmaError carries the CLI's `--json` error object field for field."""
+    assert isinstance(err, ValueError)
+    assert str(err) == err.message == cli["message"]
+    assert (err.file, err.line, err.column, err.exit_code) == (
+        cli["file"],
+        cli["line"],
+        cli["column"],
+        cli["exit_code"],
+    )
+
+
+def read_with_csv_module(path):
+    """The same file through Python's own CSV reader: an independent check of the arrays."""
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    return gma.fit("ja+mech", [FIT_CSV], val=[VAL_CSV], **QUICK)
+
+
+def test_read_recording_gives_the_files_columns_as_float_arrays():
+    rec = gma.read_recording(FIT_CSV)
+    ref = read_with_csv_module(FIT_CSV)
+    assert rec["name"] == str(FIT_CSV)
+    assert set(rec) - {"name"} == set(ref)
+    for k, v in ref.items():
+        assert rec[k].dtype == np.float64 and rec[k].shape == v.shape
+        np.testing.assert_array_equal(rec[k], v)
+
+
+def test_read_recording_applies_the_clis_column_options(tmp_path):
+    f = tmp_path / "ms.csv"
+    f.write_text("t_ms,I_mA,x_mm\n0,100,0.001\n0.1,200,0.002\n0.2,300,0.004\n0.3,200,0.003\n0.4,100,0.002\n")
+    rec = gma.read_recording(
+        f,
+        columns=["time_s=t_ms:ms", "current_A=I_mA:mA", "displacement_um=x_mm:mm"],
+        trim_start_s=0.00015,
+    )
+    np.testing.assert_allclose(rec["time_s"], [0.0002, 0.0003, 0.0004])
+    np.testing.assert_allclose(rec["current_A"], [0.3, 0.2, 0.1])
+    np.testing.assert_allclose(rec["displacement_um"], [4.0, 3.0, 2.0])
+
+
+def test_read_loop_converts_the_files_units_to_si():
+    lp = gma.read_loop(CORPUS / "loop_units.csv")  # header `H [kA/m],B [T]`
+    assert lp["channel"] == "flux_density"
+    assert lp["field_A_per_m"][0] == -50e3 and lp["field_A_per_m"][4] == 50e3
+    np.testing.assert_array_equal(lp["flux_density_T"][:3], [-1.0, -0.8, -0.1])
+
+
+def test_loop_fit_and_compare_agree_on_a_hand_written_loop():
+    loop_file = CORPUS / "loop_units.csv"
+    # Seed 1: at seed 3 this 8-point loop's search ends in the multivalued J–A region, which the
+    # CLI (and so the package) refuses as an invalid model.
+    fitted = gma.fit("ja", loop_file, seed=1, effort=0.3)
+    res = gma.compare("ja", loop_file, params=fitted)
+    assert res["nrmse"] == pytest.approx(fitted["nrmse_fit"], rel=1e-9)
+    assert fitted["nrmse_fit"] < 0.10, fitted["nrmse_fit"]
+    measured = gma.read_loop(loop_file)["flux_density_T"]
+    model = res["predictions"][0]["flux_density_T"]
+    nrmse = np.sqrt(np.mean((measured - model) ** 2)) / (measured.max() - measured.min())
+    assert nrmse == pytest.approx(res["nrmse"], rel=1e-6)
+    assert set(res["files"][0]["measured"]) == {"coercivity_a_per_m", "remanence_a_per_m", "max_magnetization_a_per_m"}
+
+
+def test_fit_on_independent_data_reports_the_clis_result_fields(fitted):
+    for key in ("model", "params", "nrmse_fit", "nrmse_val", "files", "uncertainty", "params_toml"):
+        assert key in fitted
+    assert fitted["model"] == "ja+mech" and fitted["seed"] == QUICK["seed"]
+    # The reference rig has eddy currents, two resonances, heating and drift that ja+mech lacks:
+    # within 5 % on the sine it saw (2.6–3.3 % over seeds 1–4 at this effort) and within 10 % on
+    # the multisine it did not see (5.3–6.6 %).
+    assert 0 < fitted["nrmse_fit"] < 0.05, fitted["nrmse_fit"]
+    assert fitted["nrmse_fit"] < fitted["nrmse_val"] < 0.10, fitted["nrmse_val"]
+    assert [r["split"] for r in fitted["files"]] == ["fit", "val"]
+    for name, e in fitted["uncertainty"].items():
+        assert e["value"] == pytest.approx(fitted["params"][name])
+
+
+def test_fit_is_the_clis_fit(fitted):
+    if not GMA_BIN:
+        pytest.skip("GMA_BIN not set: no CLI to compare with")
+    args = ["fit", "--model", "ja+mech", "--seed", "3", "--effort", "0.3", "--val", VAL_CSV, FIT_CSV, "--json"]
+    p = subprocess.run([GMA_BIN, *map(str, args)], capture_output=True, text=True, check=True)
+    cli = json.loads(p.stdout)
+    for key in ("params", "nrmse_fit", "nrmse_val", "files", "uncertainty", "correlation", "evaluations"):
+        assert fitted[key] == cli[key], key
+
+
+def test_fit_from_arrays_equals_fit_from_the_file(fitted):
+    arrays = gma.read_recording(FIT_CSV)
+    again = gma.fit("ja+mech", arrays, val=[VAL_CSV], **QUICK)
+    assert again["params"] == fitted["params"]
+    assert again["nrmse_fit"] == fitted["nrmse_fit"]
+
+
+def test_compare_with_the_fitted_set_reproduces_the_fit_scores(fitted):
+    res = gma.compare("ja+mech", [FIT_CSV, VAL_CSV], params=fitted)
+    by_file = {r["file"]: r["nrmse"] for r in fitted["files"]}
+    assert [r["nrmse"] for r in res["files"]] == pytest.approx(
+        [by_file[str(FIT_CSV)], by_file[str(VAL_CSV)]], rel=1e-9
+    )
+    # The prediction arrays give the same score when recomputed here from the measurement.
+    meas = gma.read_recording(VAL_CSV)["displacement_um"]
+    pred = res["predictions"][1]["displacement_um"]
+    nrmse = np.sqrt(np.mean((meas - pred) ** 2)) / (meas.max() - meas.min())
+    assert nrmse == pytest.approx(res["files"][1]["nrmse"], rel=1e-9)
+
+
+def test_model_response_is_the_compare_prediction_without_the_offset(fitted):
+    rec = gma.read_recording(FIT_CSV)
+    drive = {"time_s": rec["time_s"], "current_A": rec["current_A"]}
+    resp = gma.model_response("ja+mech", drive, params=fitted)
+    cmp = gma.compare("ja+mech", rec, params=fitted)
+    offset = cmp["files"][0]["offset_um"]
+    np.testing.assert_allclose(resp["displacement_um"] + offset, cmp["predictions"][0]["displacement_um"])
+    assert np.all(np.isfinite(resp["magnetization_A_per_m"]))
+
+
+def test_simulate_writes_what_read_recording_reads():
+    # Our own plant simulator: only shape, determinism and the options' effect are checked.
+    a = gma.simulate("ja+mech", duration_s=0.05, noise_um=0.01, seed=5)
+    b = gma.simulate("ja+mech", duration_s=0.05, noise_um=0.01, seed=5)
+    c = gma.simulate("ja+mech", duration_s=0.05, noise_um=0.01, seed=6)
+    assert len(a["time_s"]) == 500 and a["name"] == "simulated"
+    np.testing.assert_array_equal(a["displacement_um"], b["displacement_um"])
+    assert not np.array_equal(a["displacement_um"], c["displacement_um"])
+    assert a["current_A"].max() == pytest.approx(2.0, abs=1e-3)  # bias 1 A + amplitude 1 A
+
+
+def test_diagnose_returns_the_clis_diagnosis_object():
+    d = gma.diagnose("ja", [FIT_CSV], val=[VAL_CSV], **QUICK)
+    assert d["model"] == "ja" and d["candidates"]
+    assert {"verdict", "findings", "time_limit_reached", "nrmse_fit"} <= set(d)
+    assert all(math.isfinite(c["nrmse_after"]) for c in d["candidates"])
+    # ja alone lacks the rig's rate-dependent effects: the best candidate's refit cuts the
+    # validation error by a fifth at least (7.9 % -> 4.6-5.2 % over seeds 1-4).
+    best = d["candidates"][0]
+    assert best["nrmse_after"] < 0.8 * best["nrmse_before"], best
+
+
+def test_missing_file_is_the_clis_error(tmp_path):
+    missing = tmp_path / "nope.csv"
+    with pytest.raises(gma.GmaError) as e:
+        gma.fit("ja+mech", [missing])
+    assert str(missing) in str(e.value)
+    # As in the CLI's JSON, `file` is only set for an error inside a file (then with line/column).
+    assert_same_error(e.value, cli_error("fit", "--model", "ja+mech", missing))
+
+
+def test_malformed_csv_names_line_and_column(tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time_s,current_A,displacement_um\n0,1,2\n0.0001,1.1,2.1\n0.0002,abc,2.2\n")
+    with pytest.raises(gma.GmaError) as e:
+        gma.read_recording(bad)
+    assert (e.value.line, e.value.column) == (4, 2)
+    assert_same_error(e.value, cli_error("compare", "--model", "ja", "--out-dir", tmp_path / "plots", bad))
+
+
+def test_nan_in_an_array_names_the_array_and_index():
+    rec = gma.read_recording(FIT_CSV)
+    rec["current_A"] = rec["current_A"].copy()
+    rec["current_A"][17] = np.nan
+    with pytest.raises(gma.GmaError) as e:
+        gma.fit("ja+mech", rec)
+    assert (e.value.array, e.value.index, e.value.line) == ("current_A", 17, None)
+    assert "current_A" in str(e.value) and "17" in str(e.value) and "not a finite number" in str(e.value)
+
+
+def test_arrays_are_checked_as_the_csv_reader_checks_a_file():
+    t = np.arange(100) * 1e-4
+    i = np.sin(t * 300)
+    cases = [
+        ({"time_s": t, "current_A": i[:50]}, "current_A", None, "50 samples"),
+        ({"time_s": t[::-1], "current_A": i}, "time_s", 1, "increase"),
+        ({"time_s": np.r_[t[:60], t[61:]], "current_A": i[:99]}, "time_s", 60, "median step"),
+        ({"time_s": t, "current_A": i * 1e6}, "current_A", 1, "A"),
+        ({"time_s": t, "curent_A": i}, "curent_A", None, "not a recognised column"),
+        ({"time_s": t}, "current_A", None, "needs a drive"),
+        ({"time_s": np.ones((2, 50)), "current_A": i}, "time_s", None, "one-dimensional"),
+    ]
+    for arrays, array, index, fragment in cases:
+        with pytest.raises(gma.GmaError) as e:
+            gma.model_response("ja", arrays)
+        assert (e.value.array, e.value.index) == (array, index), str(e.value)
+        assert fragment in str(e.value)
+
+
+def test_wrong_model_spec_is_the_clis_error():
+    with pytest.raises(gma.GmaError) as e:
+        gma.fit("ja+nosuch", [FIT_CSV])
+    assert "nosuch" in str(e.value)
+    assert_same_error(e.value, cli_error("fit", "--model", "ja+nosuch", FIT_CSV))
+
+
+def test_bad_option_values_are_the_clis_errors():
+    with pytest.raises(gma.GmaError) as e:
+        gma.fit("ja", [FIT_CSV], effort=0)
+    assert_same_error(e.value, cli_error("fit", "--model", "ja", "--effort", "0", FIT_CSV))
+    with pytest.raises(gma.GmaError) as e:
+        gma.simulate("ja", freq_hz=-1)
+    assert "--freq-hz must be a positive number" in str(e.value)
+    with pytest.raises(gma.GmaError) as e:
+        gma.simulate("ja", waveform="triangle")
+    assert "'triangle'" in str(e.value) and "multisine" in str(e.value)
+
+
+def test_simulate_takes_the_clis_defaults():
+    # Our own plant simulator: the defaults of `gma simulate` (0.2 s, 1 A bias + 1 A sine, 50 Hz).
+    rec = gma.simulate()
+    assert len(rec["time_s"]) == 2000
+    assert rec["current_A"].min() == pytest.approx(0.0, abs=1e-3)
+    assert rec["current_A"].max() == pytest.approx(2.0, abs=1e-3)
+    sq = gma.simulate("ja", waveform="square", amplitude=0.5, bias=0.0, freq_hz=10.0)
+    assert set(np.round(sq["current_A"], 6)) == {-0.5, 0.5}

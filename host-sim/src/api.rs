@@ -1,0 +1,612 @@
+//! The workbench as a library for bindings (the Python package in `host-sim/python`): fit,
+//! compare, diagnose and simulate on files or on arrays in memory, with the CLI's checks, errors
+//! and result types ([`crate::results`], [`crate::diagnose::Diagnosis`]). Nothing here prints a
+//! result; warnings the CLI prints on stderr are printed on stderr here too.
+
+use std::fmt;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::Parser;
+use model_core::{ActuatorParams, Effect, ModelSpec};
+
+use crate::cli::common::{self, Data, Prepared};
+use crate::cli::simulate::SimulateArgs;
+use crate::columns::ReadOptions;
+use crate::diagnose::Diagnosis;
+use crate::files::{names, open_all, Input};
+use crate::fit::{self, Drive, FitOptions, Simulation};
+use crate::loops::{self, LoopFile};
+use crate::recording::{self, Recording, COLUMNS};
+use crate::results::{CompareSummary, FileScoreRow, FitSummary};
+
+/// Largest deviation of one time step from the median step (fraction), as the CSV reader allows.
+const MAX_TIME_JITTER: f64 = 0.01;
+/// Steps whose median is the reference step, as in the CSV reader.
+const REFERENCE_STEPS: usize = 1024;
+
+/// A bad value in an input array: which recording, which array, which index. The array
+/// counterpart of a CSV cell's [`crate::error::Located`] error.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ArrayError {
+    /// The recording's name.
+    pub file: String,
+    /// The array (a column name such as `current_A`).
+    pub array: String,
+    /// 0-based index into the array, when one element is at fault.
+    pub index: Option<usize>,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl fmt::Display for ArrayError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.index {
+            Some(i) => write!(f, "{}: array `{}` index {i}: {}", self.file, self.array, self.message),
+            None => write!(f, "{}: array `{}`: {}", self.file, self.array, self.message),
+        }
+    }
+}
+
+impl std::error::Error for ArrayError {}
+
+fn array_error(file: &str, array: &str, index: Option<usize>, message: String) -> anyhow::Error {
+    ArrayError { file: file.into(), array: array.into(), index, message }.into()
+}
+
+/// Builds a recording from arrays named as the CSV columns (`time_s`, `current_A`, …), refusing
+/// what the CSV reader refuses in a file: unknown names, a missing time or drive column, fewer
+/// than 3 samples, arrays of unequal length, values that are not finite or implausible, time
+/// not strictly increasing or not uniform within 1 %. Errors are [`ArrayError`]s.
+pub fn recording_from_arrays(name: &str, arrays: Vec<(String, Vec<f64>)>) -> Result<Recording> {
+    let mut cols: [Option<Vec<f64>>; COLUMNS.len()] = Default::default();
+    for (array, values) in arrays {
+        let Some(k) = COLUMNS.iter().position(|c| *c == array) else {
+            return Err(array_error(
+                name,
+                &array,
+                None,
+                format!("not a recognised column; recognised are {}", COLUMNS.join(", ")),
+            ));
+        };
+        for (i, &v) in values.iter().enumerate() {
+            if !v.is_finite() {
+                return Err(array_error(name, &array, Some(i), format!("`{v}` is not a finite number")));
+            }
+            if let Err(why) = recording::plausible(k, v) {
+                return Err(array_error(name, &array, Some(i), format!("{v:e} {why}")));
+            }
+        }
+        cols[k] = Some(values);
+    }
+    let [time, command_v, current_a, displacement_um, force_n, temperature_c] = cols;
+    let Some(time_s) = time else {
+        return Err(array_error(name, "time_s", None, "missing: a recording needs a time axis [s]".into()));
+    };
+    if current_a.is_none() && command_v.is_none() {
+        return Err(array_error(
+            name,
+            "current_A",
+            None,
+            "missing: a recording needs a drive, `current_A` or `command_V`".into(),
+        ));
+    }
+    if time_s.len() < 3 {
+        return Err(array_error(
+            name,
+            "time_s",
+            None,
+            format!("{} samples; a recording needs at least 3", time_s.len()),
+        ));
+    }
+    let channels = [
+        ("command_V", &command_v),
+        ("current_A", &current_a),
+        ("displacement_um", &displacement_um),
+        ("force_N", &force_n),
+        ("temperature_C", &temperature_c),
+    ];
+    for (array, v) in channels {
+        if let Some(v) = v.as_ref().filter(|v| v.len() != time_s.len()) {
+            return Err(array_error(
+                name,
+                array,
+                None,
+                format!("{} samples, but `time_s` has {}", v.len(), time_s.len()),
+            ));
+        }
+    }
+    if let Some(i) = time_s.windows(2).position(|w| w[1] <= w[0]) {
+        return Err(array_error(
+            name,
+            "time_s",
+            Some(i + 1),
+            format!("{} s does not follow {} s: time must increase strictly", time_s[i + 1], time_s[i]),
+        ));
+    }
+    // The reference step as the CSV reader takes it: the median of the first 1024 steps.
+    let mut steps: Vec<f64> = time_s.windows(2).take(REFERENCE_STEPS).map(|w| w[1] - w[0]).collect();
+    steps.sort_by(f64::total_cmp);
+    let dt = steps[steps.len() / 2];
+    let (lo, hi) = (model_core::DT_MIN_S as f64, model_core::DT_MAX_S as f64);
+    if !(lo..=hi).contains(&dt) {
+        return Err(array_error(
+            name,
+            "time_s",
+            None,
+            format!("sample period {dt:.3e} s is outside [{lo:e}, {hi:e}] s (is time_s in seconds?)"),
+        ));
+    }
+    if let Some(i) = time_s.windows(2).position(|w| ((w[1] - w[0]) - dt).abs() > MAX_TIME_JITTER * dt) {
+        let step = time_s[i + 1] - time_s[i];
+        return Err(array_error(name, "time_s", Some(i + 1), format!("time step {step:.3e} s differs from the median step {dt:.3e} s by more than 1 % (samples must be uniform in time)")));
+    }
+    Ok(Recording { name: name.into(), time_s, command_v, current_a, displacement_um, force_n, temperature_c })
+}
+
+/// Where a recording comes from.
+#[derive(Debug, Clone)]
+pub enum Source {
+    /// A measurement CSV or a magnetization-loop file (`-`: standard input).
+    File(PathBuf),
+    /// Arrays already checked by [`recording_from_arrays`].
+    Arrays(Recording),
+}
+
+/// Where the parameter set comes from.
+#[derive(Debug, Clone, Default)]
+pub enum ParamsSource {
+    /// The built-in Terfenol-D demo set.
+    #[default]
+    Demo,
+    /// A parameter file (TOML as `gma fit --params-out` writes).
+    File(PathBuf),
+    /// The text of such a file, with a name for messages.
+    Text {
+        /// Name in messages.
+        name: String,
+        /// The TOML text.
+        text: String,
+    },
+}
+
+impl ParamsSource {
+    /// The parameters, checked for `spec`.
+    pub fn load(&self, spec: ModelSpec) -> Result<ActuatorParams> {
+        match self {
+            ParamsSource::Demo => crate::params::load_input(None, spec),
+            ParamsSource::File(path) => crate::params::load_input(Some(Input::open(path)?), spec),
+            ParamsSource::Text { name, text } => crate::params::parse(name, text, spec),
+        }
+    }
+}
+
+/// How files are read: the CLI's `--max-samples`, `--column`, `--resample`, `--trim-start`.
+#[derive(Debug, Clone)]
+pub struct ReadSettings {
+    /// Samples (or loop points) kept per file.
+    pub max_samples: usize,
+    /// `CANONICAL=HEADER[:UNIT]` column maps.
+    pub columns: Vec<String>,
+    /// `linear` or none.
+    pub resample: Option<String>,
+    /// Seconds dropped at the start of each recording.
+    pub trim_start_s: Option<f64>,
+}
+
+impl Default for ReadSettings {
+    fn default() -> Self {
+        Self {
+            max_samples: common::DEFAULT_MAX_SAMPLES,
+            columns: Vec::new(),
+            resample: None,
+            trim_start_s: None,
+        }
+    }
+}
+
+impl ReadSettings {
+    fn options(&self) -> Result<ReadOptions> {
+        common::check_max_samples(self.max_samples)?;
+        ReadOptions::new(&self.columns, self.resample.as_deref(), self.trim_start_s)
+    }
+}
+
+/// Reads one measurement CSV as the CLI does.
+pub fn read_recording(path: PathBuf, read: &ReadSettings) -> Result<Recording> {
+    let opts = read.options()?;
+    common::read_recording(Input::open(&path)?, read.max_samples, &opts)
+}
+
+/// Reads one magnetization-loop file as the CLI does.
+pub fn read_loop(path: PathBuf, read: &ReadSettings) -> Result<LoopFile> {
+    read.options()?;
+    loops::read_input(Input::open(&path)?, read.max_samples)
+}
+
+/// Reads fit and validation sources: files as the CLI reads them (recordings or loops, never a
+/// mix), arrays in their place among them.
+fn read_sources(fit_src: &[Source], val_src: &[Source], read: &ReadSettings) -> Result<Data> {
+    let opts = read.options()?;
+    let paths = |v: &[Source]| -> Vec<PathBuf> {
+        v.iter().filter_map(|s| if let Source::File(p) = s { Some(p.clone()) } else { None }).collect()
+    };
+    let (fit_paths, val_paths) = (paths(fit_src), paths(val_src));
+    if fit_paths.is_empty() && val_paths.is_empty() {
+        let arrays = |v: &[Source]| {
+            v.iter().filter_map(|s| if let Source::Arrays(r) = s { Some(r.clone()) } else { None }).collect()
+        };
+        return Ok(Data::Recordings(arrays(fit_src), arrays(val_src)));
+    }
+    let data = common::read_data(open_all(&fit_paths)?, open_all(&val_paths)?, read.max_samples, &opts)?;
+    let has_arrays = fit_src.iter().chain(val_src).any(|s| matches!(s, Source::Arrays(_)));
+    match data {
+        Data::Loops(..) if has_arrays => bail!(
+            "mixing magnetization-loop files and recordings given as arrays in one call: loop files are read from files only"
+        ),
+        Data::Loops(f, v) => Ok(Data::Loops(f, v)),
+        Data::Recordings(f, v) => {
+            let merge = |src: &[Source], files: Vec<Recording>| -> Vec<Recording> {
+                let mut files = files.into_iter();
+                src.iter()
+                    .filter_map(|s| match s {
+                        Source::File(_) => files.next(),
+                        Source::Arrays(r) => Some(r.clone()),
+                    })
+                    .collect()
+            };
+            Ok(Data::Recordings(merge(fit_src, f), merge(val_src, v)))
+        }
+    }
+}
+
+/// The search settings: the CLI's `--seed`, `--effort`, `--time-limit`, `--fix`, `--bound`.
+#[derive(Debug, Clone)]
+pub struct FitSettings {
+    /// Seed of the global search.
+    pub seed: u64,
+    /// Search effort, (0, 20].
+    pub effort: f64,
+    /// Seconds after which the best result so far is used.
+    pub time_limit_s: Option<f64>,
+    /// `NAME[=VALUE]` held parameters (displacement fits).
+    pub fix: Vec<String>,
+    /// `NAME=LO:HI` narrowed ranges (displacement fits).
+    pub bound: Vec<String>,
+}
+
+impl Default for FitSettings {
+    fn default() -> Self {
+        Self { seed: 1, effort: 1.0, time_limit_s: None, fix: Vec::new(), bound: Vec::new() }
+    }
+}
+
+/// What a fitting call needs, checked as the CLI checks it.
+fn prepare(
+    model: &str,
+    fit_src: &[Source],
+    val_src: &[Source],
+    params: &ParamsSource,
+    s: &FitSettings,
+    read: &ReadSettings,
+) -> Result<Prepared> {
+    let spec = crate::params::parse_spec(model)?;
+    if fit_src.is_empty() {
+        bail!("no recordings or loop files to fit");
+    }
+    if !(s.effort.is_finite() && s.effort > 0.0 && s.effort <= 20.0) {
+        bail!("--effort must be in (0, 20], got {}", s.effort);
+    }
+    let time_limit = s.time_limit_s.map(common::time_limit).transpose()?;
+    let init = params.load(spec)?;
+    let data = read_sources(fit_src, val_src, read)?;
+    if let Data::Recordings(fit_files, val_files) = &data {
+        for r in fit_files.iter().chain(val_files) {
+            fit::drive_for(spec, r)?;
+        }
+    }
+    let deadline = time_limit.map(|t| Instant::now() + t);
+    Ok(Prepared {
+        spec,
+        init,
+        data,
+        opts: FitOptions { seed: s.seed, progress: false, effort: s.effort, deadline },
+    })
+}
+
+/// A fit's outcome: the CLI's `--json` result and the parameter file `--params-out` writes.
+#[derive(Debug, Clone)]
+pub struct FitOutcome {
+    /// As `gma fit --json` prints it.
+    pub summary: FitSummary,
+    /// The identified parameter set, as `--params-out` writes it (TOML).
+    pub params_toml: String,
+}
+
+/// `gma fit`: one parameter set for all fit sources, scored on the validation sources.
+pub fn fit(
+    model: &str,
+    fit_src: &[Source],
+    val_src: &[Source],
+    params: &ParamsSource,
+    s: &FitSettings,
+    read: &ReadSettings,
+) -> Result<FitOutcome> {
+    let mut p = prepare(model, fit_src, val_src, params, s, read)?;
+    let (summary, fitted, warnings) = match &p.data {
+        Data::Loops(fit_files, val_files) => {
+            if !(s.fix.is_empty() && s.bound.is_empty()) {
+                bail!(
+                    "--{}: fixing or bounding parameters applies to displacement fits, not to loop files",
+                    if s.fix.is_empty() { "bound" } else { "fix" }
+                );
+            }
+            crate::cli::fit::fit_loops(&p, fit_files, val_files)?
+        }
+        Data::Recordings(fit_files, val_files) => {
+            let c = fit::Constraints::parse(p.spec, fit_files, &s.fix, &s.bound, &mut p.init)?;
+            crate::cli::fit::fit_recordings(&p, fit_files, val_files, &c)?
+        }
+    };
+    let invalid: Vec<String> = warnings.iter().filter(|w| w.invalidates()).map(|w| w.to_string()).collect();
+    if !invalid.is_empty() {
+        bail!("the loop fit did not produce a valid model: {}", invalid.join("; "));
+    }
+    let sources: Vec<PathBuf> = fit_src
+        .iter()
+        .map(|s| match s {
+            Source::File(p) => p.clone(),
+            Source::Arrays(r) => PathBuf::from(&r.name),
+        })
+        .collect();
+    let header = format!(
+        "gma.fit (Python) --model {} (seed {}) on {}\nfit NRMSE {:.4} %",
+        summary.model,
+        s.seed,
+        names(&sources),
+        summary.nrmse_fit * 100.0
+    );
+    Ok(FitOutcome { params_toml: crate::params::to_toml(&fitted, &header)?, summary })
+}
+
+/// `gma diagnose`: fit `model`, analyse what it leaves unexplained, name the missing effect.
+pub fn diagnose(
+    model: &str,
+    fit_src: &[Source],
+    val_src: &[Source],
+    params: &ParamsSource,
+    s: &FitSettings,
+    read: &ReadSettings,
+) -> Result<Diagnosis> {
+    let p = prepare(model, fit_src, val_src, params, s, read)?;
+    let Data::Recordings(fit_files, val_files) = &p.data else {
+        bail!("diagnose works on displacement recordings; for magnetization loops use `gma fit` and `gma compare`");
+    };
+    crate::diagnose::diagnose(p.spec, &p.init, fit_files, val_files, p.opts)
+}
+
+/// The model's prediction for one compared source.
+#[derive(Debug, Clone)]
+pub enum Prediction {
+    /// A recording: the model run over its drive, displacement with the fitted offset added.
+    Recording {
+        /// The source's name.
+        name: String,
+        /// The recording's time axis [s].
+        time_s: Vec<f64>,
+        /// The model run (`displacement_um` already offset to the measurement).
+        sim: Simulation,
+    },
+    /// A loop file: the model's value of the file's channel along the file's field path.
+    Loop {
+        /// The source's name.
+        name: String,
+        /// Field H [A/m] (the file's).
+        field_a_per_m: Vec<f64>,
+        /// `flux_density` or `magnetization`.
+        channel: &'static str,
+        /// The model's B [T] or M [A/m].
+        value: Vec<f64>,
+    },
+}
+
+/// `gma compare` without plots: the CLI's `--json` result and the model's predictions.
+pub fn compare(
+    model: &str,
+    params: &ParamsSource,
+    sources: &[Source],
+    read: &ReadSettings,
+) -> Result<(CompareSummary, Vec<Prediction>)> {
+    let spec = crate::params::parse_spec(model)?;
+    if sources.is_empty() {
+        bail!("no recordings or loop files to compare");
+    }
+    let p = params.load(spec)?;
+    let (mut rows, mut predictions, mut total) = (Vec::new(), Vec::new(), 0.0);
+    match read_sources(sources, &[], read)? {
+        Data::Recordings(recs, _) => {
+            for r in &recs {
+                fit::drive_for(spec, r)?;
+            }
+            for rec in &recs {
+                let mut sim = fit::simulate(spec, &p, rec)?;
+                let sc = fit::score(spec, rec, &sim);
+                total += sc.nrmse;
+                sim.displacement_um.iter_mut().for_each(|y| *y += sc.offset_um);
+                rows.push(FileScoreRow {
+                    offset_um: Some(sc.offset_um),
+                    ..FileScoreRow::new(&rec.name, None, "displacement", sc.nrmse)
+                });
+                if let Some(c) = sc.nrmse_current {
+                    rows.push(FileScoreRow::new(&rec.name, None, "current", c));
+                }
+                predictions.push(Prediction::Recording {
+                    name: rec.name.clone(),
+                    time_s: rec.time_s.clone(),
+                    sim,
+                });
+            }
+        }
+        Data::Loops(files, _) => {
+            let lm = loops::LoopModel::from_spec(spec)?;
+            let values = lm.values_of(&p);
+            for f in &files {
+                let h_max = f.h.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                let m = loops::run(lm, &values, &f.h, h_max)
+                    .map_err(|e| anyhow::anyhow!("{}: {}", f.name, e.0))?;
+                let model_value = f.channel_from_m(&m);
+                let e = fit::nrmse(&f.value, &model_value);
+                total += e;
+                rows.push(FileScoreRow {
+                    measured: Some(loops::features(&f.h, &f.magnetization())),
+                    model: Some(loops::features(&f.h, &m)),
+                    ..FileScoreRow::new(&f.name, None, f.channel.name(), e)
+                });
+                predictions.push(Prediction::Loop {
+                    name: f.name.clone(),
+                    field_a_per_m: f.h.clone(),
+                    channel: f.channel.name(),
+                    value: model_value,
+                });
+            }
+        }
+    }
+    let summary =
+        CompareSummary { model: spec.to_string(), nrmse: total / sources.len() as f64, files: rows };
+    Ok((summary, predictions))
+}
+
+/// The model's response to a drive given as arrays (`time_s` and `current_A`, or `command_V`
+/// for a model with `amp` or a rig logging the command only): the same run `compare` makes,
+/// without a measurement to score it against.
+pub fn model_response(model: &str, params: &ParamsSource, drive: &Recording) -> Result<Simulation> {
+    let spec = crate::params::parse_spec(model)?;
+    let p = params.load(spec)?;
+    let drive_kind = if spec.has(Effect::AmplifierDynamics) {
+        if drive.command_v.is_none() {
+            bail!("{}: the model has amplifier_dynamics, which needs a `command_V` array", drive.name);
+        }
+        Drive::CommandDynamic
+    } else if drive.current_a.is_some() {
+        Drive::Current
+    } else {
+        Drive::CommandIdeal
+    };
+    let prep = fit::Prepared { rec: drive, dt_s: drive.dt_s(), drive: drive_kind };
+    fit::run_model(spec, &p, &prep, true)
+}
+
+/// `gma simulate` with `options` as on its command line (`("--freq-hz", Some("80"))`,
+/// `("--no-current", None)`; `--out` and `--params` are set here): a SIMULATED rig's recording,
+/// parsed by the CLI's own option definitions (same defaults, same refusals), written and read
+/// back as the CLI writes it (same CSV rounding), named `name`.
+pub fn simulate_rig(
+    model: Option<&str>,
+    params: &ParamsSource,
+    options: &[(String, Option<String>)],
+    name: &str,
+) -> Result<Recording> {
+    #[derive(clap::Parser)]
+    #[command(name = "gma simulate", allow_negative_numbers = true)]
+    struct SimulateCli {
+        #[command(flatten)]
+        args: SimulateArgs,
+    }
+    if let Some((option, _)) =
+        options.iter().find(|(o, _)| matches!(o.as_str(), "--out" | "-o" | "--params" | "--model"))
+    {
+        bail!("{option} is set by the call itself, not as an option");
+    }
+    let dir = tempfile::tempdir().context("creating a temporary folder for the simulated recording")?;
+    let out = dir.path().join("simulated.csv");
+    let mut argv: Vec<std::ffi::OsString> = vec!["gma simulate".into(), "--out".into(), out.clone().into()];
+    if let Some(m) = model {
+        argv.extend(["--model".into(), m.into()]);
+    }
+    for (option, value) in options {
+        argv.push(option.into());
+        argv.extend(value.iter().map(Into::into));
+    }
+    let mut args = SimulateCli::try_parse_from(argv).map_err(|e| usage_error(&e))?.args;
+    // Checked here first, so that problems are reported under the names given, not the temporary files'.
+    params.load(crate::params::parse_spec(&args.model)?)?;
+    args.params = match params {
+        ParamsSource::Demo => None,
+        ParamsSource::File(p) => Some(p.clone()),
+        ParamsSource::Text { text, .. } => {
+            let p = dir.path().join("params.toml");
+            std::fs::write(&p, text).context("writing the parameter set to a temporary file")?;
+            Some(p)
+        }
+    };
+    crate::cli::simulate::run(&args)?;
+    let mut rec = Recording::read(&out)?;
+    rec.name = name.into();
+    Ok(rec)
+}
+
+/// clap's refusal of an option as one line: what is wrong and the accepted values, without the
+/// pointer to `--help` (there is no command line to ask).
+fn usage_error(e: &clap::Error) -> anyhow::Error {
+    let text = e.to_string();
+    let text = text.split("\n\nFor more information").next().unwrap_or_default();
+    let words: Vec<&str> = text.trim_start_matches("error: ").split_whitespace().collect();
+    anyhow::anyhow!("{}", words.join(" "))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cli::common::ModelFiles;
+
+    #[derive(clap::Parser)]
+    struct FitCli {
+        #[command(flatten)]
+        mf: ModelFiles,
+    }
+
+    /// The settings a binding leaves unset are the CLI's defaults.
+    #[test]
+    fn defaults_are_the_command_lines() {
+        let cli = FitCli::try_parse_from(["gma", "--model", "ja", "rig.csv"]).unwrap().mf;
+        let (f, r) = (FitSettings::default(), ReadSettings::default());
+        assert_eq!((f.seed, f.effort, f.time_limit_s), (cli.seed, cli.effort, cli.time_limit));
+        assert_eq!(
+            (r.max_samples, r.columns, r.resample, r.trim_start_s),
+            (cli.read.max_samples, cli.read.columns, cli.read.resample, cli.read.trim_start)
+        );
+    }
+
+    /// Arrays pass where a CSV with the same numbers passes, and a bad element is named.
+    #[test]
+    fn arrays_are_read_as_the_csv_with_the_same_numbers() {
+        let t: Vec<f64> = (0..50).map(|k| k as f64 * 1e-4).collect();
+        let i: Vec<f64> = t.iter().map(|t| (300.0 * t).sin()).collect();
+        let csv: String = std::iter::once("time_s,current_A\n".to_string())
+            .chain(t.iter().zip(&i).map(|(t, i)| format!("{t:?},{i:?}\n")))
+            .collect();
+        let from_csv = Recording::parse("a", csv.as_bytes()).unwrap();
+        let arrays = vec![("time_s".to_string(), t.clone()), ("current_A".to_string(), i.clone())];
+        assert_eq!(recording_from_arrays("a", arrays).unwrap(), from_csv);
+        let mut bad = i.clone();
+        bad[7] = f64::INFINITY;
+        let e =
+            recording_from_arrays("a", vec![("time_s".into(), t), ("current_A".into(), bad)]).unwrap_err();
+        let at = e.downcast_ref::<ArrayError>().unwrap();
+        assert_eq!((at.array.as_str(), at.index), ("current_A", Some(7)));
+    }
+
+    /// `simulate_rig` takes the CLI's option names and refuses as the CLI does.
+    #[test]
+    fn rig_options_are_the_command_lines() {
+        let opt = |o: &str, v: &str| (o.to_string(), Some(v.to_string()));
+        let r = simulate_rig(None, &ParamsSource::Demo, &[opt("--duration-s", "0.01")], "s").unwrap();
+        assert_eq!((r.len(), r.name.as_str()), (100, "s"));
+        let e =
+            simulate_rig(Some("ja"), &ParamsSource::Demo, &[opt("--waveform", "triangle")], "s").unwrap_err();
+        assert!(e.to_string().contains("'triangle'") && e.to_string().contains("multisine"), "{e}");
+        let e = simulate_rig(Some("ja"), &ParamsSource::Demo, &[opt("--freq-hz", "-5")], "s").unwrap_err();
+        assert!(e.to_string().contains("--freq-hz must be a positive number"), "{e}");
+    }
+}
