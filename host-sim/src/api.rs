@@ -18,6 +18,7 @@ use crate::diagnose::Diagnosis;
 use crate::files::{names, open_all, Input};
 use crate::fit::{self, Drive, FitOptions, Simulation};
 use crate::loops::{self, LoopFile};
+use crate::params::ParamSource;
 use crate::recording::{self, Recording, COLUMNS};
 use crate::results::{CompareSummary, FileScoreRow, FitSummary};
 
@@ -172,12 +173,20 @@ pub enum ParamsSource {
 }
 
 impl ParamsSource {
-    /// The parameters, checked for `spec`.
-    pub fn load(&self, spec: ModelSpec) -> Result<ActuatorParams> {
+    /// The parameters, checked for `spec`, and where they came from (the CLI's
+    /// `parameters_source` / `parameters_defaulted`; the same stderr notes).
+    pub fn load(&self, spec: ModelSpec) -> Result<(ActuatorParams, ParamSource)> {
         match self {
-            ParamsSource::Demo => crate::params::load_input(None, spec),
-            ParamsSource::File(path) => crate::params::load_input(Some(Input::open(path)?), spec),
-            ParamsSource::Text { name, text } => crate::params::parse(name, text, spec),
+            ParamsSource::Demo => crate::params::load_input(None, spec, "parameters"),
+            ParamsSource::File(path) => {
+                crate::params::load_input(Some(Input::open(path)?), spec, "parameters")
+            }
+            ParamsSource::Text { name, text } => {
+                let f = crate::params::parse_file(name, text, spec)?;
+                let source =
+                    ParamSource { parameters_source: name.clone(), parameters_defaulted: f.defaulted };
+                Ok((f.params, source))
+            }
         }
     }
 }
@@ -299,7 +308,7 @@ fn prepare(
         bail!("--effort must be in (0, 20], got {}", s.effort);
     }
     let time_limit = s.time_limit_s.map(common::time_limit).transpose()?;
-    let init = params.load(spec)?;
+    let (init, params_source) = params.load(spec)?;
     let data = read_sources(fit_src, val_src, read)?;
     if let Data::Recordings(fit_files, val_files) = &data {
         for r in fit_files.iter().chain(val_files) {
@@ -312,6 +321,7 @@ fn prepare(
         init,
         data,
         opts: FitOptions { seed: s.seed, progress: false, effort: s.effort, deadline },
+        params_source,
     })
 }
 
@@ -422,7 +432,7 @@ pub fn compare(
     if sources.is_empty() {
         bail!("no recordings or loop files to compare");
     }
-    let p = params.load(spec)?;
+    let (p, _) = params.load(spec)?;
     let (mut rows, mut predictions, mut total) = (Vec::new(), Vec::new(), 0.0);
     match read_sources(sources, &[], read)? {
         Data::Recordings(recs, _) => {
@@ -449,7 +459,7 @@ pub fn compare(
             }
         }
         Data::Loops(files, _) => {
-            let lm = loops::LoopModel::from_spec(spec)?;
+            let lm = loops::LoopModel::from_spec(spec, &p)?;
             let values = lm.values_of(&p);
             for f in &files {
                 let h_max = f.h.iter().fold(0.0f64, |m, v| m.max(v.abs()));
@@ -482,7 +492,7 @@ pub fn compare(
 /// without a measurement to score it against.
 pub fn model_response(model: &str, params: &ParamsSource, drive: &Recording) -> Result<Simulation> {
     let spec = crate::params::parse_spec(model)?;
-    let p = params.load(spec)?;
+    let (p, _) = params.load(spec)?;
     let drive_kind = if spec.has(Effect::AmplifierDynamics) {
         if drive.command_v.is_none() {
             bail!("{}: the model has amplifier_dynamics, which needs a `command_V` array", drive.name);
