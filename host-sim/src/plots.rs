@@ -93,14 +93,18 @@ where
         .map_err(|e| anyhow!("{e}"))?;
     for s in &c.series {
         let color = PALETTE[s.color % PALETTE.len()];
-        chart
+        let drawn = chart
             .draw_series(LineSeries::new(
                 s.points.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()),
                 color.stroke_width(1),
             ))
-            .map_err(|e| anyhow!("{e}"))?
-            .label(&s.label)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2)));
+            .map_err(|e| anyhow!("{e}"))?;
+        // An unlabelled series (a second bound line) shares its neighbour's legend entry.
+        if !s.label.is_empty() {
+            drawn
+                .label(&s.label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2)));
+        }
     }
     chart
         .configure_series_labels()
@@ -116,12 +120,18 @@ where
 
 /// Draws `chart` to `path` (`.svg` or `.png`, 800 × 500).
 pub fn write(path: &Path, chart: &Chart) -> Result<()> {
+    write_panels(path, std::slice::from_ref(chart))
+}
+
+/// Draws `charts` stacked top to bottom (panels sharing one figure, e.g. gain over phase) to
+/// `path` (`.svg` or `.png`, 800 wide, 500 for one panel and 300 more for each further one).
+pub fn write_panels(path: &Path, charts: &[Chart]) -> Result<()> {
     register_font()?;
-    let size = (800, 500);
+    let size = (800, 500 + 300 * charts.len().saturating_sub(1) as u32);
     match path.extension().and_then(|e| e.to_str()) {
         Some("svg") => {
             let mut text = String::new();
-            draw(&SVGBackend::with_string(&mut text, size).into_drawing_area(), chart)?;
+            draw_panels(&SVGBackend::with_string(&mut text, size).into_drawing_area(), charts)?;
             crate::files::write_atomic(path, text.as_bytes())
         }
         Some("png") => {
@@ -130,12 +140,132 @@ pub fn write(path: &Path, chart: &Chart) -> Result<()> {
             let tmp = crate::files::partial_file_with_suffix(crate::files::output_dir(path), ".partial.png")?;
             {
                 let area = BitMapBackend::new(tmp.path(), size).into_drawing_area();
-                draw(&area, chart)?;
+                draw_panels(&area, charts)?;
             }
             crate::files::persist(tmp, path)
         }
         _ => bail!("{}: plots are written as .svg or .png", path.display()),
     }
+}
+
+fn draw_panels<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, charts: &[Chart]) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    for (panel, chart) in area.split_evenly((charts.len().max(1), 1)).iter().zip(charts) {
+        draw(panel, chart)?;
+    }
+    Ok(())
+}
+
+/// Stacked panels as SVG text (for inlining in HTML); `size` is the whole figure's.
+pub fn svg_panels(charts: &[Chart], size: (u32, u32)) -> Result<String> {
+    register_font()?;
+    let mut text = String::new();
+    draw_panels(&SVGBackend::with_string(&mut text, size).into_drawing_area(), charts)?;
+    Ok(text)
+}
+
+/// A grouped bar chart: one group per category (named on the x axis), one bar per series in
+/// each group, the value written on top of each bar.
+pub struct Bars {
+    /// Caption.
+    pub title: String,
+    /// y axis label with unit.
+    pub y_label: String,
+    /// The category names on the x axis.
+    pub categories: Vec<String>,
+    /// (legend text, one value per category (None: no bar), palette index).
+    pub series: Vec<(String, Vec<Option<f64>>, usize)>,
+    /// How a value is written on its bar (e.g. `11.2 %`).
+    pub value_format: fn(f64) -> String,
+}
+
+fn draw_bars<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, b: &Bars) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    area.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let top = b
+        .series
+        .iter()
+        .flat_map(|s| s.1.iter().flatten())
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, |m, v| m.max(*v));
+    let top = if top > 0.0 { 1.15 * top } else { 1.0 };
+    let groups = b.categories.len().max(1);
+    let mut chart = ChartBuilder::on(area)
+        .caption(&b.title, ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(42)
+        .y_label_area_size(64)
+        .build_cartesian_2d((0..groups).into_segmented(), 0.0..top)
+        .map_err(|e| anyhow!("{e}"))?;
+    let names = &b.categories;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .x_labels(groups + 1)
+        .x_label_formatter(&|v| match v {
+            SegmentValue::CenterOf(k) => names.get(*k).cloned().unwrap_or_default(),
+            _ => String::new(),
+        })
+        .y_desc(&b.y_label)
+        .label_style(("sans-serif", 13))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    // Each group's width is split among the series in pixels (the segmented axis has only the
+    // group's edges and centre as coordinates).
+    let plot_width = chart.plotting_area().dim_in_pixel().0 as i32;
+    let group_px = plot_width / groups as i32;
+    let bar_px = (group_px * 7 / 10) / b.series.len().max(1) as i32;
+    let left_pad = (group_px - bar_px * b.series.len() as i32) / 2;
+    for (s_idx, (label, values, color)) in b.series.iter().enumerate() {
+        let color = PALETTE[color % PALETTE.len()];
+        let left = left_pad + s_idx as i32 * bar_px;
+        let right = group_px - left - bar_px;
+        let bars = values.iter().enumerate().filter_map(|(k, v)| {
+            let v = v.filter(|v| v.is_finite())?;
+            let mut r = Rectangle::new(
+                [(SegmentValue::Exact(k), 0.0), (SegmentValue::Exact(k + 1), v)],
+                color.filled(),
+            );
+            r.set_margin(0, 0, left.max(0) as u32, right.max(0) as u32);
+            Some(r)
+        });
+        chart
+            .draw_series(bars)
+            .map_err(|e| anyhow!("{e}"))?
+            .label(label)
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], color.filled()));
+        let texts = values.iter().enumerate().filter_map(|(k, v)| {
+            let v = v.filter(|v| v.is_finite())?;
+            Some(
+                EmptyElement::at((SegmentValue::Exact(k), v))
+                    + Text::new((b.value_format)(v), (left, -16), ("sans-serif", 12).into_font()),
+            )
+        });
+        chart.draw_series(texts).map_err(|e| anyhow!("{e}"))?;
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(200, 200, 200))
+        .label_font(("sans-serif", 13))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    area.present().map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}
+
+/// The bar chart as SVG text (for inlining in HTML).
+pub fn bars_svg(bars: &Bars, size: (u32, u32)) -> Result<String> {
+    register_font()?;
+    let mut text = String::new();
+    draw_bars(&SVGBackend::with_string(&mut text, size).into_drawing_area(), bars)?;
+    Ok(text)
 }
 
 /// The chart as SVG text (for inlining in HTML).
