@@ -7,6 +7,7 @@ use std::sync::Once;
 use anyhow::{anyhow, bail, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 /// One curve.
 pub struct Series {
@@ -199,39 +200,26 @@ where
         .margin(12)
         .x_label_area_size(42)
         .y_label_area_size(64)
-        .build_cartesian_2d((0..groups).into_segmented(), 0.0..top)
+        .build_cartesian_2d(0.0..groups as f64, 0.0..top)
         .map_err(|e| anyhow!("{e}"))?;
-    let names = &b.categories;
     chart
         .configure_mesh()
         .disable_x_mesh()
-        .x_labels(groups + 1)
-        .x_label_formatter(&|v| match v {
-            SegmentValue::CenterOf(k) => names.get(*k).cloned().unwrap_or_default(),
-            _ => String::new(),
-        })
+        .x_labels(0)
         .y_desc(&b.y_label)
         .label_style(("sans-serif", 13))
         .light_line_style(RGBColor(235, 235, 235))
         .draw()
         .map_err(|e| anyhow!("{e}"))?;
-    // Each group's width is split among the series in pixels (the segmented axis has only the
-    // group's edges and centre as coordinates).
-    let plot_width = chart.plotting_area().dim_in_pixel().0 as i32;
-    let group_px = plot_width / groups as i32;
-    let bar_px = (group_px * 7 / 10) / b.series.len().max(1) as i32;
-    let left_pad = (group_px - bar_px * b.series.len() as i32) / 2;
+    // Category k spans [k, k + 1]; its bars share the middle 70 %, side by side.
+    let width = 0.7 / b.series.len().max(1) as f64;
     for (s_idx, (label, values, color)) in b.series.iter().enumerate() {
         let color = PALETTE[color % PALETTE.len()];
-        let left = left_pad + s_idx as i32 * bar_px;
-        let right = group_px - left - bar_px;
+        let left = |k: usize| k as f64 + 0.15 + s_idx as f64 * width;
         let bars = values.iter().enumerate().filter_map(|(k, v)| {
             let v = v.filter(|v| v.is_finite())?;
-            let mut r = Rectangle::new(
-                [(SegmentValue::Exact(k), 0.0), (SegmentValue::Exact(k + 1), v)],
-                color.filled(),
-            );
-            r.set_margin(0, 0, left.max(0) as u32, right.max(0) as u32);
+            let mut r = Rectangle::new([(left(k), 0.0), (left(k) + width, v)], color.filled());
+            r.set_margin(0, 0, 1, 1);
             Some(r)
         });
         chart
@@ -242,11 +230,18 @@ where
         let texts = values.iter().enumerate().filter_map(|(k, v)| {
             let v = v.filter(|v| v.is_finite())?;
             Some(
-                EmptyElement::at((SegmentValue::Exact(k), v))
-                    + Text::new((b.value_format)(v), (left, -16), ("sans-serif", 12).into_font()),
+                EmptyElement::at((left(k), v))
+                    + Text::new((b.value_format)(v), (0, -16), ("sans-serif", 12).into_font()),
             )
         });
         chart.draw_series(texts).map_err(|e| anyhow!("{e}"))?;
+    }
+    // The category names under the axis, centred on their group (drawn on the whole area: the
+    // plot area clips what lies below its axis).
+    for (k, name) in b.categories.iter().enumerate() {
+        let (x, y) = chart.backend_coord(&(k as f64 + 0.5, 0.0));
+        let style = TextStyle::from(("sans-serif", 13).into_font()).pos(Pos::new(HPos::Center, VPos::Top));
+        area.draw(&Text::new(name.clone(), (x, y + 8), style)).map_err(|e| anyhow!("{e}"))?;
     }
     chart
         .configure_series_labels()
@@ -280,4 +275,45 @@ pub fn svg(chart: &Chart, size: (u32, u32)) -> Result<String> {
 pub fn thin<T: Copy>(v: &[T], max_points: usize) -> Vec<T> {
     let step = v.len().div_ceil(max_points.max(1)).max(1);
     v.iter().step_by(step).copied().collect()
+}
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bars_stand_in_their_groups_in_proportion_to_their_values() {
+        let b = Bars {
+            title: "error as effects are added".into(),
+            y_label: "mean NRMSE [%]".into(),
+            categories: vec!["ja".into(), "ja+mech".into(), "eddy+ja+mech".into()],
+            series: vec![
+                ("fit".into(), vec![Some(10.04), Some(3.1), Some(1.7)], 2),
+                ("validation".into(), vec![Some(11.2), None, Some(1.83)], 1),
+            ],
+            value_format: |v| format!("{v:.1} %"),
+        };
+        let svg = bars_svg(&b, (760, 340)).unwrap();
+        // (x, height) of the rectangles filled in a palette colour, legend swatch (12 px) left out.
+        let bars = |c: RGBColor| -> Vec<(f64, f64)> {
+            let fill = format!("fill=\"#{:02X}{:02X}{:02X}\"", c.0, c.1, c.2);
+            let attr = |r: &str, name: &str| -> f64 {
+                let at = r.find(&format!(" {name}=\"")).unwrap() + name.len() + 3;
+                r[at..].split('"').next().unwrap().parse().unwrap()
+            };
+            svg.split("<rect")
+                .filter(|r| r.split('>').next().unwrap().contains(&fill))
+                .map(|r| (attr(r, "x"), attr(r, "height")))
+                .filter(|(_, h)| *h != 10.0)
+                .collect()
+        };
+        let (fit, val) = (bars(PALETTE[2]), bars(PALETTE[1]));
+        assert_eq!((fit.len(), val.len()), (3, 2), "one bar per value: {fit:?} {val:?}");
+        // Heights in proportion to the values (to a pixel), groups left to right, fit before val.
+        let scale = fit[0].1 / 10.04;
+        for ((_, h), v) in fit.iter().zip([10.04, 3.1, 1.7]) {
+            assert!((h - v * scale).abs() <= 1.0, "bar of {v}: {h} px");
+        }
+        assert!((val[0].1 - 11.2 * scale).abs() <= 1.0 && (val[1].1 - 1.83 * scale).abs() <= 1.0);
+        assert!(fit[0].0 < val[0].0 && val[0].0 < fit[1].0 && fit[2].0 < val[1].0, "{fit:?} {val:?}");
+    }
 }
