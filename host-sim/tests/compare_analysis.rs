@@ -95,7 +95,7 @@ fn compare_writes_the_analysis_plots_and_a_time_series_csv_that_adds_up() {
     let chirp_band = a["frequency_response"]["band_hz"].as_array().unwrap();
     let (lo, hi) = (chirp_band[0].as_f64().unwrap(), chirp_band[1].as_f64().unwrap());
     // The chirp sweeps 200 Hz – 2 kHz: its excited band lies inside that and covers most of it.
-    assert!(lo >= 150.0 && lo < 400.0 && hi > 1500.0 && hi <= 2050.0, "band {lo}–{hi} Hz");
+    assert!((150.0..400.0).contains(&lo) && hi > 1500.0 && hi <= 2050.0, "band {lo}–{hi} Hz");
     // A single 100 Hz sine excites only the bins of its window's main lobe and first side lobes (within 3 bins of 19.5 Hz).
     let sine_fr = &files[1]["analysis"]["frequency_response"];
     let sine_band = sine_fr["band_hz"].as_array().unwrap();
