@@ -57,15 +57,26 @@ fn register_font() -> Result<()> {
     }
 }
 
-fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, c: &Chart) -> Result<()>
+/// The x axis of a chart: linear, or logarithmic (frequency axes of spectra and Bode plots).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum XScale {
+    /// Linear.
+    Linear,
+    /// Base-10 logarithmic, points at x ≤ 0 left out; linear when the data span less than a
+    /// decade (a log axis would show one or two labels).
+    Log,
+}
+
+fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, c: &Chart, scale: XScale) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
     area.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let shown = |x: f64, y: f64| x.is_finite() && y.is_finite() && (scale == XScale::Linear || x > 0.0);
     let pts = c.series.iter().flat_map(|s| s.points.iter());
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for &(x, y) in pts {
-        if x.is_finite() && y.is_finite() {
+        if shown(x, y) {
             x0 = x0.min(x);
             x1 = x1.max(x);
             y0 = y0.min(y);
@@ -73,16 +84,42 @@ where
         }
     }
     if x0 > x1 {
-        (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
+        (x0, x1, y0, y1) = (1.0, 10.0, 0.0, 1.0);
     }
+    let scale = if scale == XScale::Log && x1 < 10.0 * x0 { XScale::Linear } else { scale };
     let pad = |a: f64, b: f64| if b > a { 0.04 * (b - a) } else { 0.5 * a.abs().max(1e-9) };
-    let (px, py) = (pad(x0, x1), pad(y0, y1));
+    let py = pad(y0, y1);
+    let y = (y0 - py)..(y1 + py);
+    match scale {
+        XScale::Linear => {
+            let px = pad(x0, x1);
+            draw_on(area, c, (x0 - px)..(x1 + px), y, shown)
+        }
+        XScale::Log => {
+            let (lo, hi) = if x1 > x0 { (x0 / 1.1, x1 * 1.1) } else { (x0 / 2.0, x0 * 2.0) };
+            draw_on(area, c, (lo..hi).log_scale(), y, shown)
+        }
+    }
+}
+
+fn draw_on<DB: DrawingBackend, X>(
+    area: &DrawingArea<DB, Shift>,
+    c: &Chart,
+    x: X,
+    y: std::ops::Range<f64>,
+    shown: impl Fn(f64, f64) -> bool,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+    X: plotters::coord::ranged1d::AsRangedCoord<Value = f64>,
+    X::CoordDescType: plotters::coord::ranged1d::ValueFormatter<f64>,
+{
     let mut chart = ChartBuilder::on(area)
         .caption(&c.title, ("sans-serif", 18))
         .margin(12)
         .x_label_area_size(42)
         .y_label_area_size(64)
-        .build_cartesian_2d((x0 - px)..(x1 + px), (y0 - py)..(y1 + py))
+        .build_cartesian_2d(x, y)
         .map_err(|e| anyhow!("{e}"))?;
     chart
         .configure_mesh()
@@ -96,7 +133,7 @@ where
         let color = PALETTE[s.color % PALETTE.len()];
         let drawn = chart
             .draw_series(LineSeries::new(
-                s.points.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()),
+                s.points.iter().copied().filter(|p| shown(p.0, p.1)),
                 color.stroke_width(1),
             ))
             .map_err(|e| anyhow!("{e}"))?;
@@ -121,18 +158,18 @@ where
 
 /// Draws `chart` to `path` (`.svg` or `.png`, 800 × 500).
 pub fn write(path: &Path, chart: &Chart) -> Result<()> {
-    write_panels(path, std::slice::from_ref(chart))
+    write_panels(path, std::slice::from_ref(chart), XScale::Linear)
 }
 
 /// Draws `charts` stacked top to bottom (panels sharing one figure, e.g. gain over phase) to
 /// `path` (`.svg` or `.png`, 800 wide, 500 for one panel and 300 more for each further one).
-pub fn write_panels(path: &Path, charts: &[Chart]) -> Result<()> {
+pub fn write_panels(path: &Path, charts: &[Chart], scale: XScale) -> Result<()> {
     register_font()?;
     let size = (800, 500 + 300 * charts.len().saturating_sub(1) as u32);
     match path.extension().and_then(|e| e.to_str()) {
         Some("svg") => {
             let mut text = String::new();
-            draw_panels(&SVGBackend::with_string(&mut text, size).into_drawing_area(), charts)?;
+            draw_panels(&SVGBackend::with_string(&mut text, size).into_drawing_area(), charts, scale)?;
             crate::files::write_atomic(path, text.as_bytes())
         }
         Some("png") => {
@@ -141,7 +178,7 @@ pub fn write_panels(path: &Path, charts: &[Chart]) -> Result<()> {
             let tmp = crate::files::partial_file_with_suffix(crate::files::output_dir(path), ".partial.png")?;
             {
                 let area = BitMapBackend::new(tmp.path(), size).into_drawing_area();
-                draw_panels(&area, charts)?;
+                draw_panels(&area, charts, scale)?;
             }
             crate::files::persist(tmp, path)
         }
@@ -149,21 +186,25 @@ pub fn write_panels(path: &Path, charts: &[Chart]) -> Result<()> {
     }
 }
 
-fn draw_panels<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, charts: &[Chart]) -> Result<()>
+fn draw_panels<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    charts: &[Chart],
+    scale: XScale,
+) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
     for (panel, chart) in area.split_evenly((charts.len().max(1), 1)).iter().zip(charts) {
-        draw(panel, chart)?;
+        draw(panel, chart, scale)?;
     }
     Ok(())
 }
 
 /// Stacked panels as SVG text (for inlining in HTML); `size` is the whole figure's.
-pub fn svg_panels(charts: &[Chart], size: (u32, u32)) -> Result<String> {
+pub fn svg_panels(charts: &[Chart], size: (u32, u32), scale: XScale) -> Result<String> {
     register_font()?;
     let mut text = String::new();
-    draw_panels(&SVGBackend::with_string(&mut text, size).into_drawing_area(), charts)?;
+    draw_panels(&SVGBackend::with_string(&mut text, size).into_drawing_area(), charts, scale)?;
     Ok(text)
 }
 
@@ -267,7 +308,7 @@ pub fn bars_svg(bars: &Bars, size: (u32, u32)) -> Result<String> {
 pub fn svg(chart: &Chart, size: (u32, u32)) -> Result<String> {
     register_font()?;
     let mut text = String::new();
-    draw(&SVGBackend::with_string(&mut text, size).into_drawing_area(), chart)?;
+    draw(&SVGBackend::with_string(&mut text, size).into_drawing_area(), chart, XScale::Linear)?;
     Ok(text)
 }
 

@@ -293,12 +293,12 @@ fn analysis_section<'a>(
                 let _ = write!(
                     h,
                     "<div class=fig>{}</div>",
-                    plots::svg_panels(&fa.correlation_charts(), (900, 560))?
+                    plots::svg_panels(&fa.correlation_charts(), (900, 560), plots::XScale::Linear)?
                 );
                 let _ = write!(
                     h,
                     "<div class=fig>{}</div>",
-                    plots::svg_panels(&fa.bode_charts(&spec.to_string()), (900, 760))?
+                    plots::svg_panels(&fa.bode_charts(&spec.to_string()), (900, 760), plots::XScale::Log)?
                 );
             }
             Err(e) => {

@@ -13,7 +13,7 @@ use crate::files::{check_outputs, display, open_all, output_folder, unique_stems
 use crate::fit::{self, Simulation};
 use crate::loops::{self, LoopFile};
 use crate::params;
-use crate::plots::{self, Chart};
+use crate::plots::{self, Chart, XScale};
 use crate::recording::Recording;
 use crate::report;
 use crate::results::{CompareSummary, FileScoreRow};
@@ -133,18 +133,18 @@ fn compare_recordings(
         ] {
             let out = plot_path(a, stem, kind);
             written.push(display(&out));
-            charts.push((out, vec![chart]));
+            charts.push((out, vec![chart], XScale::Linear));
         }
         let summary = match analysis::analyse(rec, &sim, sc.offset_um, a.max_lag) {
             Ok(fa) => {
-                for (kind, panels) in [
-                    ("correlation", fa.correlation_charts()),
-                    ("spectrum", vec![fa.spectrum_chart()]),
-                    ("bode", fa.bode_charts(&spec.to_string())),
+                for (kind, panels, scale) in [
+                    ("correlation", fa.correlation_charts(), XScale::Linear),
+                    ("spectrum", vec![fa.spectrum_chart()], XScale::Log),
+                    ("bode", fa.bode_charts(&spec.to_string()), XScale::Log),
                 ] {
                     let out = plot_path(a, stem, kind);
                     written.push(display(&out));
-                    charts.push((out, panels));
+                    charts.push((out, panels, scale));
                 }
                 Some(fa.summary)
             }
@@ -206,12 +206,12 @@ fn write_time_series(
 /// plots), then the summary.
 fn report_all(
     a: &CompareArgs,
-    charts: &[(PathBuf, Vec<Chart>)],
+    charts: &[(PathBuf, Vec<Chart>, XScale)],
     table: Option<(&Path, &[u8])>,
     summary: CompareSummary,
 ) -> Result<()> {
-    for (path, panels) in charts {
-        plots::write_panels(path, panels)?;
+    for (path, panels, scale) in charts {
+        plots::write_panels(path, panels, *scale)?;
     }
     if let Some((path, bytes)) = table {
         write_atomic(path, bytes)?;
@@ -251,7 +251,7 @@ fn compare_loops(
             model: Some(loops::features(&f.h, &m)),
             ..FileScoreRow::new(&f.name, None, f.channel.name(), e)
         });
-        charts.push((out, vec![loops::chart(f, &m, &spec.to_string())]));
+        charts.push((out, vec![loops::chart(f, &m, &spec.to_string())], XScale::Linear));
     }
     report_all(
         a,
