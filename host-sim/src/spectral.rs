@@ -58,11 +58,10 @@ fn check_finite(name: &str, x: &[f64]) -> Result<()> {
     Ok(())
 }
 
-fn centred(x: &[f64]) -> (Vec<f64>, f64) {
+/// Mean and Σ(x − mean)².
+fn mean_and_energy(x: &[f64]) -> (f64, f64) {
     let mean = x.iter().sum::<f64>() / x.len() as f64;
-    let c: Vec<f64> = x.iter().map(|v| v - mean).collect();
-    let energy = c.iter().map(|v| v * v).sum::<f64>();
-    (c, energy)
+    (mean, x.iter().map(|v| (v - mean) * (v - mean)).sum())
 }
 
 /// Normalised sample cross-correlation r_xy(τ) = Σ_t x̃_t ỹ_{t+τ} / √(Σx̃² Σỹ²) for τ = 0..=max_lag
@@ -82,34 +81,40 @@ pub fn cross_correlation(x: &[f64], y: &[f64], max_lag: usize) -> Result<Correla
     }
     check_finite("correlation input", x)?;
     check_finite("correlation input", y)?;
-    let (xc, ex) = centred(x);
-    let (yc, ey) = centred(y);
+    let (mx, ex) = mean_and_energy(x);
+    let (my, ey) = mean_and_energy(y);
     if ex <= 0.0 || ey <= 0.0 {
         bail!("correlation: a signal is constant (no variance to correlate)");
     }
-    // Linear (not circular) correlation: zero-pad past 2N, then IFFT(conj(X)·Y).
+    // Linear (not circular) correlation: zero-pad past 2N, then IFFT(conj(X)·Y). One padded
+    // buffer and two spectra at a time (2 million samples: about 100 MB).
     let len = (2 * n).next_power_of_two();
     let mut planner = RealFftPlanner::<f64>::new();
     let fwd = planner.plan_fft_forward(len);
     let inv = planner.plan_fft_inverse(len);
-    let spectrum = |v: &[f64]| -> Result<Vec<Complex<f64>>> {
-        let mut buf = fwd.make_input_vec();
-        buf[..n].copy_from_slice(v);
+    let mut buf = fwd.make_input_vec();
+    let spectrum = |v: &[f64], mean: f64, buf: &mut [f64]| -> Result<Vec<Complex<f64>>> {
+        buf.fill(0.0); // the transform uses its input as scratch
+        for (b, x) in buf.iter_mut().zip(v) {
+            *b = x - mean;
+        }
         let mut out = fwd.make_output_vec();
-        fwd.process(&mut buf, &mut out).map_err(|e| anyhow::anyhow!("FFT: {e}"))?;
+        fwd.process(buf, &mut out).map_err(|e| anyhow::anyhow!("FFT: {e}"))?;
         Ok(out)
     };
-    let sx = spectrum(&xc)?;
-    let sy = spectrum(&yc)?;
-    let mut prod: Vec<Complex<f64>> = sx.iter().zip(&sy).map(|(a, b)| a.conj() * b).collect();
+    let sx = spectrum(x, mx, &mut buf)?;
+    let mut prod = spectrum(y, my, &mut buf)?;
+    for (p, a) in prod.iter_mut().zip(&sx) {
+        *p *= a.conj();
+    }
+    drop(sx);
     // DC and Nyquist bins of a real signal's product are real up to rounding.
     let last = prod.len() - 1;
     prod[0].im = 0.0;
     prod[last].im = 0.0;
-    let mut lagged = inv.make_output_vec();
-    inv.process(&mut prod, &mut lagged).map_err(|e| anyhow::anyhow!("FFT: {e}"))?;
+    inv.process(&mut prod, &mut buf).map_err(|e| anyhow::anyhow!("FFT: {e}"))?;
     let scale = 1.0 / (len as f64 * (ex * ey).sqrt());
-    let r = lagged[..=max_lag].iter().map(|v| (v * scale).clamp(-1.0, 1.0)).collect();
+    let r = buf[..=max_lag].iter().map(|v| (v * scale).clamp(-1.0, 1.0)).collect();
     Ok(Correlation { r, samples: n, bound: Z95 / (n as f64).sqrt() })
 }
 

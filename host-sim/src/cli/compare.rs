@@ -6,10 +6,13 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use clap::Args;
 use model_core::{ActuatorParams, ModelSpec};
+use tempfile::NamedTempFile;
 
 use super::common::{check_max_samples, read_data, Data, ReadArgs};
 use crate::analysis;
-use crate::files::{check_outputs, display, open_all, output_folder, unique_stems, write_atomic, Input};
+use crate::files::{
+    check_outputs, display, open_all, output_dir, output_folder, partial_file, persist, unique_stems, Input,
+};
 use crate::fit::{self, Simulation};
 use crate::loops::{self, LoopFile};
 use crate::params;
@@ -116,7 +119,12 @@ fn compare_recordings(
     let mut rows = Vec::new();
     let mut charts = Vec::new();
     let mut total = 0.0;
-    let mut csv = a.out_csv.as_ref().map(|_| csv::Writer::from_writer(Vec::new()));
+    // The table goes to a temporary file beside its target as it is made (it may be far larger
+    // than the recordings' memory), renamed into place only when everything else succeeded.
+    let mut csv = match &a.out_csv {
+        Some(path) => Some(csv::Writer::from_writer(partial_file(output_dir(path))?)),
+        None => None,
+    };
     if let Some(w) = &mut csv {
         w.write_record(["file", "time_s", "measured_um", "model_um", "residual_um"])?;
     }
@@ -168,18 +176,19 @@ fn compare_recordings(
     }
     let summary = CompareSummary { model: spec.to_string(), nrmse: total / recs.len() as f64, files: rows };
     let table = match (&a.out_csv, csv) {
-        (Some(path), Some(w)) => {
-            Some((path, w.into_inner().map_err(|e| anyhow::anyhow!("{}: {}", display(path), e.error()))?))
-        }
+        (Some(path), Some(w)) => Some((
+            path.as_path(),
+            w.into_inner().map_err(|e| anyhow::anyhow!("{}: {}", display(path), e.error()))?,
+        )),
         _ => None,
     };
-    report_all(a, &charts, table.as_ref().map(|(p, b)| (p.as_path(), b.as_slice())), summary)
+    report_all(a, &charts, table, summary)
 }
 
 /// Appends one recording's rows to the `--out-csv` table: values in shortest round-trip form,
 /// so measured − model = residual holds to rounding when read back.
 fn write_time_series(
-    w: &mut csv::Writer<Vec<u8>>,
+    w: &mut csv::Writer<NamedTempFile>,
     rec: &Recording,
     sim: &Simulation,
     offset_um: f64,
@@ -207,14 +216,14 @@ fn write_time_series(
 fn report_all(
     a: &CompareArgs,
     charts: &[(PathBuf, Vec<Chart>, XScale)],
-    table: Option<(&Path, &[u8])>,
+    table: Option<(&Path, NamedTempFile)>,
     summary: CompareSummary,
 ) -> Result<()> {
     for (path, panels, scale) in charts {
         plots::write_panels(path, panels, *scale)?;
     }
-    if let Some((path, bytes)) = table {
-        write_atomic(path, bytes)?;
+    if let Some((path, tmp)) = table {
+        persist(tmp, path)?;
         say!(a.json, "time series written to {}", display(path));
     }
     say!(a.json, "{summary}");
