@@ -3,6 +3,7 @@
 //! subcommand; `src/main.rs` only calls it. Papers are cited as 000–003: the list, and what the
 //! code takes from each, is docs/references.md.
 
+pub mod analysis;
 pub mod api;
 pub mod cases;
 pub mod cli;
@@ -25,5 +26,6 @@ pub mod results;
 pub mod rig;
 pub mod rod_diffusion;
 pub mod search;
+pub mod spectral;
 pub mod uncertainty;
 pub mod warning;

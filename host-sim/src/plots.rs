@@ -7,6 +7,7 @@ use std::sync::Once;
 use anyhow::{anyhow, bail, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 /// One curve.
 pub struct Series {
@@ -56,15 +57,26 @@ fn register_font() -> Result<()> {
     }
 }
 
-fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, c: &Chart) -> Result<()>
+/// The x axis of a chart: linear, or logarithmic (frequency axes of spectra and Bode plots).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum XScale {
+    /// Linear.
+    Linear,
+    /// Base-10 logarithmic, points at x ≤ 0 left out; linear when the data span less than a
+    /// decade (a log axis would show one or two labels).
+    Log,
+}
+
+fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, c: &Chart, scale: XScale) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
     area.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let shown = |x: f64, y: f64| x.is_finite() && y.is_finite() && (scale == XScale::Linear || x > 0.0);
     let pts = c.series.iter().flat_map(|s| s.points.iter());
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for &(x, y) in pts {
-        if x.is_finite() && y.is_finite() {
+        if shown(x, y) {
             x0 = x0.min(x);
             x1 = x1.max(x);
             y0 = y0.min(y);
@@ -72,16 +84,42 @@ where
         }
     }
     if x0 > x1 {
-        (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
+        (x0, x1, y0, y1) = (1.0, 10.0, 0.0, 1.0);
     }
+    let scale = if scale == XScale::Log && x1 < 10.0 * x0 { XScale::Linear } else { scale };
     let pad = |a: f64, b: f64| if b > a { 0.04 * (b - a) } else { 0.5 * a.abs().max(1e-9) };
-    let (px, py) = (pad(x0, x1), pad(y0, y1));
+    let py = pad(y0, y1);
+    let y = (y0 - py)..(y1 + py);
+    match scale {
+        XScale::Linear => {
+            let px = pad(x0, x1);
+            draw_on(area, c, (x0 - px)..(x1 + px), y, shown)
+        }
+        XScale::Log => {
+            let (lo, hi) = if x1 > x0 { (x0 / 1.1, x1 * 1.1) } else { (x0 / 2.0, x0 * 2.0) };
+            draw_on(area, c, (lo..hi).log_scale(), y, shown)
+        }
+    }
+}
+
+fn draw_on<DB: DrawingBackend, X>(
+    area: &DrawingArea<DB, Shift>,
+    c: &Chart,
+    x: X,
+    y: std::ops::Range<f64>,
+    shown: impl Fn(f64, f64) -> bool,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+    X: plotters::coord::ranged1d::AsRangedCoord<Value = f64>,
+    X::CoordDescType: plotters::coord::ranged1d::ValueFormatter<f64>,
+{
     let mut chart = ChartBuilder::on(area)
         .caption(&c.title, ("sans-serif", 18))
         .margin(12)
         .x_label_area_size(42)
         .y_label_area_size(64)
-        .build_cartesian_2d((x0 - px)..(x1 + px), (y0 - py)..(y1 + py))
+        .build_cartesian_2d(x, y)
         .map_err(|e| anyhow!("{e}"))?;
     chart
         .configure_mesh()
@@ -93,14 +131,18 @@ where
         .map_err(|e| anyhow!("{e}"))?;
     for s in &c.series {
         let color = PALETTE[s.color % PALETTE.len()];
-        chart
+        let drawn = chart
             .draw_series(LineSeries::new(
-                s.points.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()),
+                s.points.iter().copied().filter(|p| shown(p.0, p.1)),
                 color.stroke_width(1),
             ))
-            .map_err(|e| anyhow!("{e}"))?
-            .label(&s.label)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2)));
+            .map_err(|e| anyhow!("{e}"))?;
+        // An unlabelled series (a second bound line) shares its neighbour's legend entry.
+        if !s.label.is_empty() {
+            drawn
+                .label(&s.label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2)));
+        }
     }
     chart
         .configure_series_labels()
@@ -116,12 +158,18 @@ where
 
 /// Draws `chart` to `path` (`.svg` or `.png`, 800 × 500).
 pub fn write(path: &Path, chart: &Chart) -> Result<()> {
+    write_panels(path, std::slice::from_ref(chart), XScale::Linear)
+}
+
+/// Draws `charts` stacked top to bottom (panels sharing one figure, e.g. gain over phase) to
+/// `path` (`.svg` or `.png`, 800 wide, 500 for one panel and 300 more for each further one).
+pub fn write_panels(path: &Path, charts: &[Chart], scale: XScale) -> Result<()> {
     register_font()?;
-    let size = (800, 500);
+    let size = (800, 500 + 300 * charts.len().saturating_sub(1) as u32);
     match path.extension().and_then(|e| e.to_str()) {
         Some("svg") => {
             let mut text = String::new();
-            draw(&SVGBackend::with_string(&mut text, size).into_drawing_area(), chart)?;
+            draw_panels(&SVGBackend::with_string(&mut text, size).into_drawing_area(), charts, scale)?;
             crate::files::write_atomic(path, text.as_bytes())
         }
         Some("png") => {
@@ -130,7 +178,7 @@ pub fn write(path: &Path, chart: &Chart) -> Result<()> {
             let tmp = crate::files::partial_file_with_suffix(crate::files::output_dir(path), ".partial.png")?;
             {
                 let area = BitMapBackend::new(tmp.path(), size).into_drawing_area();
-                draw(&area, chart)?;
+                draw_panels(&area, charts, scale)?;
             }
             crate::files::persist(tmp, path)
         }
@@ -138,11 +186,129 @@ pub fn write(path: &Path, chart: &Chart) -> Result<()> {
     }
 }
 
+fn draw_panels<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    charts: &[Chart],
+    scale: XScale,
+) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    for (panel, chart) in area.split_evenly((charts.len().max(1), 1)).iter().zip(charts) {
+        draw(panel, chart, scale)?;
+    }
+    Ok(())
+}
+
+/// Stacked panels as SVG text (for inlining in HTML); `size` is the whole figure's.
+pub fn svg_panels(charts: &[Chart], size: (u32, u32), scale: XScale) -> Result<String> {
+    register_font()?;
+    let mut text = String::new();
+    draw_panels(&SVGBackend::with_string(&mut text, size).into_drawing_area(), charts, scale)?;
+    Ok(text)
+}
+
+/// A grouped bar chart: one group per category (named on the x axis), one bar per series in
+/// each group, the value written on top of each bar.
+pub struct Bars {
+    /// Caption.
+    pub title: String,
+    /// y axis label with unit.
+    pub y_label: String,
+    /// The category names on the x axis.
+    pub categories: Vec<String>,
+    /// (legend text, one value per category (None: no bar), palette index).
+    pub series: Vec<(String, Vec<Option<f64>>, usize)>,
+    /// How a value is written on its bar (e.g. `11.2 %`).
+    pub value_format: fn(f64) -> String,
+}
+
+fn draw_bars<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, b: &Bars) -> Result<()>
+where
+    DB::ErrorType: 'static,
+{
+    area.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let top = b
+        .series
+        .iter()
+        .flat_map(|s| s.1.iter().flatten())
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, |m, v| m.max(*v));
+    let top = if top > 0.0 { 1.15 * top } else { 1.0 };
+    let groups = b.categories.len().max(1);
+    let mut chart = ChartBuilder::on(area)
+        .caption(&b.title, ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(42)
+        .y_label_area_size(64)
+        .build_cartesian_2d(0.0..groups as f64, 0.0..top)
+        .map_err(|e| anyhow!("{e}"))?;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .x_labels(0)
+        .y_desc(&b.y_label)
+        .label_style(("sans-serif", 13))
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    // Category k spans [k, k + 1]; its bars share the middle 70 %, side by side.
+    let width = 0.7 / b.series.len().max(1) as f64;
+    for (s_idx, (label, values, color)) in b.series.iter().enumerate() {
+        let color = PALETTE[color % PALETTE.len()];
+        let left = |k: usize| k as f64 + 0.15 + s_idx as f64 * width;
+        let bars = values.iter().enumerate().filter_map(|(k, v)| {
+            let v = v.filter(|v| v.is_finite())?;
+            let mut r = Rectangle::new([(left(k), 0.0), (left(k) + width, v)], color.filled());
+            r.set_margin(0, 0, 1, 1);
+            Some(r)
+        });
+        chart
+            .draw_series(bars)
+            .map_err(|e| anyhow!("{e}"))?
+            .label(label)
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], color.filled()));
+        let texts = values.iter().enumerate().filter_map(|(k, v)| {
+            let v = v.filter(|v| v.is_finite())?;
+            Some(
+                EmptyElement::at((left(k), v))
+                    + Text::new((b.value_format)(v), (0, -16), ("sans-serif", 12).into_font()),
+            )
+        });
+        chart.draw_series(texts).map_err(|e| anyhow!("{e}"))?;
+    }
+    // The category names under the axis, centred on their group (drawn on the whole area: the
+    // plot area clips what lies below its axis).
+    for (k, name) in b.categories.iter().enumerate() {
+        let (x, y) = chart.backend_coord(&(k as f64 + 0.5, 0.0));
+        let style = TextStyle::from(("sans-serif", 13).into_font()).pos(Pos::new(HPos::Center, VPos::Top));
+        area.draw(&Text::new(name.clone(), (x, y + 8), style)).map_err(|e| anyhow!("{e}"))?;
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(200, 200, 200))
+        .label_font(("sans-serif", 13))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    area.present().map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}
+
+/// The bar chart as SVG text (for inlining in HTML).
+pub fn bars_svg(bars: &Bars, size: (u32, u32)) -> Result<String> {
+    register_font()?;
+    let mut text = String::new();
+    draw_bars(&SVGBackend::with_string(&mut text, size).into_drawing_area(), bars)?;
+    Ok(text)
+}
+
 /// The chart as SVG text (for inlining in HTML).
 pub fn svg(chart: &Chart, size: (u32, u32)) -> Result<String> {
     register_font()?;
     let mut text = String::new();
-    draw(&SVGBackend::with_string(&mut text, size).into_drawing_area(), chart)?;
+    draw(&SVGBackend::with_string(&mut text, size).into_drawing_area(), chart, XScale::Linear)?;
     Ok(text)
 }
 
@@ -150,4 +316,45 @@ pub fn svg(chart: &Chart, size: (u32, u32)) -> Result<String> {
 pub fn thin<T: Copy>(v: &[T], max_points: usize) -> Vec<T> {
     let step = v.len().div_ceil(max_points.max(1)).max(1);
     v.iter().step_by(step).copied().collect()
+}
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bars_stand_in_their_groups_in_proportion_to_their_values() {
+        let b = Bars {
+            title: "error as effects are added".into(),
+            y_label: "mean NRMSE [%]".into(),
+            categories: vec!["ja".into(), "ja+mech".into(), "eddy+ja+mech".into()],
+            series: vec![
+                ("fit".into(), vec![Some(10.04), Some(3.1), Some(1.7)], 2),
+                ("validation".into(), vec![Some(11.2), None, Some(1.83)], 1),
+            ],
+            value_format: |v| format!("{v:.1} %"),
+        };
+        let svg = bars_svg(&b, (760, 340)).unwrap();
+        // (x, height) of the rectangles filled in a palette colour, legend swatch (12 px) left out.
+        let bars = |c: RGBColor| -> Vec<(f64, f64)> {
+            let fill = format!("fill=\"#{:02X}{:02X}{:02X}\"", c.0, c.1, c.2);
+            let attr = |r: &str, name: &str| -> f64 {
+                let at = r.find(&format!(" {name}=\"")).unwrap() + name.len() + 3;
+                r[at..].split('"').next().unwrap().parse().unwrap()
+            };
+            svg.split("<rect")
+                .filter(|r| r.split('>').next().unwrap().contains(&fill))
+                .map(|r| (attr(r, "x"), attr(r, "height")))
+                .filter(|(_, h)| *h != 10.0)
+                .collect()
+        };
+        let (fit, val) = (bars(PALETTE[2]), bars(PALETTE[1]));
+        assert_eq!((fit.len(), val.len()), (3, 2), "one bar per value: {fit:?} {val:?}");
+        // Heights in proportion to the values (to a pixel), groups left to right, fit before val.
+        let scale = fit[0].1 / 10.04;
+        for ((_, h), v) in fit.iter().zip([10.04, 3.1, 1.7]) {
+            assert!((h - v * scale).abs() <= 1.0, "bar of {v}: {h} px");
+        }
+        assert!((val[0].1 - 11.2 * scale).abs() <= 1.0 && (val[1].1 - 1.83 * scale).abs() <= 1.0);
+        assert!(fit[0].0 < val[0].0 && val[0].0 < fit[1].0 && fit[2].0 < val[1].0, "{fit:?} {val:?}");
+    }
 }

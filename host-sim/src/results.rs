@@ -7,6 +7,7 @@ use std::fmt;
 
 use serde::Serialize;
 
+use crate::analysis::AnalysisSummary;
 use crate::loops::LoopFeatures;
 use crate::uncertainty::Uncertainty;
 
@@ -34,6 +35,9 @@ pub struct FileScoreRow {
     /// Loop features of the model (compare on loop files).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub model: Option<LoopFeatures>,
+    /// Residual correlation, residual spectrum and frequency response (compare on recordings).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub analysis: Option<AnalysisSummary>,
 }
 
 impl FileScoreRow {
@@ -48,6 +52,7 @@ impl FileScoreRow {
             plots: None,
             measured: None,
             model: None,
+            analysis: None,
         }
     }
 }
@@ -318,6 +323,9 @@ impl fmt::Display for CompareSummary {
             let plots = r.plots.as_ref().map(|p| format!("  plots: {}", p.join(", "))).unwrap_or_default();
             let offset = r.offset_um.map(|o| format!("  offset {o:8.3} µm")).unwrap_or_default();
             writeln!(f, "{:40} {:14} NRMSE {:6.3} %{offset}{plots}", r.file, r.channel, r.nrmse * 100.0)?;
+            if let Some(a) = &r.analysis {
+                writeln!(f, "{a}")?;
+            }
             if let (Some(m), Some(y)) = (r.measured, r.model) {
                 writeln!(f, "  {:28} {:>14} {:>14}", "", "measured", "model")?;
                 for (name, x, y) in [

@@ -93,7 +93,8 @@ fn a_failed_run_leaves_the_previous_parameter_file_and_report_alone() {
 
 /// Large files stream: reading is bounded by `--max-samples`, not by the file. A 60 MB CSV is
 /// read to its end with a small window; the old whole-file reader needed over 100 MB for it.
-/// (A 1.1 GB file: 31 MB with `--max-samples 200000`, 270 MB at the default 2 000 000.)
+/// (A 1.1 GB file: 31 MB with `--max-samples 200000`, 270 MB at the default 2 000 000, before
+/// compare had its residual and frequency analysis, which adds about 110 MB at 2 million samples.)
 #[test]
 fn a_large_csv_streams_in_bounded_memory() {
     let dir = tempfile::tempdir().unwrap();

@@ -248,6 +248,12 @@ fn demo_finds_the_hidden_effects_and_writes_the_report() {
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("<svg") && html.contains("Model ladder") && html.contains("eddy+ja+mech"));
     assert!(html.contains("Parameter uncertainty") && html.contains("Provenance"));
+    // The final model's analysis: a whiteness line and a frequency-response line per file (the
+    // demo's five recordings), and their plots.
+    let section = &html[html.find("Residual and frequency analysis of").expect("no analysis section")..];
+    assert_eq!(section.matches("residual ACF:").count(), 5, "{section:.2000}");
+    assert_eq!(section.matches("\n  frequency response current_A").count(), 5);
+    assert!(section.matches("<svg").count() >= 10);
 }
 
 #[test]

@@ -365,11 +365,11 @@ fn plots_of_inputs_with_the_same_name_do_not_overwrite_each_other() {
         .flat_map(|f| f["plots"].as_array().cloned().unwrap_or_default())
         .map(|p| p.as_str().unwrap().to_string())
         .collect();
-    assert_eq!(plots.len(), 6, "{plots:?}");
+    assert_eq!(plots.len(), 12, "{plots:?}");
     let mut unique = plots.clone();
     unique.sort();
     unique.dedup();
-    assert_eq!(unique.len(), 6, "{plots:?}");
+    assert_eq!(unique.len(), 12, "{plots:?}");
     assert!(plots.iter().all(|p| Path::new(p).exists()));
 }
 
@@ -398,7 +398,7 @@ fn concurrent_png_comparisons_into_one_folder_all_succeed() {
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
         .collect();
-    assert_eq!(names.iter().filter(|n| n.ends_with(".png")).count(), 30, "{names:?}");
+    assert_eq!(names.iter().filter(|n| n.ends_with(".png")).count(), 60, "{names:?}");
     assert!(names.iter().all(|n| !n.starts_with('.')), "temporary files left: {names:?}");
 }
 

@@ -1,18 +1,22 @@
 //! `gma compare`: per-file error and plots of a model (with a given parameter set) against
 //! recordings or magnetization loops.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::Args;
 use model_core::{ActuatorParams, ModelSpec};
+use tempfile::NamedTempFile;
 
 use super::common::{check_max_samples, read_data, Data, ReadArgs};
-use crate::files::{check_outputs, display, open_all, output_folder, unique_stems, Input};
-use crate::fit;
+use crate::analysis;
+use crate::files::{
+    check_outputs, display, open_all, output_dir, output_folder, partial_file, persist, unique_stems, Input,
+};
+use crate::fit::{self, Simulation};
 use crate::loops::{self, LoopFile};
 use crate::params;
-use crate::plots::{self, Chart};
+use crate::plots::{self, Chart, XScale};
 use crate::provenance::Provenance;
 use crate::recording::Recording;
 use crate::report;
@@ -38,6 +42,13 @@ pub struct CompareArgs {
     /// Plot format.
     #[arg(long, value_parser = ["svg", "png"], default_value = "svg")]
     pub format: String,
+    /// Also write one CSV of every recording's time series: columns `file, time_s, measured_um,
+    /// model_um, residual_um` (model with its fitted offset; residual = measured − model).
+    #[arg(long, value_name = "PATH")]
+    pub out_csv: Option<PathBuf>,
+    /// Largest lag [samples] of the residual autocorrelation and input cross-correlation.
+    #[arg(long, value_name = "L", default_value_t = analysis::DEFAULT_MAX_LAG)]
+    pub max_lag: usize,
     /// Print exactly one JSON object on stdout.
     #[arg(long)]
     pub json: bool,
@@ -57,11 +68,30 @@ pub fn run(a: &CompareArgs) -> Result<()> {
     let (p, source) = params::load_input(params_input, spec, "the compared parameters")?;
     output_folder(&a.out_dir)?;
     let stems = unique_stems(&a.files);
-    let planned: Vec<PathBuf> =
-        stems.iter().flat_map(|s| ["loop", "time", "residual"].map(|k| plot_path(a, s, k))).collect();
+    if a.max_lag == 0 || a.max_lag > analysis::MAX_LAG_LIMIT {
+        anyhow::bail!(
+            "--max-lag {}: give a number of samples from 1 to {}",
+            a.max_lag,
+            analysis::MAX_LAG_LIMIT
+        );
+    }
+    let planned: Vec<PathBuf> = stems
+        .iter()
+        .flat_map(|s| PLOTS.map(|k| plot_path(a, s, k)))
+        .chain(a.out_csv.iter().cloned())
+        .collect();
     check_outputs(&planned.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &ids)?;
     let summary = match read_data(inputs, Vec::new(), a.read.max_samples, &read_opts)? {
-        Data::Loops(files, _) => compare_loops(a, spec, &p, &files, &stems)?,
+        Data::Loops(files, _) => {
+            if let Some(csv) = &a.out_csv {
+                anyhow::bail!(
+                    "--out-csv {}: writes recordings' time series; {} is a magnetization loop (no time axis)",
+                    display(csv),
+                    files.first().map(|f| f.name.as_str()).unwrap_or("the input")
+                );
+            }
+            compare_loops(a, spec, &p, &files, &stems)?
+        }
         Data::Recordings(files, _) => compare_recordings(a, spec, &p, &files, &stems)?,
     };
     say!(a.json, "{summary}");
@@ -70,6 +100,9 @@ pub fn run(a: &CompareArgs) -> Result<()> {
     }
     Ok(())
 }
+
+/// The plots of one recording, by file-name suffix.
+const PLOTS: [&str; 6] = ["loop", "time", "residual", "correlation", "spectrum", "bode"];
 
 fn plot_path(a: &CompareArgs, stem: &str, kind: &str) -> PathBuf {
     a.out_dir.join(format!("{stem}-{kind}.{}", a.format))
@@ -89,6 +122,15 @@ fn compare_recordings(
     let mut rows = Vec::new();
     let mut charts = Vec::new();
     let mut total = 0.0;
+    // The table goes to a temporary file beside its target as it is made (it may be far larger
+    // than the recordings' memory), renamed into place only when everything else succeeded.
+    let mut csv = match &a.out_csv {
+        Some(path) => Some(csv::Writer::from_writer(partial_file(output_dir(path))?)),
+        None => None,
+    };
+    if let Some(w) = &mut csv {
+        w.write_record(["file", "time_s", "measured_um", "model_um", "residual_um"])?;
+    }
     for (rec, stem) in recs.iter().zip(stems) {
         let sim = fit::simulate(spec, p, rec)?;
         let sc = fit::score(spec, rec, &sim);
@@ -102,28 +144,90 @@ fn compare_recordings(
         ] {
             let out = plot_path(a, stem, kind);
             written.push(display(&out));
-            charts.push((out, chart));
+            charts.push((out, vec![chart], XScale::Linear));
+        }
+        let summary = match analysis::analyse(rec, &sim, sc.offset_um, a.max_lag) {
+            Ok(fa) => {
+                for (kind, panels, scale) in [
+                    ("correlation", fa.correlation_charts(), XScale::Linear),
+                    ("spectrum", vec![fa.spectrum_chart()], XScale::Log),
+                    ("bode", fa.bode_charts(&spec.to_string()), XScale::Log),
+                ] {
+                    let out = plot_path(a, stem, kind);
+                    written.push(display(&out));
+                    charts.push((out, panels, scale));
+                }
+                Some(fa.summary)
+            }
+            Err(e) => {
+                eprintln!("gma: note: {}: no residual or frequency analysis: {e}", rec.name);
+                None
+            }
+        };
+        if let Some(w) = &mut csv {
+            write_time_series(w, rec, &sim, sc.offset_um)?;
         }
         rows.push(FileScoreRow {
             offset_um: Some(sc.offset_um),
             plots: Some(written),
+            analysis: summary,
             ..FileScoreRow::new(&rec.name, None, "displacement", sc.nrmse)
         });
         if let Some(c) = sc.nrmse_current {
             rows.push(FileScoreRow::new(&rec.name, None, "current", c));
         }
     }
-    report_all(
-        &charts,
-        CompareSummary { model: spec.to_string(), nrmse: total / recs.len() as f64, files: rows },
-    )
+    let summary = CompareSummary { model: spec.to_string(), nrmse: total / recs.len() as f64, files: rows };
+    let table = match (&a.out_csv, csv) {
+        (Some(path), Some(w)) => Some((
+            path.as_path(),
+            w.into_inner().map_err(|e| anyhow::anyhow!("{}: {}", display(path), e.error()))?,
+        )),
+        _ => None,
+    };
+    report_all(a, &charts, table, summary)
+}
+
+/// Appends one recording's rows to the `--out-csv` table: values in shortest round-trip form,
+/// so measured − model = residual holds to rounding when read back.
+fn write_time_series(
+    w: &mut csv::Writer<NamedTempFile>,
+    rec: &Recording,
+    sim: &Simulation,
+    offset_um: f64,
+) -> Result<()> {
+    let measured = rec.displacement_um.as_deref().unwrap_or_default();
+    for ((t, m), y) in rec.time_s.iter().zip(measured).zip(&sim.displacement_um) {
+        let model = y + offset_um;
+        let residual = m - model;
+        if !(model.is_finite() && residual.is_finite()) {
+            anyhow::bail!("{}: the model output at t = {t} s is not a finite number", rec.name);
+        }
+        w.write_record([
+            rec.name.clone(),
+            t.to_string(),
+            m.to_string(),
+            model.to_string(),
+            residual.to_string(),
+        ])?;
+    }
+    Ok(())
 }
 
 /// Writes every chart (only now that all were drawn: a failing file leaves no partial set of
-/// plots) and hands back the summary.
-fn report_all(charts: &[(PathBuf, Chart)], summary: CompareSummary) -> Result<CompareSummary> {
-    for (path, chart) in charts {
-        plots::write(path, chart)?;
+/// plots) and the `--out-csv` table, and hands back the summary.
+fn report_all(
+    a: &CompareArgs,
+    charts: &[(PathBuf, Vec<Chart>, XScale)],
+    table: Option<(&Path, NamedTempFile)>,
+    summary: CompareSummary,
+) -> Result<CompareSummary> {
+    for (path, panels, scale) in charts {
+        plots::write_panels(path, panels, *scale)?;
+    }
+    if let Some((path, tmp)) = table {
+        persist(tmp, path)?;
+        say!(a.json, "time series written to {}", display(path));
     }
     Ok(summary)
 }
@@ -155,10 +259,12 @@ fn compare_loops(
             model: Some(loops::features(&f.h, &m)),
             ..FileScoreRow::new(&f.name, None, f.channel.name(), e)
         });
-        charts.push((out, loops::chart(f, &m, &spec.to_string())));
+        charts.push((out, vec![loops::chart(f, &m, &spec.to_string())], XScale::Linear));
     }
     report_all(
+        a,
         &charts,
+        None,
         CompareSummary { model: spec.to_string(), nrmse: total / files.len() as f64, files: rows },
     )
 }
