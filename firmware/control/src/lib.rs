@@ -9,6 +9,7 @@
 //! ```
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 
+pub mod command;
 pub mod current;
 pub mod faults;
 pub mod pid;
@@ -20,50 +21,97 @@ pub mod units;
 
 use model_core::{Actuator, ActuatorParams, Compensator, CompensatorState, ModelSpec, ParamError};
 
+use crate::command::{Command, Refusal, Reply};
 use crate::current::{CurrentLoop, CurrentLoopParams};
 use crate::faults::{FaultCode, FaultLimits, FaultMonitor};
 use crate::pid::{Pid, PidParams, PidState};
 use crate::reference::{Reference, Waveform};
 use crate::telemetry::Frame;
-use crate::units::{Amps, Calibration, Micrometres};
+use crate::units::{Amps, Calibration, Micrometres, Volts, ADC_FULL_SCALE};
 
 pub use crate::tick::{RawSample, TickOutput};
 
 /// Everything the controller needs besides the model.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ControlConfig {
-    /// Front-end scaling.
+    /// Front-end scaling (the current zero is replaced by the one measured at boot).
     pub calibration: Calibration,
     /// Current loop design.
     pub current_loop: CurrentLoopParams,
     /// Trip levels.
     pub limits: FaultLimits,
-    /// Displacement reference [µm, relative to the rest position].
+    /// Displacement reference at boot [µm, relative to the rest position] (a command replaces it).
     pub reference: Waveform,
-    /// Ticks the compensator looks ahead on the reference (current-loop and mechanics lag).
+    /// Ticks the compensator looks ahead on the reference: the current loop's lag (its pole and
+    /// the PWM update's one-tick delay) and the mechanics'.
     pub preview_ticks: u32,
-    /// Displacement PID; `None` runs the compensator alone (open loop).
+    /// Displacement PID; `None` runs the compensator alone (open loop). The PID sees the current
+    /// loop's lag plus the PWM update's tick behind it: an integral gain of 0.02 A/µm per tick
+    /// (the earlier design) now rings, 0.04 is unstable. The derivative adds the phase lead that
+    /// buys the integral back; the reference gains sit at 0.4× the integral gain that goes
+    /// unstable (tuned on our simulated rig with the delay, `tests/closed_loop.rs`).
     pub pid: Option<PidParams>,
     /// Largest current reference [A].
     pub max_current_a: f32,
+    /// Ticks without a valid command (or keep-alive) after which an armed bridge disarms.
+    pub command_timeout_ticks: u32,
+    /// Current samples averaged at boot, bridge off, for the current channel's zero.
+    pub offset_calibration_ticks: u16,
+    /// Largest |bias| + amplitude a commanded reference may have [µm].
+    pub max_reference_um: f32,
 }
 
 impl ControlConfig {
-    /// The reference board tracking a 100 Hz sine of 12.5 µm (25 µm peak to peak) about 15 µm.
+    /// The reference board tracking a 100 Hz sine of 12.5 µm (25 µm peak to peak) about 15 µm;
+    /// disarms 200 ms after the last command, averages 256 samples (25.6 ms) for the current
+    /// zero, accepts references within ±50 µm of rest.
     pub const REFERENCE: ControlConfig = ControlConfig {
         calibration: Calibration::REFERENCE_BOARD,
         current_loop: CurrentLoopParams::REFERENCE,
         limits: FaultLimits::REFERENCE,
         reference: Waveform::Sine { freq_hz: 100.0, amplitude: 12.5, bias: 15.0 },
-        preview_ticks: 2,
-        pid: Some(PidParams { kp: 0.02, ki: 0.02, kd: 0.0, limit_a: 1.0 }),
+        preview_ticks: 3,
+        pid: Some(PidParams { kp: 0.01, ki: 0.016, kd: 0.04, limit_a: 1.0 }),
         max_current_a: 3.5,
+        command_timeout_ticks: 2000,
+        offset_calibration_ticks: 256,
+        max_reference_um: 50.0,
     };
 }
 
-/// The controller: fixed configuration and model, plus the state stepped every tick.
+/// Why the board last reset (read from the reset controller at boot).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ResetCause {
+    /// Power applied.
+    PowerOn,
+    /// Supply brown-out.
+    Brownout,
+    /// The reset pin (button, debugger).
+    Pin,
+    /// A software reset (requested by the firmware).
+    Software,
+    /// The independent or window watchdog: the firmware hung. Boots with `WATCHDOG_RESET`
+    /// latched.
+    Watchdog,
+}
+
+/// Boot-time current-zero calibration: samples summed with the bridge off.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct OffsetCalibration {
+    sum: u32,
+    samples: u16,
+    done: bool,
+}
+
+/// The controller: fixed configuration and model, plus the state stepped every tick. It boots
+/// disarmed (bridge off, not switching) and arms only on an explicit command.
 pub struct Controller {
     cfg: ControlConfig,
+    calibration: Calibration,
+    offset: OffsetCalibration,
+    armed: bool,
+    /// Whether the configuration (current loop, PID, timing) validated at construction.
+    design_valid: bool,
     current_loop: CurrentLoop,
     reference: Reference,
     compensator: Option<(Compensator, CompensatorState)>,
@@ -73,44 +121,59 @@ pub struct Controller {
     seq: u32,
     rest_um: Option<f32>,
     pid: Option<(Pid, PidState)>,
+    ticks_since_command: u32,
+    last_raw: RawSample,
+}
+
+/// The compensator for `spec` with `params`, and its model's rest displacement [m].
+fn compensator_for(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    tick_s: f32,
+) -> Result<((Compensator, CompensatorState), f32), ParamError> {
+    let model = compensator_model(spec, params, tick_s)?;
+    let c = Compensator::new(model);
+    let s = c.rest_state();
+    let rest = c.model().rest_state().mech.displacement_m;
+    Ok(((c, s), rest))
 }
 
 impl Controller {
     /// Builds the controller for `spec` with the identified `params` (from `gma fit`); the
     /// compensator inverts [`compensator_model`]. A rejected parameter set or controller design
-    /// (current loop, PID) starts the controller with `PARAMETERS_INVALID` latched (bridge off).
-    pub fn new(cfg: ControlConfig, spec: ModelSpec, params: &ActuatorParams) -> Self {
+    /// (current loop, PID) latches `PARAMETERS_INVALID`; a watchdog `reset` latches
+    /// `WATCHDOG_RESET`. Either way it starts disarmed.
+    pub fn new(cfg: ControlConfig, spec: ModelSpec, params: &ActuatorParams, reset: ResetCause) -> Self {
         let mut faults = FaultMonitor::new(cfg.limits);
-        let compensator = match compensator_model(spec, params, cfg.current_loop.tick_s) {
-            Ok(model) => {
-                let c = Compensator::new(model);
-                let s = c.rest_state();
-                Some((c, s))
-            }
+        if reset == ResetCause::Watchdog {
+            faults.latch(FaultCode::WATCHDOG_RESET);
+        }
+        let (compensator, model_rest_m) = match compensator_for(spec, params, cfg.current_loop.tick_s) {
+            Ok((c, rest)) => (Some(c), rest),
             Err(_) => {
                 faults.latch(FaultCode::PARAMETERS_INVALID);
-                None
+                (None, 0.0)
             }
         };
-        let model_rest_m =
-            compensator.as_ref().map(|(c, _)| c.model().rest_state().mech.displacement_m).unwrap_or(0.0);
-        let current_loop = match CurrentLoop::new(cfg.current_loop) {
-            Ok(c) => c,
-            Err(_) => {
-                faults.latch(FaultCode::PARAMETERS_INVALID);
-                CurrentLoop::idle()
-            }
-        };
-        let pid = match cfg.pid.map(Pid::new) {
-            Some(Ok(pid)) => Some((pid, PidState::default())),
-            Some(Err(_)) => {
-                faults.latch(FaultCode::PARAMETERS_INVALID);
-                None
-            }
-            None => None,
-        };
+        let current_loop = CurrentLoop::new(cfg.current_loop);
+        let pid = cfg.pid.map(Pid::new);
+        let design_valid = current_loop.is_ok()
+            && !matches!(pid, Some(Err(_)))
+            && cfg.command_timeout_ticks > 0
+            && cfg.offset_calibration_ticks > 0
+            && cfg.max_reference_um.is_finite()
+            && cfg.max_reference_um > 0.0;
+        if !design_valid {
+            faults.latch(FaultCode::PARAMETERS_INVALID);
+        }
+        let current_loop = current_loop.unwrap_or(CurrentLoop::idle());
+        let pid = pid.and_then(Result::ok).map(|p| (p, PidState::default()));
         Self {
             cfg,
+            calibration: cfg.calibration,
+            offset: OffsetCalibration { sum: 0, samples: 0, done: false },
+            armed: false,
+            design_valid,
             current_loop,
             reference: Reference::new(cfg.reference, cfg.current_loop.tick_s),
             compensator,
@@ -119,13 +182,20 @@ impl Controller {
             seq: 0,
             rest_um: None,
             pid,
+            ticks_since_command: 0,
+            last_raw: RawSample {
+                current: Default::default(),
+                displacement: Default::default(),
+                bus: Volts(0.0),
+                break_tripped: false,
+            },
         }
     }
 
     /// A controller whose parameter set could not even be read: PARAMETERS_INVALID latched, the
-    /// bridge never enabled.
-    pub fn refused(cfg: ControlConfig) -> Self {
-        let mut c = Self::new(cfg, ModelSpec::LINEAR, &ActuatorParams::TERFENOL_DEMO);
+    /// bridge never enabled until a valid set is loaded by command.
+    pub fn refused(cfg: ControlConfig, reset: ResetCause) -> Self {
+        let mut c = Self::new(cfg, ModelSpec::LINEAR, &ActuatorParams::TERFENOL_DEMO, reset);
         c.compensator = None;
         c.faults.latch(FaultCode::PARAMETERS_INVALID);
         c
@@ -136,43 +206,156 @@ impl Controller {
         self.faults.latched()
     }
 
+    /// Whether the bridge is armed (switching).
+    pub fn armed(&self) -> bool {
+        self.armed
+    }
+
+    /// The current channel's zero measured at boot [V], once calibration has finished.
+    pub fn current_zero_v(&self) -> Option<f32> {
+        self.offset.done.then_some(self.calibration.current_zero_v)
+    }
+
     /// The explicit recovery command, given the present measurements: clears what is no longer
-    /// present and restarts the loops from rest. Returns what stays latched.
+    /// present and restarts the loops from rest. Returns what stays latched. It never arms.
     pub fn clear_faults(&mut self, raw: &RawSample) -> FaultCode {
-        let i = self.cfg.calibration.current(raw.current);
-        let left = self.faults.clear(raw, i);
-        if left.is_clear() {
-            self.current_loop.reset();
-            if let Some((_, s)) = self.pid.as_mut() {
-                *s = PidState::default();
+        let i = self.calibration.current(raw.current);
+        self.faults.clear(raw, i)
+    }
+
+    /// Executes one command (decoded by [`command::Decoder`]); any valid command is also the
+    /// keep-alive. Returns the reply to send.
+    pub fn command(&mut self, tag: u8, cmd: &Command) -> Reply {
+        self.ticks_since_command = 0;
+        let outcome = match cmd {
+            Command::Ping => Ok(()),
+            Command::Arm => self.arm(),
+            Command::Disarm => {
+                self.armed = false;
+                Ok(())
             }
-            if let Some((c, s)) = self.compensator.as_mut() {
-                *s = c.rest_state();
+            Command::ClearFaults => {
+                let raw = self.last_raw;
+                if self.clear_faults(&raw).is_clear() {
+                    Ok(())
+                } else {
+                    Err(Refusal::FaultStillPresent)
+                }
             }
+            Command::SetReference(r) => {
+                let max_hz = 1.0 / (6.0 * self.cfg.current_loop.tick_s);
+                r.waveform(self.cfg.max_reference_um, max_hz).map(|w| {
+                    self.reference = Reference::new(w, self.cfg.current_loop.tick_s);
+                })
+            }
+            Command::LoadParameters { spec, params } => self.load(*spec, params),
+        };
+        self.reply(tag, cmd.opcode(), outcome)
+    }
+
+    /// The reply for a frame the decoder refused (its tag and opcode, the reason).
+    pub fn refusal(&self, tag: u8, opcode: u8, reason: Refusal) -> Reply {
+        self.reply(tag, opcode, Err(reason))
+    }
+
+    fn reply(&self, tag: u8, opcode: u8, outcome: Result<(), Refusal>) -> Reply {
+        Reply { tag, opcode, outcome, faults: self.faults().0, armed: self.armed }
+    }
+
+    fn arm(&mut self) -> Result<(), Refusal> {
+        if self.armed {
+            return Ok(());
         }
-        left
+        if !self.faults().is_clear() {
+            return Err(Refusal::FaultLatched);
+        }
+        if !self.offset.done {
+            return Err(Refusal::NotCalibrated);
+        }
+        if !self.cfg.limits.bus_healthy(self.last_raw.bus.0) {
+            return Err(Refusal::BusOutOfRange);
+        }
+        // Start from rest: the loops, the compensator and the reference's phase.
+        self.current_loop.reset();
+        if let Some((_, s)) = self.pid.as_mut() {
+            *s = PidState::default();
+        }
+        if let Some((c, s)) = self.compensator.as_mut() {
+            *s = c.rest_state();
+        }
+        self.reference = Reference::new(self.reference.waveform(), self.cfg.current_loop.tick_s);
+        self.armed = true;
+        Ok(())
+    }
+
+    /// A new parameter set, validated as at boot; only while disarmed. Clears
+    /// `PARAMETERS_INVALID` when the set is good.
+    fn load(&mut self, spec: ModelSpec, params: &ActuatorParams) -> Result<(), Refusal> {
+        if self.armed {
+            return Err(Refusal::Armed);
+        }
+        // A configuration refused at boot (current loop, PID, timing) stays refused.
+        if !self.design_valid {
+            return Err(Refusal::InvalidParameters);
+        }
+        let (c, rest) = compensator_for(spec, params, self.cfg.current_loop.tick_s)
+            .map_err(|_| Refusal::InvalidParameters)?;
+        self.compensator = Some(c);
+        self.model_rest_m = rest;
+        self.faults.release(FaultCode::PARAMETERS_INVALID);
+        Ok(())
+    }
+
+    /// Boot calibration of the current zero (the bridge is off until it is done): the mean of
+    /// the first `offset_calibration_ticks` codes, refused (`CURRENT_OFFSET` latched, the nominal
+    /// zero kept) outside the stated window around the nominal mid-scale zero.
+    fn calibrate_offset(&mut self, raw: &RawSample) {
+        let o = &mut self.offset;
+        o.sum += raw.current.0 as u32;
+        o.samples += 1;
+        if o.samples < self.cfg.offset_calibration_ticks {
+            return;
+        }
+        o.done = true;
+        let code = o.sum as f32 / o.samples as f32;
+        let zero_v = code * (self.calibration.vref / ADC_FULL_SCALE as f32);
+        if (zero_v - self.cfg.calibration.current_zero_v).abs() <= self.cfg.limits.current_offset_window_v {
+            self.calibration.current_zero_v = zero_v;
+        } else {
+            self.faults.latch(FaultCode::CURRENT_OFFSET);
+        }
     }
 
     /// One control tick.
     pub fn tick(&mut self, raw: &RawSample) -> TickOutput {
-        let cal = &self.cfg.calibration;
+        self.last_raw = *raw;
+        if !self.offset.done && !self.armed {
+            self.calibrate_offset(raw);
+        }
+        let cal = &self.calibration;
         let tick_s = self.cfg.current_loop.tick_s;
         let i = cal.current(raw.current);
         let y_abs = cal.displacement(raw.displacement);
         let rest = *self.rest_um.get_or_insert(y_abs.0);
         let y = Micrometres(y_abs.0 - rest);
-        let faults = self.faults.check(raw, i, tick_s);
+        self.ticks_since_command = self.ticks_since_command.saturating_add(1);
+        if self.armed && self.ticks_since_command > self.cfg.command_timeout_ticks {
+            self.faults.latch(FaultCode::COMMAND_TIMEOUT);
+        }
+        let faults = self.faults.check(raw, i, y, tick_s);
         let seq = self.seq;
         self.seq = self.seq.wrapping_add(1);
-        let r = self.reference.advance();
-        if !faults.is_clear() {
+        if !faults.is_clear() || !self.armed {
+            // The safe state, in this very tick: any fault disarms; re-arming takes a clear
+            // and an arm command.
+            self.armed = false;
             self.current_loop.reset();
             return TickOutput {
                 duty: 0.0,
                 bridge_enabled: false,
                 frame: Frame {
                     seq,
-                    reference_um: r,
+                    reference_um: 0.0,
                     command_v: 0.0,
                     current_a: i.0,
                     displacement_um: y.0,
@@ -180,6 +363,7 @@ impl Controller {
                 },
             };
         }
+        let r = self.reference.advance();
         // Feedforward: the current the inverse model says gives the reference `preview` ticks on.
         let ahead = self.reference.peek_ahead(self.cfg.preview_ticks.saturating_sub(1));
         let i_ff = match self.compensator.as_mut() {

@@ -51,6 +51,20 @@ pub enum Waveform {
         /// DC level.
         bias: f32,
     },
+    /// bias ± amplitude with linear ramps, period 1/f (starts at bias, rising).
+    Triangle {
+        /// Frequency [Hz].
+        freq_hz: f32,
+        /// Amplitude.
+        amplitude: f32,
+        /// DC level.
+        bias: f32,
+    },
+    /// A constant level.
+    Constant {
+        /// DC level.
+        bias: f32,
+    },
 }
 
 /// cos θ and sin θ for |θ| ≤ 0.7 (Taylor to θ⁸ / θ⁹).
@@ -97,7 +111,7 @@ impl Reference {
                     bias,
                 }
             }
-            w @ Waveform::Steps { .. } => w,
+            w @ (Waveform::Steps { .. } | Waveform::Triangle { .. } | Waveform::Constant { .. }) => w,
         };
         let mut r =
             Self { wave, tick_s, ticks: 0, phasor: [(1.0, 0.0); MAX_TONES], step: [(1.0, 0.0); MAX_TONES] };
@@ -165,6 +179,13 @@ impl Reference {
                 let frac = phase - libm_floor(phase);
                 bias + if frac < 0.5 { amplitude } else { -amplitude }
             }
+            Waveform::Triangle { freq_hz, amplitude, bias } => {
+                // Phase shifted a quarter period so that the ramp starts at the bias.
+                let phase = t * freq_hz + 0.25;
+                let frac = phase - libm_floor(phase);
+                bias + amplitude * (1.0 - 4.0 * (frac - 0.5).abs())
+            }
+            Waveform::Constant { bias } => bias,
         }
     }
 
@@ -210,6 +231,7 @@ mod tests {
             Waveform::Chirp { f0_hz: 1.0, f1_hz: 500.0, duration_s: 1.0, amplitude: 10.0, bias: 5.0 },
             Waveform::Steps { freq_hz: 10.0, amplitude: 10.0, bias: 5.0 },
             Waveform::Multisine { freq_hz: 20.0, tones: 8, amplitude: 10.0, bias: 5.0 },
+            Waveform::Triangle { freq_hz: 10.0, amplitude: 10.0, bias: 5.0 },
         ] {
             let mut r = Reference::new(w, 1e-4);
             let (mut lo, mut hi) = (f32::MAX, f32::MIN);
@@ -225,5 +247,9 @@ mod tests {
         let mut r = Reference::new(Waveform::Steps { freq_hz: 10.0, amplitude: 1.0, bias: 0.0 }, 1e-4);
         assert_eq!(r.peek_ahead(600), -1.0);
         assert_eq!(r.advance(), 1.0);
+        // Triangle: bias at t = 0, the peak a quarter period on, the trough at three quarters.
+        let mut r = Reference::new(Waveform::Triangle { freq_hz: 10.0, amplitude: 2.0, bias: 1.0 }, 1e-4);
+        assert!((r.peek_ahead(250) - 3.0).abs() < 1e-4 && (r.peek_ahead(750) + 1.0).abs() < 1e-4);
+        assert!((r.advance() - 1.0).abs() < 1e-6);
     }
 }
