@@ -153,3 +153,35 @@ impl CurrentLoop {
         BridgeCommand { voltage: Volts(v), duty, saturated }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 0 → 1 A step on a coil with the one-tick PWM delay, resistance `r_ohm`, inductance
+    /// `l_h` (the design assumes 6 Ω, 6 mH); returns the current over 200 ticks.
+    fn step_on(r_ohm: f32, l_h: f32) -> Vec<f32> {
+        let mut pi = CurrentLoop::new(CurrentLoopParams::REFERENCE).unwrap();
+        let p = model_core::math::exp(-1e-4 * r_ohm / l_h);
+        let (mut i, mut loaded_v) = (0.0f32, 0.0f32);
+        (0..200)
+            .map(|_| {
+                let v = pi.step(Amps(1.0), Amps(i), Volts(24.0)).voltage.0;
+                i = p * i + (1.0 - p) / r_ohm * loaded_v;
+                loaded_v = v;
+                i
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_delay_compensation_leaves_no_steady_error_on_a_wrong_coil_model() {
+        let exact = step_on(6.0, 6e-3);
+        assert!(exact.iter().all(|&i| i <= 1.0 + 1e-4), "exact model overshoots: {exact:?}");
+        // A hot winding (+25 % R) and 20 % less inductance than designed for.
+        let off = step_on(7.5, 4.8e-3);
+        let peak = off.iter().fold(0.0f32, |m, &i| m.max(i));
+        assert!((off[199] - 1.0).abs() < 1e-3, "steady error with a wrong model: {}", off[199]);
+        assert!(peak < 1.15, "wrong model overshoots {:.1} %", (peak - 1.0) * 100.0);
+    }
+}

@@ -30,6 +30,7 @@ mod common;
 mod compare;
 mod demo;
 mod diagnose;
+mod drive;
 mod effects;
 mod fit;
 mod mechanics;
@@ -84,6 +85,9 @@ enum Command {
     /// (m ÿ + c ẏ + k y = F, 001 eq. 14–15), discretised exactly at the loop rate.
     #[command(allow_negative_numbers = true)]
     Mechanics(mechanics::MechanicsArgs),
+    /// The drive's command channel: encode a command (arm, disarm, clear, ping, reference,
+    /// load) for its UART, or decode its replies.
+    Drive(drive::DriveArgs),
 }
 
 impl Command {
@@ -96,6 +100,7 @@ impl Command {
             Command::Compare(a) => a.json,
             Command::Record(a) => a.json,
             Command::Effects(a) => a.json,
+            Command::Drive(a) => a.json(),
             Command::Demo(_) | Command::Simulate(_) | Command::Mechanics(_) => false,
         }
     }
@@ -189,5 +194,6 @@ fn run(command: Command) -> Result<()> {
         Command::Simulate(a) => simulate::run(&a),
         Command::Effects(a) => effects::run(&a),
         Command::Mechanics(a) => mechanics::run(&a),
+        Command::Drive(a) => drive::run(&a),
     }
 }
