@@ -219,8 +219,9 @@ impl FaultMonitor {
     fn bus(&mut self, bus_v: f32) -> FaultCode {
         let l = &self.limits;
         let count = |n: u16, outside: bool| if outside { n.saturating_add(1) } else { 0 };
-        self.under_ticks = count(self.under_ticks, !(bus_v >= l.min_bus_v));
-        self.over_ticks = count(self.over_ticks, !(bus_v <= l.max_bus_v));
+        let nan = bus_v.is_nan();
+        self.under_ticks = count(self.under_ticks, nan || bus_v < l.min_bus_v);
+        self.over_ticks = count(self.over_ticks, nan || bus_v > l.max_bus_v);
         let mut f = FaultCode::NONE;
         if self.under_ticks >= l.bus_qualify_ticks {
             f = f | FaultCode::BUS_UNDERVOLTAGE;
