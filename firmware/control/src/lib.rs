@@ -14,6 +14,7 @@ pub mod current;
 pub mod faults;
 pub mod pid;
 pub mod reference;
+pub mod resonant;
 pub mod sim;
 pub mod telemetry;
 pub mod tick;
@@ -26,6 +27,7 @@ use crate::current::{CurrentLoop, CurrentLoopParams};
 use crate::faults::{FaultCode, FaultLimits, FaultMonitor};
 use crate::pid::{Pid, PidParams, PidState};
 use crate::reference::{Reference, Waveform};
+use crate::resonant::{Resonant, ResonantParams};
 use crate::telemetry::Frame;
 use crate::units::{Amps, Calibration, Micrometres, Volts, ADC_FULL_SCALE};
 
@@ -51,6 +53,9 @@ pub struct ControlConfig {
     /// buys the integral back; the reference gains sit at 0.4× the integral gain that goes
     /// unstable (tuned on our simulated rig with the delay, `tests/closed_loop.rs`).
     pub pid: Option<PidParams>,
+    /// Rejection of the repeating error at a sine reference's fundamental and its harmonics;
+    /// `None`: PID only.
+    pub resonant: Option<ResonantParams>,
     /// Largest current reference [A].
     pub max_current_a: f32,
     /// Ticks without a valid command (or keep-alive) after which an armed bridge disarms.
@@ -62,7 +67,8 @@ pub struct ControlConfig {
 }
 
 impl ControlConfig {
-    /// The reference board tracking a 100 Hz sine of 12.5 µm (25 µm peak to peak) about 15 µm;
+    /// The reference board tracking a 100 Hz sine of 12.5 µm (25 µm peak to peak) about 15 µm,
+    /// with the repeating error learned at 100, 200 and 300 Hz (time constant about 1000 ticks);
     /// disarms 200 ms after the last command, averages 256 samples (25.6 ms) for the current
     /// zero, accepts references within ±50 µm of rest.
     pub const REFERENCE: ControlConfig = ControlConfig {
@@ -72,12 +78,22 @@ impl ControlConfig {
         reference: Waveform::Sine { freq_hz: 100.0, amplitude: 12.5, bias: 15.0 },
         preview_ticks: 3,
         pid: Some(PidParams { kp: 0.01, ki: 0.016, kd: 0.04, limit_a: 1.0 }),
+        resonant: Some(ResonantParams {
+            gain_a_per_um: 0.0005,
+            phase_lead_rad: [70.0 * DEGREE; 3],
+            max_freq_hz: 250.0,
+            limit_a: 1.0,
+            max_error_um: 1.0,
+        }),
         max_current_a: 3.5,
         command_timeout_ticks: 2000,
         offset_calibration_ticks: 256,
         max_reference_um: 50.0,
     };
 }
+
+/// One degree [rad].
+const DEGREE: f32 = core::f32::consts::PI / 180.0;
 
 /// Why the board last reset (read from the reset controller at boot).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -121,6 +137,7 @@ pub struct Controller {
     seq: u32,
     rest_um: Option<f32>,
     pid: Option<(Pid, PidState)>,
+    resonant: Option<Resonant>,
     ticks_since_command: u32,
     last_raw: RawSample,
 }
@@ -157,8 +174,10 @@ impl Controller {
         };
         let current_loop = CurrentLoop::new(cfg.current_loop);
         let pid = cfg.pid.map(Pid::new);
+        let resonant = cfg.resonant.map(Resonant::new);
         let design_valid = current_loop.is_ok()
             && !matches!(pid, Some(Err(_)))
+            && !matches!(resonant, Some(Err(_)))
             && cfg.command_timeout_ticks > 0
             && cfg.offset_calibration_ticks > 0
             && cfg.max_reference_um.is_finite()
@@ -168,6 +187,7 @@ impl Controller {
         }
         let current_loop = current_loop.unwrap_or(CurrentLoop::idle());
         let pid = pid.and_then(Result::ok).map(|p| (p, PidState::default()));
+        let resonant = resonant.and_then(Result::ok);
         Self {
             cfg,
             calibration: cfg.calibration,
@@ -182,6 +202,7 @@ impl Controller {
             seq: 0,
             rest_um: None,
             pid,
+            resonant,
             ticks_since_command: 0,
             last_raw: RawSample {
                 current: Default::default(),
@@ -246,6 +267,9 @@ impl Controller {
                 let max_hz = 1.0 / (6.0 * self.cfg.current_loop.tick_s);
                 r.waveform(self.cfg.max_reference_um, max_hz).map(|w| {
                     self.reference = Reference::new(w, self.cfg.current_loop.tick_s);
+                    if let Some(res) = self.resonant.as_mut() {
+                        res.reset();
+                    }
                 })
             }
             Command::LoadParameters { spec, params } => self.load(*spec, params),
@@ -282,6 +306,9 @@ impl Controller {
         }
         if let Some((c, s)) = self.compensator.as_mut() {
             *s = c.rest_state();
+        }
+        if let Some(res) = self.resonant.as_mut() {
+            res.reset();
         }
         self.reference = Reference::new(self.reference.waveform(), self.cfg.current_loop.tick_s);
         self.armed = true;
@@ -363,6 +390,7 @@ impl Controller {
                 },
             };
         }
+        let fundamental = self.reference.fundamental();
         let r = self.reference.advance();
         // Feedforward: the current the inverse model says gives the reference `preview` ticks on.
         let ahead = self.reference.peek_ahead(self.cfg.preview_ticks.saturating_sub(1));
@@ -374,8 +402,12 @@ impl Controller {
             Some((pid, s)) => pid.step(s, r - y.0),
             None => 0.0,
         };
+        let i_res = match (self.resonant.as_mut(), fundamental) {
+            (Some(res), Some((f, phasor))) if res.runs_at(f) => res.step(r - y.0, phasor),
+            _ => 0.0,
+        };
         let max_i = self.cfg.max_current_a;
-        let i_ref = (i_ff + i_pid).clamp(-max_i, max_i);
+        let i_ref = (i_ff + i_pid + i_res).clamp(-max_i, max_i);
         let cmd = self.current_loop.step(Amps(i_ref), i, raw.bus);
         TickOutput {
             duty: cmd.duty,

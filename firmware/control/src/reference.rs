@@ -138,6 +138,15 @@ impl Reference {
         self.wave
     }
 
+    /// A sine's frequency [Hz] and its phasor (cos θ, sin θ) at the current tick; `None` for the
+    /// other waveforms.
+    pub fn fundamental(&self) -> Option<(f32, (f32, f32))> {
+        match self.wave {
+            Waveform::Sine { freq_hz, .. } => Some((freq_hz, self.phasor[0])),
+            _ => None,
+        }
+    }
+
     /// The value at the current tick, then advances one tick.
     #[inline]
     pub fn advance(&mut self) -> f32 {
