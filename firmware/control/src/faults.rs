@@ -108,8 +108,9 @@ pub struct FaultLimits {
 impl FaultLimits {
     /// The reference board: 4 A trip, 2 A continuous, 4 A²s budget, 20-code margins; a probe
     /// whose span over 50 ms stays below 2 µm per ampere of a ≥ 0.3 A current swing is stuck
-    /// (the reference actuator moves about 12 µm/A about its bias; ±2 codes of noise span
-    /// 0.1 µm, a fifth of the least span a 0.3 A swing demands); bus 12–34 V with 1 V hysteresis,
+    /// (the reference actuator tracking its 25 µm sine spans 18 µm per ampere of current span
+    /// on our simulated rig, nine times the limit; ±2 codes of noise span 0.1 µm, a sixth of
+    /// the least span a 0.3 A swing demands); bus 12–34 V with 1 V hysteresis,
     /// 3 ticks (300 µs) to qualify (a 24 V supply; the 100 µF bus absorbs a 4 A coil's 48 mJ at
     /// about 31 V, below the trip, and 34 V leaves margin to 40 V parts); current zero within
     /// ±0.15 V (±0.75 A, ±186 codes) of 1.65 V.
