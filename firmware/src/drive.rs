@@ -163,9 +163,10 @@ pub struct BridgeTiming {
 
 impl BridgeTiming {
     /// Compare values of leg A and leg B for the signed duty `d` (bipolar full bridge: leg A at
-    /// (1 + d)/2 of the period, leg B at (1 − d)/2), `d` limited to ±`max_duty`.
+    /// (1 + d)/2 of the period, leg B at (1 − d)/2), `d` limited to ±`max_duty`; a duty that is
+    /// not a number gives 0 (both legs at half period).
     pub fn compare_values(&self, d: f32) -> (u16, u16) {
-        let d = d.clamp(-self.max_duty, self.max_duty);
+        let d = if d.is_nan() { 0.0 } else { d.clamp(-self.max_duty, self.max_duty) };
         let arr = self.period_ticks;
         let a = (0.5 * (1.0 + d) * arr as f32 + 0.5) as u16;
         let a = a.min(arr);

@@ -105,6 +105,134 @@ fn closed_loop(force_fail: bool) -> u32 {
     failures
 }
 
+/// The board's interrupt (`firmware::drive`) against the simulated rig, with stand-in registers:
+/// telemetry through the queue and the thread-mode encoder decodes in order with its cycle
+/// count; a break-input trip turns the outputs off in its own tick and keeps them off; one late
+/// tick is counted, three in a row latch the bridge off in the third; the compare values keep
+/// the duty inside the quiet window.
+fn drive_loop() -> u32 {
+    use core::sync::atomic::Ordering;
+    use firmware::drive::{
+        bus_code, encode_queued, quiet_window_max_duty, trip, BridgeTiming, DriveCounters, DriveLoop,
+        MemoryStage, Slot, TelemetryQueue, DEADLINE_LATCH_AFTER,
+    };
+    use gma_control::sim::{CoilActuator, Rig};
+    use gma_control::telemetry::{Decoder, MAX_ENCODED};
+    use gma_control::{ControlConfig, Controller};
+    use model_core::{ActuatorParams, ModelSpec};
+
+    static QUEUE_BREAK: Slot<TelemetryQueue> = Slot::new();
+    static QUEUE_DEADLINE: Slot<TelemetryQueue> = Slot::new();
+    static COUNTERS_BREAK: DriveCounters = DriveCounters::new();
+    static COUNTERS_DEADLINE: DriveCounters = DriveCounters::new();
+
+    let mut failures = 0;
+    let mut check = |ok: bool, what: &str| {
+        if ok {
+            hprintln!("qemu-smoke: drive loop: {}", what);
+        } else {
+            hprintln!("qemu-smoke: FAIL drive loop: {}", what);
+            failures += 1;
+        }
+    };
+    let Ok(spec) = ModelSpec::parse("ja+eddy+mech") else { return 1 };
+    let p = ActuatorParams::TERFENOL_DEMO;
+    let timing = BridgeTiming { period_ticks: 4250, max_duty: quiet_window_max_duty() };
+    let rig = || CoilActuator::new(spec, &p, 1e-4).map(|plant| Rig::new(plant, 1));
+    let (Ok(mut rig_a), Ok(mut rig_b)) = (rig(), rig()) else { return 1 };
+    // SAFETY: the only writes to these two slots.
+    #[allow(unsafe_code)]
+    let (queue_a, queue_b) =
+        unsafe { (QUEUE_BREAK.write(TelemetryQueue::new()), QUEUE_DEADLINE.write(TelemetryQueue::new())) };
+    let (producer, mut consumer) = queue_a.split();
+    let ctl = Controller::new(ControlConfig::REFERENCE, spec, &p);
+    let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS_BREAK);
+    let mut decoder = Decoder::default();
+    let mut bytes = [0u8; 8 * MAX_ENCODED];
+    let (mut decoded, mut in_order, mut timed) = (0u32, true, true);
+    let step = |drive: &mut DriveLoop<MemoryStage>, rig: &mut Rig<CoilActuator>| {
+        let raw = rig.sample();
+        drive.stage().conversions = [raw.current.0, raw.displacement.0, bus_code(raw.bus)];
+        let out = drive.on_conversion();
+        let _ = rig.apply(&out);
+        out
+    };
+    let mut enabled_before = true;
+    let mut widest = 0u16;
+    for _ in 0..300 {
+        let out = step(&mut drive, &mut rig_a);
+        enabled_before &= out.bridge_enabled && drive.stage().outputs_enabled;
+        let [a, b] = drive.stage().compare;
+        widest = widest.max(a.abs_diff(b));
+        let n = encode_queued(&mut consumer, &mut bytes);
+        for &byte in &bytes[..n] {
+            if let Some(d) = decoder.push(byte) {
+                in_order &= d.frame.seq == decoded && d.gap == 0;
+                timed &= d.tick_cycles.is_some();
+                decoded += 1;
+            }
+        }
+    }
+    check(enabled_before, "bridge enabled for 300 fault-free ticks");
+    check(
+        decoded == 300 && in_order && timed && decoder.corrupt == 0,
+        "300 telemetry records queued, encoded in thread mode, decoded in order (format 2)",
+    );
+    let window = (timing.max_duty * timing.period_ticks as f32) as u16 + 1;
+    let full = [1.0f32, -1.0, f32::INFINITY, f32::NAN, 0.0].map(|d| timing.compare_values(d));
+    let spans = full.map(|(a, b)| a.abs_diff(b));
+    hprintln!(
+        "qemu-smoke: drive loop: duty limit {} = {} of {} ticks; widest in closed loop {}",
+        timing.max_duty,
+        window,
+        timing.period_ticks,
+        widest
+    );
+    check(
+        widest <= window
+            && spans[..3].iter().all(|&s| s <= window && s + 2 >= window)
+            && spans[3] == 0
+            && spans[4] == 0,
+        "compare values: full duty and beyond stop at the quiet-window limit, NaN and 0 give equal legs",
+    );
+    drive.stage().break_flag = true;
+    let out = step(&mut drive, &mut rig_a);
+    check(!out.bridge_enabled && !drive.stage().outputs_enabled, "break input: outputs off in its own tick");
+    let mut stays_off = true;
+    for _ in 0..10 {
+        let out = step(&mut drive, &mut rig_a);
+        stays_off &= !out.bridge_enabled && !drive.stage().outputs_enabled;
+    }
+    check(
+        stays_off && COUNTERS_BREAK.trips.load(Ordering::Relaxed) & trip::BREAK_INPUT != 0,
+        "break input: latched off for the following ticks",
+    );
+
+    let (producer, _consumer) = queue_b.split();
+    let ctl = Controller::new(ControlConfig::REFERENCE, spec, &p);
+    let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS_DEADLINE);
+    for _ in 0..10 {
+        step(&mut drive, &mut rig_b);
+    }
+    drive.stage().late = true;
+    let mut on_while_counting = true;
+    for _ in 1..DEADLINE_LATCH_AFTER {
+        on_while_counting &= step(&mut drive, &mut rig_b).bridge_enabled;
+    }
+    let latched = !step(&mut drive, &mut rig_b).bridge_enabled && !drive.stage().outputs_enabled;
+    drive.stage().late = false;
+    let stays_off = !step(&mut drive, &mut rig_b).bridge_enabled;
+    check(
+        on_while_counting
+            && latched
+            && stays_off
+            && COUNTERS_DEADLINE.deadline_overruns.load(Ordering::Relaxed) == DEADLINE_LATCH_AFTER as u32
+            && COUNTERS_DEADLINE.trips.load(Ordering::Relaxed) & trip::DEADLINE != 0,
+        "deadline: late ticks counted, the bridge latched off in the 3rd late tick in a row",
+    );
+    failures
+}
+
 #[entry]
 fn main() -> ! {
     let mut buf = [0u8; 128];
@@ -138,6 +266,7 @@ fn main() -> ! {
         }
     }
     failures += closed_loop(force_fail);
+    failures += drive_loop();
     if failures == 0 {
         hprintln!("qemu-smoke: PASS");
         exit(0)
