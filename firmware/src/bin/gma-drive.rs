@@ -256,6 +256,10 @@ async fn main(spawner: Spawner) {
     pwm.set_duty(Channel::Ch2, half);
     pwm.enable(Channel::Ch1);
     pwm.enable(Channel::Ch2);
+    // Lock level 2 (writable once per reset): dead time, break configuration, idle levels,
+    // OSSI/OSSR and output polarities can no longer change until reset — a stray write cannot
+    // undo the safe state. MOE and the compare values stay writable.
+    pac::TIM1.bdtr().modify(|w| w.set_lock(pac::timer::vals::Lock::LEVEL2));
     let timing = BridgeTiming { period_ticks: period_ticks as u16, max_duty: quiet_window_max_duty() };
     info!(
         "gma-drive: PWM ARR {} at {} Hz timer clock, dead time {} ticks, duty within ±{}",
