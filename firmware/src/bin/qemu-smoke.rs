@@ -210,6 +210,32 @@ fn drive_loop() -> u32 {
         "break input: latched off for the following ticks",
     );
 
+    // Dead time: the smallest whole number of timer ticks that covers DEAD_TIME_NS.
+    let timer_hz = 170_000_000u64;
+    let ticks = firmware::drive::dead_time_ticks(timer_hz as u32) as u64;
+    let ns = |t: u64| t * 1_000_000_000 / timer_hz;
+    let dead = firmware::drive::DEAD_TIME_NS as u64;
+    check(
+        ns(ticks) >= dead && ns(ticks - 1) < dead,
+        "dead time: fewest 170 MHz ticks covering the datasheet value",
+    );
+    // Bus scaling: code → volts → code is exact over the range; 24 V within one code.
+    let lsb = firmware::drive::bus_volts(1).0;
+    let exact = (0..=4095u16).all(|c| bus_code(firmware::drive::bus_volts(c)) == c);
+    let v24 = firmware::drive::bus_volts(bus_code(gma_control::units::Volts(24.0))).0;
+    check(exact && (v24 - 24.0).abs() <= lsb, "bus voltage scaling round-trips every code");
+    // Reset cause: a watchdog wins over the pin flag every internal reset also sets.
+    use firmware::drive::ResetCause;
+    let cause = |iwdg, sft, bor, pin| ResetCause::from_flags(iwdg, false, sft, bor, pin, false);
+    check(
+        cause(true, false, false, true).is_watchdog()
+            && cause(false, false, false, true) == ResetCause::Pin
+            && cause(false, false, true, true) == ResetCause::PowerOn
+            && cause(false, true, false, true) == ResetCause::Software
+            && !cause(false, false, true, true).is_watchdog(),
+        "reset cause from RCC_CSR flags (watchdog over pin)",
+    );
+
     let (producer, _consumer) = queue_b.split();
     let ctl = Controller::new(ControlConfig::REFERENCE, spec, &p);
     let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS_DEADLINE);
