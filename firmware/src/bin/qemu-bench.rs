@@ -138,6 +138,50 @@ fn run(case: &str) -> Result<f32, &'static str> {
             }
             acc
         }
+        // The whole 10 kHz interrupt as the board runs it (firmware::drive): conversions, control
+        // tick, bridge compare values and enable, watchdog, deadline check and the telemetry
+        // record into the queue; the rig and the thread-mode encoder run outside the markers.
+        "isr" | "telemetry-encode" => {
+            use firmware::drive::{
+                bus_code, encode_queued, quiet_window_max_duty, BridgeTiming, DriveCounters, DriveLoop,
+                MemoryStage, Slot, TelemetryQueue,
+            };
+            use gma_control::sim::{CoilActuator, Rig};
+            use gma_control::telemetry::MAX_ENCODED;
+            use gma_control::{ControlConfig, Controller};
+            static QUEUE: Slot<TelemetryQueue> = Slot::new();
+            static COUNTERS: DriveCounters = DriveCounters::new();
+            let spec = ModelSpec::parse("ja+eddy+mech").map_err(|_| "bad spec")?;
+            let mut rig = Rig::new(CoilActuator::new(spec, &p, 1e-4).map_err(err)?, 1);
+            // SAFETY: the only write to QUEUE.
+            #[allow(unsafe_code)]
+            let (producer, mut consumer) = unsafe { QUEUE.write(TelemetryQueue::new()) }.split();
+            let timing = BridgeTiming { period_ticks: 4250, max_duty: quiet_window_max_duty() };
+            let ctl = Controller::new(ControlConfig::REFERENCE, spec, &p);
+            let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS);
+            let mut bytes = [0u8; MAX_ENCODED];
+            let mut acc = 0.0;
+            for _ in 0..STEPS {
+                let raw = rig.sample();
+                drive.stage().conversions = [raw.current.0, raw.displacement.0, bus_code(raw.bus)];
+                if case == "isr" {
+                    bench_start();
+                }
+                let out = drive.on_conversion();
+                if case == "isr" {
+                    bench_end();
+                } else {
+                    bench_start();
+                }
+                let n = encode_queued(black_box(&mut consumer), &mut bytes);
+                if case != "isr" {
+                    bench_end();
+                }
+                acc += black_box(out.duty) + n as f32;
+                rig.apply(&out).map_err(|_| "rig input out of range")?;
+            }
+            acc
+        }
         "arx" => {
             let arx = Arx::new(ArxParams::DAVINO_003).map_err(err)?;
             let mut s: ArxState<2, 2> = arx.steady_state(0.0).map_err(err)?;
@@ -146,7 +190,7 @@ fn run(case: &str) -> Result<f32, &'static str> {
         _ => {
             return Err(
                 "unknown case (empty, ja-substep, ja-sample-400hz, zoh, chain, chain-400hz, inverse, \
-                 inverse-400hz, preisach, ndof, arx, control-tick)",
+                 inverse-400hz, preisach, ndof, arx, control-tick, isr, telemetry-encode)",
             )
         }
     })

@@ -6,6 +6,8 @@
 //! a failure is reported.
 #![no_std]
 #![no_main]
+// `!(error <= limit)` on purpose: a NaN error must fail the check.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use cortex_m_rt::entry;
 use cortex_m_semihosting::hprintln;
@@ -105,6 +107,160 @@ fn closed_loop(force_fail: bool) -> u32 {
     failures
 }
 
+/// The board's interrupt (`firmware::drive`) against the simulated rig, with stand-in registers:
+/// telemetry through the queue and the thread-mode encoder decodes in order with its cycle
+/// count; a break-input trip turns the outputs off in its own tick and keeps them off; one late
+/// tick is counted, three in a row latch the bridge off in the third; the compare values keep
+/// the duty inside the quiet window.
+fn drive_loop() -> u32 {
+    use core::sync::atomic::Ordering;
+    use firmware::drive::{
+        bus_code, encode_queued, quiet_window_max_duty, trip, BridgeTiming, DriveCounters, DriveLoop,
+        MemoryStage, Slot, TelemetryQueue, DEADLINE_LATCH_AFTER,
+    };
+    use gma_control::sim::{CoilActuator, Rig};
+    use gma_control::telemetry::{Decoder, MAX_ENCODED};
+    use gma_control::{ControlConfig, Controller};
+    use model_core::{ActuatorParams, ModelSpec};
+
+    static QUEUE_BREAK: Slot<TelemetryQueue> = Slot::new();
+    static QUEUE_DEADLINE: Slot<TelemetryQueue> = Slot::new();
+    static COUNTERS_BREAK: DriveCounters = DriveCounters::new();
+    static COUNTERS_DEADLINE: DriveCounters = DriveCounters::new();
+
+    let mut failures = 0;
+    let mut check = |ok: bool, what: &str| {
+        if ok {
+            hprintln!("qemu-smoke: drive loop: {}", what);
+        } else {
+            hprintln!("qemu-smoke: FAIL drive loop: {}", what);
+            failures += 1;
+        }
+    };
+    let Ok(spec) = ModelSpec::parse("ja+eddy+mech") else { return 1 };
+    let p = ActuatorParams::TERFENOL_DEMO;
+    let timing = BridgeTiming { period_ticks: 4250, max_duty: quiet_window_max_duty() };
+    let rig = || CoilActuator::new(spec, &p, 1e-4).map(|plant| Rig::new(plant, 1));
+    let (Ok(mut rig_a), Ok(mut rig_b)) = (rig(), rig()) else { return 1 };
+    // SAFETY: the only writes to these two slots.
+    #[allow(unsafe_code)]
+    let (queue_a, queue_b) =
+        unsafe { (QUEUE_BREAK.write(TelemetryQueue::new()), QUEUE_DEADLINE.write(TelemetryQueue::new())) };
+    let (producer, mut consumer) = queue_a.split();
+    let ctl = Controller::new(ControlConfig::REFERENCE, spec, &p);
+    let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS_BREAK);
+    let mut decoder = Decoder::default();
+    let mut bytes = [0u8; 8 * MAX_ENCODED];
+    let (mut decoded, mut in_order, mut timed) = (0u32, true, true);
+    let step = |drive: &mut DriveLoop<MemoryStage>, rig: &mut Rig<CoilActuator>| {
+        let raw = rig.sample();
+        drive.stage().conversions = [raw.current.0, raw.displacement.0, bus_code(raw.bus)];
+        let out = drive.on_conversion();
+        let _ = rig.apply(&out);
+        out
+    };
+    let mut enabled_before = true;
+    let mut widest = 0u16;
+    for _ in 0..300 {
+        let out = step(&mut drive, &mut rig_a);
+        enabled_before &= out.bridge_enabled && drive.stage().outputs_enabled;
+        let [a, b] = drive.stage().compare;
+        widest = widest.max(a.abs_diff(b));
+        let n = encode_queued(&mut consumer, &mut bytes);
+        for &byte in &bytes[..n] {
+            if let Some(d) = decoder.push(byte) {
+                in_order &= d.frame.seq == decoded && d.gap == 0;
+                timed &= d.tick_cycles.is_some();
+                decoded += 1;
+            }
+        }
+    }
+    check(enabled_before, "bridge enabled for 300 fault-free ticks");
+    check(
+        decoded == 300 && in_order && timed && decoder.corrupt == 0,
+        "300 telemetry records queued, encoded in thread mode, decoded in order (format 2)",
+    );
+    let window = (timing.max_duty * timing.period_ticks as f32) as u16 + 1;
+    let full = [1.0f32, -1.0, f32::INFINITY, f32::NAN, 0.0].map(|d| timing.compare_values(d));
+    let spans = full.map(|(a, b)| a.abs_diff(b));
+    hprintln!(
+        "qemu-smoke: drive loop: duty limit {} = {} of {} ticks; widest in closed loop {}",
+        timing.max_duty,
+        window,
+        timing.period_ticks,
+        widest
+    );
+    check(
+        widest <= window
+            && spans[..3].iter().all(|&s| s <= window && s + 2 >= window)
+            && spans[3] == 0
+            && spans[4] == 0,
+        "compare values: full duty and beyond stop at the quiet-window limit, NaN and 0 give equal legs",
+    );
+    drive.stage().break_flag = true;
+    let out = step(&mut drive, &mut rig_a);
+    check(!out.bridge_enabled && !drive.stage().outputs_enabled, "break input: outputs off in its own tick");
+    let mut stays_off = true;
+    for _ in 0..10 {
+        let out = step(&mut drive, &mut rig_a);
+        stays_off &= !out.bridge_enabled && !drive.stage().outputs_enabled;
+    }
+    check(
+        stays_off && COUNTERS_BREAK.trips.load(Ordering::Relaxed) & trip::BREAK_INPUT != 0,
+        "break input: latched off for the following ticks",
+    );
+
+    // Dead time: the smallest whole number of timer ticks that covers DEAD_TIME_NS.
+    let timer_hz = 170_000_000u64;
+    let ticks = firmware::drive::dead_time_ticks(timer_hz as u32) as u64;
+    let ns = |t: u64| t * 1_000_000_000 / timer_hz;
+    let dead = firmware::drive::DEAD_TIME_NS as u64;
+    check(
+        ns(ticks) >= dead && ns(ticks - 1) < dead,
+        "dead time: fewest 170 MHz ticks covering the datasheet value",
+    );
+    // Bus scaling: code → volts → code is exact over the range; 24 V within one code.
+    let lsb = firmware::drive::bus_volts(1).0;
+    let exact = (0..=4095u16).all(|c| bus_code(firmware::drive::bus_volts(c)) == c);
+    let v24 = firmware::drive::bus_volts(bus_code(gma_control::units::Volts(24.0))).0;
+    check(exact && (v24 - 24.0).abs() <= lsb, "bus voltage scaling round-trips every code");
+    // Reset cause: a watchdog wins over the pin flag every internal reset also sets.
+    use firmware::drive::ResetCause;
+    let cause = |iwdg, sft, bor, pin| ResetCause::from_flags(iwdg, false, sft, bor, pin, false);
+    check(
+        cause(true, false, false, true).is_watchdog()
+            && cause(false, false, false, true) == ResetCause::Pin
+            && cause(false, false, true, true) == ResetCause::PowerOn
+            && cause(false, true, false, true) == ResetCause::Software
+            && !cause(false, false, true, true).is_watchdog(),
+        "reset cause from RCC_CSR flags (watchdog over pin)",
+    );
+
+    let (producer, _consumer) = queue_b.split();
+    let ctl = Controller::new(ControlConfig::REFERENCE, spec, &p);
+    let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS_DEADLINE);
+    for _ in 0..10 {
+        step(&mut drive, &mut rig_b);
+    }
+    drive.stage().late = true;
+    let mut on_while_counting = true;
+    for _ in 1..DEADLINE_LATCH_AFTER {
+        on_while_counting &= step(&mut drive, &mut rig_b).bridge_enabled;
+    }
+    let latched = !step(&mut drive, &mut rig_b).bridge_enabled && !drive.stage().outputs_enabled;
+    drive.stage().late = false;
+    let stays_off = !step(&mut drive, &mut rig_b).bridge_enabled;
+    check(
+        on_while_counting
+            && latched
+            && stays_off
+            && COUNTERS_DEADLINE.deadline_overruns.load(Ordering::Relaxed) == DEADLINE_LATCH_AFTER as u32
+            && COUNTERS_DEADLINE.trips.load(Ordering::Relaxed) & trip::DEADLINE != 0,
+        "deadline: late ticks counted, the bridge latched off in the 3rd late tick in a row",
+    );
+    failures
+}
+
 #[entry]
 fn main() -> ! {
     let mut buf = [0u8; 128];
@@ -138,6 +294,7 @@ fn main() -> ! {
         }
     }
     failures += closed_loop(force_fail);
+    failures += drive_loop();
     if failures == 0 {
         hprintln!("qemu-smoke: PASS");
         exit(0)
