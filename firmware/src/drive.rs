@@ -12,9 +12,12 @@ use core::cell::UnsafeCell;
 use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicU32, Ordering};
 
+use gma_control::command::{Decoder, Received, Reply, MAX_REPLY_ENCODED};
+use gma_control::current::CurrentLoopParams;
+use gma_control::faults::FaultCode;
 use gma_control::telemetry::TimedFrame;
 use gma_control::units::{AdcCode, Volts, ADC_FULL_SCALE};
-use gma_control::{Controller, RawSample, TickOutput};
+use gma_control::{ControlConfig, Controller, RawSample, TickOutput};
 use heapless::spsc::{Consumer, Producer, Queue};
 
 /// PWM carrier [Hz]: 20 kHz, above hearing; center-aligned, so the counter's update events come
@@ -82,6 +85,16 @@ pub fn bus_code(v: Volts) -> u16 {
     }
 }
 
+/// The controller's configuration on this board: the reference design with its duty limit at
+/// the bridge's quiet-window clamp, so that the current loop's anti-windup knows the clamp.
+pub const fn control_config() -> ControlConfig {
+    let r = ControlConfig::REFERENCE;
+    ControlConfig {
+        current_loop: CurrentLoopParams { max_duty: quiet_window_max_duty(), ..r.current_loop },
+        ..r
+    }
+}
+
 /// Telemetry records buffered between the interrupt and thread mode (25 ms at 10 kHz; one slot
 /// of the ring stays empty).
 pub const TELEMETRY_QUEUE: usize = 256;
@@ -113,13 +126,16 @@ pub trait PowerStage {
     fn cycle_count(&self) -> u32;
 }
 
-/// Why the firmware holds the bridge off on its own (bits; latched until reset).
+/// What the interrupt has seen since boot (bits, for the status log). Each one also latches a
+/// fault in the controller, which holds the bridge off and reports it in telemetry until a clear
+/// command finds the cause gone.
 pub mod trip {
-    /// The break input tripped (gate-driver fault pin).
+    /// The break input tripped (gate-driver fault pin): `BRIDGE_BREAK`.
     pub const BREAK_INPUT: u32 = 1 << 0;
-    /// [`super::DEADLINE_LATCH_AFTER`] consecutive ticks overran their period.
+    /// [`super::DEADLINE_LATCH_AFTER`] consecutive ticks overran their period: `MISSED_DEADLINE`.
     pub const DEADLINE: u32 = 1 << 1;
-    /// The controller asked for a duty that is not a finite number.
+    /// The controller asked for a duty that is not a finite number: `PARAMETERS_INVALID` (the
+    /// model produced it; only a new parameter set clears it).
     pub const NON_FINITE_DUTY: u32 = 1 << 2;
 }
 
@@ -130,7 +146,7 @@ pub struct DriveCounters {
     pub telemetry_dropped: AtomicU32,
     /// Ticks that overran their period.
     pub deadline_overruns: AtomicU32,
-    /// Latched [`trip`] bits.
+    /// [`trip`] bits seen since boot.
     pub trips: AtomicU32,
     /// Largest interrupt duration so far [cycles].
     pub max_tick_cycles: AtomicU32,
@@ -174,8 +190,8 @@ impl BridgeTiming {
     }
 }
 
-/// The interrupt's state: the controller, the hardware, the telemetry producer and the
-/// firmware's own trips.
+/// The interrupt's state: the controller, the hardware, the telemetry producer and what the
+/// firmware's own checks have seen.
 pub struct DriveLoop<S: PowerStage> {
     controller: Controller,
     stage: S,
@@ -203,23 +219,26 @@ impl<S: PowerStage> DriveLoop<S> {
         &mut self.controller
     }
 
-    /// The whole end-of-conversion interrupt; returns the tick's output (the bridge is enabled
-    /// only when the controller and the firmware's trips both allow it).
+    /// The whole end-of-conversion interrupt; returns the tick's output. The bridge is enabled
+    /// only when the controller allows it; the firmware's own trips latch controller faults,
+    /// shown in this tick's telemetry record.
     pub fn on_conversion(&mut self) -> TickOutput {
         let start = self.stage.cycle_count();
         let [current, displacement, bus] = self.stage.read_conversions();
-        if self.stage.take_break_flag() {
+        let break_tripped = self.stage.take_break_flag();
+        if break_tripped {
             self.trips |= trip::BREAK_INPUT;
         }
-        let raw =
-            RawSample { current: AdcCode(current), displacement: AdcCode(displacement), bus: bus_volts(bus) };
+        let raw = RawSample {
+            current: AdcCode(current),
+            displacement: AdcCode(displacement),
+            bus: bus_volts(bus),
+            break_tripped,
+        };
         let mut out = self.controller.tick(&raw);
         if !out.duty.is_finite() {
             self.trips |= trip::NON_FINITE_DUTY;
-        }
-        if self.trips != 0 {
-            out.bridge_enabled = false;
-            out.duty = 0.0;
+            self.trip_now(&mut out, FaultCode::PARAMETERS_INVALID);
         }
         let (a, b) = self.timing.compare_values(out.duty);
         self.stage.set_compare(a, b);
@@ -231,8 +250,8 @@ impl<S: PowerStage> DriveLoop<S> {
             if self.late_in_a_row >= DEADLINE_LATCH_AFTER {
                 // Off now, not at the next tick: that one is already late.
                 self.trips |= trip::DEADLINE;
+                self.trip_now(&mut out, FaultCode::MISSED_DEADLINE);
                 self.stage.set_outputs_enabled(false);
-                out.bridge_enabled = false;
             }
         } else {
             self.late_in_a_row = 0;
@@ -248,6 +267,76 @@ impl<S: PowerStage> DriveLoop<S> {
         }
         out
     }
+
+    /// Latches `fault` in the controller (it disarms) and takes this tick's output to the safe
+    /// state, its record showing the fault.
+    fn trip_now(&mut self, out: &mut TickOutput, fault: FaultCode) {
+        self.controller.latch_fault(fault);
+        out.bridge_enabled = false;
+        out.duty = 0.0;
+        out.frame.faults |= fault.0;
+    }
+}
+
+/// Replies waiting for thread mode's UART writer (one slot of the ring stays empty).
+pub const REPLY_QUEUE: usize = 8;
+/// The reply queue's type.
+pub type ReplyQueue = Queue<Reply, REPLY_QUEUE>;
+
+/// Executes one decoded frame on the controller: a command (any valid one is the keep-alive) or
+/// the refusal of an intact frame the decoder could not accept. The board calls it inside a
+/// critical section, as the interrupt shares the controller.
+pub fn execute(controller: &mut Controller, received: &Received) -> Reply {
+    match received {
+        Received::Command(tag, cmd) => controller.command(*tag, cmd),
+        Received::Refused { tag, opcode, reason } => controller.refusal(*tag, *opcode, *reason),
+    }
+}
+
+/// Thread-mode side of the command channel: the decoder (framing, CRC, version, payload; its
+/// counters say what it threw away) and the producer of the replies.
+pub struct CommandPort {
+    /// The command decoder; `corrupt` counts frames with broken COBS or CRC (no reply: their tag
+    /// cannot be trusted), `refused` intact frames refused.
+    pub decoder: Decoder,
+    replies: Producer<'static, Reply>,
+    /// Replies the queue had no room for.
+    pub replies_dropped: u32,
+}
+
+impl CommandPort {
+    /// A port whose replies go to `replies`.
+    pub fn new(replies: Producer<'static, Reply>) -> Self {
+        Self { decoder: Decoder::default(), replies, replies_dropped: 0 }
+    }
+
+    /// Received bytes, split anywhere (COBS frames ended by their 0 delimiters): each frame that
+    /// completes goes to `execute_frame` — the board's runs [`execute`] on the controller inside
+    /// a critical section — and its reply is queued. `execute_frame` returns `None` when there
+    /// is no controller to answer (before start-up).
+    pub fn on_bytes(&mut self, bytes: &[u8], mut execute_frame: impl FnMut(&Received) -> Option<Reply>) {
+        for &b in bytes {
+            let Some(received) = self.decoder.push_command(b) else { continue };
+            let Some(reply) = execute_frame(&received) else { continue };
+            if self.replies.enqueue(reply).is_err() {
+                self.replies_dropped = self.replies_dropped.wrapping_add(1);
+            }
+        }
+    }
+}
+
+/// Thread-mode side of the replies: each queued reply COBS-encoded into `out` while it has room;
+/// returns the bytes written. The telemetry writer sends them ahead of its next batch.
+pub fn encode_replies(queue: &mut Consumer<'static, Reply>, out: &mut [u8]) -> usize {
+    let mut n = 0;
+    while out.len() - n >= MAX_REPLY_ENCODED {
+        let Some(reply) = queue.dequeue() else { break };
+        let mut frame = [0u8; MAX_REPLY_ENCODED];
+        let len = reply.encode(&mut frame);
+        out[n..n + len].copy_from_slice(&frame[..len]);
+        n += len;
+    }
+    n
 }
 
 /// Thread-mode side of the telemetry: COBS frames (format 2) of the queued records appended to
@@ -348,60 +437,5 @@ impl<S: PowerStage> DriveLoop<S> {
     /// The power stage (the QEMU binaries read and set its stand-in registers).
     pub fn stage(&mut self) -> &mut S {
         &mut self.stage
-    }
-}
-
-/// Why the chip last reset (RCC_CSR flags, read and cleared at boot). A watchdog reset means the
-/// loop stalled: the controller must boot into a latched fault, not re-arm.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "board", derive(defmt::Format))]
-pub enum ResetCause {
-    /// The independent watchdog expired (a stalled loop).
-    IndependentWatchdog,
-    /// The window watchdog expired.
-    WindowWatchdog,
-    /// A software reset (SYSRESETREQ).
-    Software,
-    /// An illegal low-power mode entry.
-    LowPower,
-    /// Power on or brown-out.
-    PowerOn,
-    /// The NRST pin (reset button, debugger).
-    Pin,
-    /// No flag set (flags cleared without a reset since).
-    Unknown,
-}
-
-impl ResetCause {
-    /// The cause from the RCC_CSR flags. Every internal reset also pulls NRST low, so PINRSTF
-    /// comes with all of them and counts only alone; a watchdog wins over everything else.
-    pub fn from_flags(
-        iwdg: bool,
-        wwdg: bool,
-        software: bool,
-        brown_out: bool,
-        pin: bool,
-        low_power: bool,
-    ) -> Self {
-        if iwdg {
-            Self::IndependentWatchdog
-        } else if wwdg {
-            Self::WindowWatchdog
-        } else if low_power {
-            Self::LowPower
-        } else if software {
-            Self::Software
-        } else if brown_out {
-            Self::PowerOn
-        } else if pin {
-            Self::Pin
-        } else {
-            Self::Unknown
-        }
-    }
-
-    /// Whether the reset was a watchdog's (a latched fault at boot).
-    pub fn is_watchdog(self) -> bool {
-        matches!(self, Self::IndependentWatchdog | Self::WindowWatchdog)
     }
 }

@@ -17,12 +17,6 @@
 //! u16 LE, armed u8`, framed the same way. A frame whose COBS or CRC is broken gets no reply
 //! (its tag cannot be trusted); it is counted. Numbers are little-endian.
 
-use model_core::amplifier::{FirstOrderAmpParams, SecondOrderAmpParams};
-use model_core::chain::ModalMechanics;
-use model_core::field::CoilField;
-use model_core::magnetization::{AnhystereticParams, JaParams, LinearMagnetization, PreisachParams};
-use model_core::magnetostriction::QuadraticParams;
-use model_core::slow::{AftereffectParams, ThermalParams};
 use model_core::{ActuatorParams, ModelSpec};
 
 use crate::reference::Waveform;
@@ -109,71 +103,6 @@ pub enum Command {
     },
 }
 
-/// The parameter set on the wire: every field in declaration order, the optional second-order
-/// amplifier always with its presence tag. `ActuatorParams`' own serde form omits an absent one
-/// (right for parameter files), which a format without field names such as postcard cannot
-/// skip on reading.
-type WireParams = (
-    f32,
-    FirstOrderAmpParams,
-    Option<SecondOrderAmpParams>,
-    CoilField,
-    f32,
-    LinearMagnetization,
-    AnhystereticParams,
-    JaParams,
-    PreisachParams,
-    QuadraticParams,
-    f32,
-    ModalMechanics,
-    AftereffectParams,
-    ThermalParams,
-    u16,
-);
-
-fn to_wire(p: &ActuatorParams) -> WireParams {
-    (
-        p.dt_s,
-        p.amp,
-        p.amp_second_order,
-        p.coil,
-        p.eddy_tau_s,
-        p.linear,
-        p.anhysteretic,
-        p.ja,
-        p.preisach,
-        p.magnetostriction,
-        p.rod_length_m,
-        p.mech,
-        p.aftereffect,
-        p.thermal,
-        p.delay_samples,
-    )
-}
-
-fn from_wire(w: WireParams) -> ActuatorParams {
-    let (dt_s, amp, amp_second_order, coil, eddy_tau_s, linear, anhysteretic, ja, preisach, magnetostriction) =
-        (w.0, w.1, w.2, w.3, w.4, w.5, w.6, w.7, w.8, w.9);
-    let (rod_length_m, mech, aftereffect, thermal, delay_samples) = (w.10, w.11, w.12, w.13, w.14);
-    ActuatorParams {
-        dt_s,
-        amp,
-        amp_second_order,
-        coil,
-        eddy_tau_s,
-        linear,
-        anhysteretic,
-        ja,
-        preisach,
-        magnetostriction,
-        rod_length_m,
-        mech,
-        aftereffect,
-        thermal,
-        delay_samples,
-    }
-}
-
 const PING: u8 = 0x01;
 const ARM: u8 = 0x02;
 const DISARM: u8 = 0x03;
@@ -217,9 +146,7 @@ impl Command {
                 raw[4..4 + text.len()].copy_from_slice(text.as_bytes());
                 n = 4 + text.len();
                 let end = MAX_RAW - 2;
-                n += postcard::to_slice(&to_wire(params), &mut raw[n..end])
-                    .map_err(|_| Refusal::Malformed)?
-                    .len();
+                n += postcard::to_slice(params, &mut raw[n..end]).map_err(|_| Refusal::Malformed)?.len();
             }
             _ => {}
         }
@@ -257,12 +184,12 @@ impl Command {
                     .ok()
                     .and_then(|t| ModelSpec::parse(t).ok())
                     .ok_or(Refusal::InvalidParameters)?;
-                let (params, tail) =
-                    postcard::take_from_bytes::<WireParams>(rest).map_err(|_| Refusal::InvalidParameters)?;
+                let (params, tail) = postcard::take_from_bytes::<ActuatorParams>(rest)
+                    .map_err(|_| Refusal::InvalidParameters)?;
                 if !tail.is_empty() {
                     return Err(Refusal::Malformed);
                 }
-                Ok(Command::LoadParameters { spec, params: from_wire(params) })
+                Ok(Command::LoadParameters { spec, params })
             }
             SET_REFERENCE | LOAD_PARAMETERS => Err(Refusal::Malformed),
             _ => Err(Refusal::UnknownCommand),

@@ -34,6 +34,9 @@ impl FaultCode {
     pub const COMMAND_TIMEOUT: FaultCode = FaultCode(1 << 10);
     /// The timer's break input switched the bridge off in hardware (gate driver or comparator).
     pub const BRIDGE_BREAK: FaultCode = FaultCode(1 << 11);
+    /// The firmware saw consecutive ticks overrun their period (the next conversion already
+    /// done when the interrupt ended): the loop no longer runs at its rate.
+    pub const MISSED_DEADLINE: FaultCode = FaultCode(1 << 12);
 
     /// No fault.
     pub const NONE: FaultCode = FaultCode(0);
@@ -50,7 +53,7 @@ impl FaultCode {
 
     /// Names of the set bits, for logs.
     pub fn names(self) -> impl Iterator<Item = &'static str> {
-        const NAMES: [&str; 12] = [
+        const NAMES: [&str; 13] = [
             "overcurrent",
             "coil_i2t",
             "current_sensor_range",
@@ -63,6 +66,7 @@ impl FaultCode {
             "watchdog_reset",
             "command_timeout",
             "bridge_break",
+            "missed_deadline",
         ];
         (0..NAMES.len()).filter(move |b| self.0 & (1 << b) != 0).map(|b| NAMES[b])
     }

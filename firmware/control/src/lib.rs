@@ -109,6 +109,39 @@ pub enum ResetCause {
     /// The independent or window watchdog: the firmware hung. Boots with `WATCHDOG_RESET`
     /// latched.
     Watchdog,
+    /// An illegal low-power mode entry (a firmware error, but not a hang).
+    LowPower,
+    /// No reset flag set (flags cleared without a reset since).
+    Unknown,
+}
+
+impl ResetCause {
+    /// The cause from the STM32 reset controller's flags (RCC_CSR: IWDGRSTF, WWDGRSTF, SFTRSTF,
+    /// BORRSTF, PINRSTF, LPWRRSTF). Every internal reset also pulls NRST low, so the pin flag
+    /// comes with all of them and counts only alone; a watchdog wins over everything else.
+    pub fn from_rcc_flags(
+        iwdg: bool,
+        wwdg: bool,
+        software: bool,
+        brown_out: bool,
+        pin: bool,
+        low_power: bool,
+    ) -> Self {
+        if iwdg || wwdg {
+            Self::Watchdog
+        } else if low_power {
+            Self::LowPower
+        } else if software {
+            Self::Software
+        } else if brown_out {
+            // BORRSTF is set by power-on as well as by a brown-out; the two cannot be told apart.
+            Self::PowerOn
+        } else if pin {
+            Self::Pin
+        } else {
+            Self::Unknown
+        }
+    }
 }
 
 /// Boot-time current-zero calibration: samples summed with the bridge off.
@@ -220,6 +253,15 @@ impl Controller {
         c.compensator = None;
         c.faults.latch(FaultCode::PARAMETERS_INVALID);
         c
+    }
+
+    /// Latches a fault the firmware detected outside the tick (a missed deadline): the bridge goes
+    /// off at the next tick at the latest, and it stays latched until a clear command.
+    pub fn latch_fault(&mut self, f: FaultCode) {
+        self.faults.latch(f);
+        if !f.is_clear() {
+            self.armed = false;
+        }
     }
 
     /// Latched faults.

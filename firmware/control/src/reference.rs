@@ -198,8 +198,18 @@ impl Reference {
         }
     }
 
-    /// The value `n` ticks ahead without advancing (for feedforward preview).
+    /// The value `n` ticks ahead without advancing (for feedforward preview). A sine rotates its
+    /// phasor `n` steps ahead (a few multiplications every tick, where copying the generator
+    /// costs more than the rest of the reference); the other waveforms step a copy.
     pub fn peek_ahead(&self, n: u32) -> f32 {
+        if let Waveform::Sine { amplitude, bias, .. } = self.wave {
+            let w = self.step[0];
+            let (mut c, mut s) = self.phasor[0];
+            for _ in 0..n {
+                (c, s) = (c * w.0 - s * w.1, c * w.1 + s * w.0);
+            }
+            return bias + amplitude * s;
+        }
         let mut copy = *self;
         for _ in 0..n {
             copy.advance();
@@ -220,6 +230,20 @@ fn libm_floor(x: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_sine_peeked_ahead_is_the_value_stepping_gives() {
+        let mut r = Reference::new(Waveform::Sine { freq_hz: 230.0, amplitude: 12.5, bias: 20.0 }, 1e-4);
+        for _ in 0..10_000 {
+            let mut stepped = r;
+            for _ in 0..3 {
+                stepped.advance();
+            }
+            let (peeked, want) = (r.peek_ahead(3), stepped.advance());
+            assert!((peeked - want).abs() < 1e-4, "peeked {peeked}, stepped {want}");
+            r.advance();
+        }
+    }
 
     #[test]
     fn sine_matches_the_closed_form_over_many_periods() {

@@ -38,13 +38,15 @@ use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, dma, interrupt, pac, peripherals, Config};
 use embassy_time::{Instant, Timer};
 use firmware::drive::{
-    dead_time_ticks, encode_queued, quiet_window_max_duty, BridgeTiming, DriveCounters, DriveLoop,
-    PowerStage, ResetCause, Slot, TelemetryQueue, PWM_HZ, TELEMETRY_QUEUE,
+    control_config, dead_time_ticks, encode_queued, encode_replies, execute, quiet_window_max_duty,
+    BridgeTiming, CommandPort, DriveCounters, DriveLoop, PowerStage, ReplyQueue, Slot, TelemetryQueue,
+    PWM_HZ, TELEMETRY_QUEUE,
 };
 use firmware::drive_params::{MODEL_SPEC, PARAMS_POSTCARD};
+use gma_control::command::{Reply, MAX_REPLY_ENCODED};
 use gma_control::telemetry::{TimedFrame, MAX_ENCODED};
-use gma_control::{ControlConfig, Controller};
-use heapless::spsc::Consumer;
+use gma_control::{Controller, ResetCause};
+use heapless::spsc::{Consumer, Producer};
 use {defmt_rtt as _, embassy_stm32 as _};
 
 bind_interrupts!(struct Irqs {
@@ -66,9 +68,12 @@ static TELEMETRY: Slot<TelemetryQueue> = Slot::new();
 static COUNTERS: DriveCounters = DriveCounters::new();
 /// UART RX ring for command bytes (DMA, circular).
 static COMMAND_RING: Slot<[u8; 256]> = Slot::new();
+/// Command replies from the command task to the UART writer.
+static REPLIES: Slot<ReplyQueue> = Slot::new();
 
-/// Encoded telemetry per DMA transfer: up to 8 frames (0.6 ms of UART time at 4 Mbaud).
-const TX_BATCH: usize = 8 * MAX_ENCODED;
+/// Encoded telemetry per DMA transfer: up to 8 frames (0.6 ms of UART time at 4 Mbaud), after
+/// the replies waiting then.
+const TX_BATCH: usize = 8 * MAX_ENCODED + firmware::drive::REPLY_QUEUE * MAX_REPLY_ENCODED;
 
 /// Clears MOE straight in TIM1's BDTR: works with nothing else initialised (panic, HardFault).
 fn bridge_off() {
@@ -172,7 +177,7 @@ fn clocks() -> Config {
 fn take_reset_cause() -> ResetCause {
     let csr = pac::RCC.csr().read();
     pac::RCC.csr().modify(|w| w.set_rmvf(true));
-    ResetCause::from_flags(
+    ResetCause::from_rcc_flags(
         csr.iwdgrstf(),
         csr.wwdgrstf(),
         csr.sftrstf(),
@@ -183,13 +188,14 @@ fn take_reset_cause() -> ResetCause {
 }
 
 /// The controller for the compiled-in parameter set (`GMA_PARAMS`, `GMA_MODEL` at build time);
-/// a set that does not decode or validate leaves the bridge off with PARAMETERS_INVALID.
-fn controller() -> Controller {
+/// a set that does not decode or validate leaves the bridge off with PARAMETERS_INVALID; a
+/// watchdog reset boots with WATCHDOG_RESET latched.
+fn controller(reset: ResetCause) -> Controller {
     let spec = model_core::ModelSpec::parse(MODEL_SPEC);
     let params = postcard::from_bytes::<model_core::ActuatorParams>(PARAMS_POSTCARD);
     match (spec, params) {
-        (Ok(spec), Ok(params)) => Controller::new(ControlConfig::REFERENCE, spec, &params),
-        _ => Controller::refused(ControlConfig::REFERENCE),
+        (Ok(spec), Ok(params)) => Controller::new(control_config(), spec, &params, reset),
+        _ => Controller::refused(control_config(), reset),
     }
 }
 
@@ -201,7 +207,11 @@ async fn main(spawner: Spawner) {
     pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
     let reset_cause = take_reset_cause();
     let p = embassy_stm32::init(clocks());
-    info!("gma-drive: SYSCLK 170 MHz, model `{}`, reset by {}", MODEL_SPEC, reset_cause);
+    info!(
+        "gma-drive: SYSCLK 170 MHz, model `{}`, reset by {}",
+        MODEL_SPEC,
+        defmt::Debug2Format(&reset_cause)
+    );
 
     // Full bridge: TIM1 CH1/CH1N (PA8/PA7) one leg, CH2/CH2N (PA9/PB0) the other. The driver
     // sets MOE on construction, before any channel is enabled; it is cleared at once.
@@ -299,10 +309,13 @@ async fn main(spawner: Spawner) {
     let ring = unsafe { COMMAND_RING.write([0; 256]) };
     let rx = rx.into_ring_buffered(ring);
 
-    let controller = controller();
+    let controller = controller(reset_cause);
     if !controller.faults().is_clear() {
-        warn!("gma-drive: parameter set refused, bridge stays off (faults {:#x})", controller.faults().0);
+        warn!("gma-drive: booted with faults latched {:#x}; bridge off until cleared", controller.faults().0);
     }
+    // SAFETY: the only write to REPLIES.
+    #[allow(unsafe_code)]
+    let (reply_producer, reply_consumer) = unsafe { REPLIES.write(ReplyQueue::new()) }.split();
     // SAFETY: the only write to TELEMETRY.
     #[allow(unsafe_code)]
     let (producer, consumer) = unsafe { TELEMETRY.write(TelemetryQueue::new()) }.split();
@@ -324,23 +337,25 @@ async fn main(spawner: Spawner) {
         NVIC::unmask(pac::Interrupt::ADC1_2);
     }
 
-    match command_rx(rx) {
+    match command_rx(rx, reply_producer) {
         Ok(task) => spawner.spawn(task),
         Err(_) => defmt::panic!("command task not spawned"),
     }
-    telemetry_tx(tx, consumer).await
+    telemetry_tx(tx, consumer, reply_consumer).await
 }
 
-/// Thread mode: encodes the queued records (format 2, CRC-16 + COBS) and sends them by DMA;
-/// logs the drive's counters once a second when something is wrong.
+/// Thread mode: sends the waiting command replies, then encodes the queued records (format 2,
+/// CRC-16 + COBS), by DMA; logs the drive's counters once a second when something is wrong.
 async fn telemetry_tx(
     mut tx: UartTx<'static, embassy_stm32::mode::Async>,
     mut queue: Consumer<'static, TimedFrame>,
+    mut replies: Consumer<'static, Reply>,
 ) -> ! {
     let mut batch = [0u8; TX_BATCH];
     let mut last_report = Instant::now();
     loop {
-        let n = encode_queued(&mut queue, &mut batch);
+        let n = encode_replies(&mut replies, &mut batch);
+        let n = n + encode_queued(&mut queue, &mut batch[n..]);
         if n > 0 {
             if tx.write(&batch[..n]).await.is_err() {
                 warn!("gma-drive: telemetry UART error");
@@ -367,48 +382,40 @@ async fn telemetry_tx(
     }
 }
 
-/// Thread mode: command bytes from the DMA ring, split at the COBS delimiter into frames for the
-/// command decoder (a frame that overflows the buffer is dropped whole).
+/// Thread mode: command bytes from the DMA ring into the command decoder (gma-control's: COBS
+/// framing, CRC, version, payload); each frame it completes is executed on the controller inside
+/// a critical section, and the reply queued for the UART writer. Corrupt frames are counted by
+/// the decoder and logged.
 #[embassy_executor::task]
-async fn command_rx(mut rx: RingBufferedUartRx<'static>) {
-    let mut frame = [0u8; 64];
-    let mut len = 0usize;
-    let mut overflow = false;
+async fn command_rx(mut rx: RingBufferedUartRx<'static>, replies: Producer<'static, Reply>) {
+    let mut port = CommandPort::new(replies);
     let mut chunk = [0u8; 32];
     loop {
         let n = match rx.read(&mut chunk).await {
             Ok(n) => n,
             Err(e) => {
-                // Overrun or framing error: what was being assembled is unreliable.
+                // Overrun or framing error: the frame being assembled fails its CRC and is
+                // counted as corrupt; the decoder resynchronises at the next delimiter.
                 warn!("gma-drive: command UART {}", e);
-                len = 0;
-                overflow = false;
                 continue;
             }
         };
-        for &b in &chunk[..n] {
-            if b != 0 {
-                if len < frame.len() {
-                    frame[len] = b;
-                    len += 1;
-                } else {
-                    overflow = true;
-                }
-                continue;
-            }
-            if len > 0 && !overflow {
-                on_command_frame(&frame[..len]);
-            }
-            len = 0;
-            overflow = false;
+        let corrupt = port.decoder.corrupt;
+        on_command_bytes(&mut port, &chunk[..n]);
+        if port.decoder.corrupt != corrupt {
+            warn!("gma-drive: corrupt command frames {}", port.decoder.corrupt);
         }
     }
 }
 
-/// One COBS-framed command (delimiter removed). The command decoder of gma-control (issue 14)
-/// plugs in here; until then a frame is only reported.
-fn on_command_frame(frame: &[u8]) {
-    info!("gma-drive: command frame of {} bytes (no decoder in this build)", frame.len());
+/// Received command bytes: every complete frame goes through the decoder to the controller,
+/// inside a critical section as the interrupt shares it.
+fn on_command_bytes(port: &mut CommandPort, bytes: &[u8]) {
+    port.on_bytes(bytes, |received| {
+        critical_section::with(|cs| {
+            DRIVE.borrow_ref_mut(cs).as_mut().map(|drive| execute(drive.controller(), received))
+        })
+    });
 }
 
 /// The 10 kHz end-of-conversion interrupt: the whole tick is `firmware::drive`'s.
