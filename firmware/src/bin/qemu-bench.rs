@@ -160,7 +160,7 @@ fn run(case: &str) -> Result<f32, &'static str> {
         // telemetry record into the queue. Booted through the offset calibration and armed by an
         // encoded command frame through the command port; the rig, the keep-alive and the
         // thread-mode encoder run outside the markers.
-        "isr" | "telemetry-encode" => {
+        "isr" | "isr-square" | "telemetry-encode" => {
             use firmware::drive::{
                 bus_code, control_config, encode_queued, execute, quiet_window_max_duty, BridgeTiming,
                 CommandPort, DriveCounters, DriveLoop, MemoryStage, ReplyQueue, Slot, TelemetryQueue,
@@ -205,23 +205,34 @@ fn run(case: &str) -> Result<f32, &'static str> {
             }
             while consumer.dequeue().is_some() {}
             send(&mut drive, &Command::Arm)?;
+            let in_isr = case != "telemetry-encode";
+            if case == "isr-square" {
+                // 25 µm steps every 5 ms: the compensator's worst ticks (many J–A sub-steps).
+                let square = command::ReferenceCommand {
+                    shape: command::Shape::Square,
+                    amplitude_um: 12.5,
+                    bias_um: 15.0,
+                    freq_hz: 100.0,
+                };
+                send(&mut drive, &Command::SetReference(square))?;
+            }
             let mut acc = 0.0;
             for n in 0..STEPS {
                 if n % KEEP_ALIVE_TICKS == 0 {
                     send(&mut drive, &Command::Ping)?;
                 }
                 sample(&mut drive, &mut rig);
-                if case == "isr" {
+                if in_isr {
                     bench_start();
                 }
                 let out = drive.on_conversion();
-                if case == "isr" {
+                if in_isr {
                     bench_end();
                 } else {
                     bench_start();
                 }
                 let n = encode_queued(black_box(&mut consumer), &mut bytes);
-                if case != "isr" {
+                if !in_isr {
                     bench_end();
                 }
                 if !out.bridge_enabled {
@@ -240,7 +251,7 @@ fn run(case: &str) -> Result<f32, &'static str> {
         _ => {
             return Err(
                 "unknown case (empty, ja-substep, ja-sample-400hz, zoh, chain, chain-400hz, inverse, \
-                 inverse-400hz, preisach, ndof, arx, control-tick, isr, telemetry-encode)",
+                 inverse-400hz, preisach, ndof, arx, control-tick, isr, isr-square, telemetry-encode)",
             )
         }
     })
