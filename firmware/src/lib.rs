@@ -2,6 +2,7 @@
 //! pieces its QEMU smoke test and benches share.
 #![no_std]
 
+pub mod drive;
 #[cfg(feature = "qemu")]
 pub mod semihosting;
 

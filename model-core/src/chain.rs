@@ -71,8 +71,10 @@ pub struct ActuatorParams {
     /// `amplifier_dynamics`: first-order amplifier (000 eq. 19).
     pub amp: FirstOrderAmpParams,
     /// `amplifier_dynamics` with 002's second-order amplifier instead of the first-order one,
-    /// when set (omit it in parameter files to keep the first-order model).
-    #[cfg_attr(feature = "serde", serde(default, skip_serializing_if = "Option::is_none"))]
+    /// when set (omit it in parameter files to keep the first-order model). Always serialised
+    /// (TOML leaves a `None` field out by itself): postcard, which the firmware embeds the set
+    /// in, has no field names and cannot skip a field on reading.
+    #[cfg_attr(feature = "serde", serde(default))]
     pub amp_second_order: Option<SecondOrderAmpParams>,
     /// Coil field gain and bias.
     pub coil: CoilField,

@@ -51,6 +51,20 @@ pub enum Waveform {
         /// DC level.
         bias: f32,
     },
+    /// bias ± amplitude with linear ramps, period 1/f (starts at bias, rising).
+    Triangle {
+        /// Frequency [Hz].
+        freq_hz: f32,
+        /// Amplitude.
+        amplitude: f32,
+        /// DC level.
+        bias: f32,
+    },
+    /// A constant level.
+    Constant {
+        /// DC level.
+        bias: f32,
+    },
 }
 
 /// cos θ and sin θ for |θ| ≤ 0.7 (Taylor to θ⁸ / θ⁹).
@@ -97,7 +111,7 @@ impl Reference {
                     bias,
                 }
             }
-            w @ Waveform::Steps { .. } => w,
+            w @ (Waveform::Steps { .. } | Waveform::Triangle { .. } | Waveform::Constant { .. }) => w,
         };
         let mut r =
             Self { wave, tick_s, ticks: 0, phasor: [(1.0, 0.0); MAX_TONES], step: [(1.0, 0.0); MAX_TONES] };
@@ -122,6 +136,15 @@ impl Reference {
     /// The waveform.
     pub fn waveform(&self) -> Waveform {
         self.wave
+    }
+
+    /// A sine's frequency [Hz] and its phasor (cos θ, sin θ) at the current tick; `None` for the
+    /// other waveforms.
+    pub fn fundamental(&self) -> Option<(f32, (f32, f32))> {
+        match self.wave {
+            Waveform::Sine { freq_hz, .. } => Some((freq_hz, self.phasor[0])),
+            _ => None,
+        }
     }
 
     /// The value at the current tick, then advances one tick.
@@ -165,11 +188,28 @@ impl Reference {
                 let frac = phase - libm_floor(phase);
                 bias + if frac < 0.5 { amplitude } else { -amplitude }
             }
+            Waveform::Triangle { freq_hz, amplitude, bias } => {
+                // Phase shifted a quarter period so that the ramp starts at the bias.
+                let phase = t * freq_hz + 0.25;
+                let frac = phase - libm_floor(phase);
+                bias + amplitude * (1.0 - 4.0 * (frac - 0.5).abs())
+            }
+            Waveform::Constant { bias } => bias,
         }
     }
 
-    /// The value `n` ticks ahead without advancing (for feedforward preview).
+    /// The value `n` ticks ahead without advancing (for feedforward preview). A sine rotates its
+    /// phasor `n` steps ahead (a few multiplications every tick, where copying the generator
+    /// costs more than the rest of the reference); the other waveforms step a copy.
     pub fn peek_ahead(&self, n: u32) -> f32 {
+        if let Waveform::Sine { amplitude, bias, .. } = self.wave {
+            let w = self.step[0];
+            let (mut c, mut s) = self.phasor[0];
+            for _ in 0..n {
+                (c, s) = (c * w.0 - s * w.1, c * w.1 + s * w.0);
+            }
+            return bias + amplitude * s;
+        }
         let mut copy = *self;
         for _ in 0..n {
             copy.advance();
@@ -192,6 +232,20 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_sine_peeked_ahead_is_the_value_stepping_gives() {
+        let mut r = Reference::new(Waveform::Sine { freq_hz: 230.0, amplitude: 12.5, bias: 20.0 }, 1e-4);
+        for _ in 0..10_000 {
+            let mut stepped = r;
+            for _ in 0..3 {
+                stepped.advance();
+            }
+            let (peeked, want) = (r.peek_ahead(3), stepped.advance());
+            assert!((peeked - want).abs() < 1e-4, "peeked {peeked}, stepped {want}");
+            r.advance();
+        }
+    }
+
+    #[test]
     fn sine_matches_the_closed_form_over_many_periods() {
         let mut r = Reference::new(Waveform::Sine { freq_hz: 100.0, amplitude: 12.5, bias: 20.0 }, 1e-4);
         let mut worst = 0.0f64;
@@ -210,6 +264,7 @@ mod tests {
             Waveform::Chirp { f0_hz: 1.0, f1_hz: 500.0, duration_s: 1.0, amplitude: 10.0, bias: 5.0 },
             Waveform::Steps { freq_hz: 10.0, amplitude: 10.0, bias: 5.0 },
             Waveform::Multisine { freq_hz: 20.0, tones: 8, amplitude: 10.0, bias: 5.0 },
+            Waveform::Triangle { freq_hz: 10.0, amplitude: 10.0, bias: 5.0 },
         ] {
             let mut r = Reference::new(w, 1e-4);
             let (mut lo, mut hi) = (f32::MAX, f32::MIN);
@@ -225,5 +280,9 @@ mod tests {
         let mut r = Reference::new(Waveform::Steps { freq_hz: 10.0, amplitude: 1.0, bias: 0.0 }, 1e-4);
         assert_eq!(r.peek_ahead(600), -1.0);
         assert_eq!(r.advance(), 1.0);
+        // Triangle: bias at t = 0, the peak a quarter period on, the trough at three quarters.
+        let mut r = Reference::new(Waveform::Triangle { freq_hz: 10.0, amplitude: 2.0, bias: 1.0 }, 1e-4);
+        assert!((r.peek_ahead(250) - 3.0).abs() < 1e-4 && (r.peek_ahead(750) + 1.0).abs() < 1e-4);
+        assert!((r.advance() - 1.0).abs() < 1e-6);
     }
 }

@@ -1,7 +1,15 @@
 //! A SIMULATED drive rig for closed-loop tests on the host and under QEMU: the board's side —
 //! full bridge, bus, analog front end (calibration, 12-bit codes) — around a [`Plant`] (coil and
 //! actuator), with faults injected at chosen ticks: what the sensors and the power stage do when
-//! something breaks. [`CoilActuator`] is the no_std plant; the workbench (host-sim) puts its
+//! something breaks.
+//!
+//! The board's timing: the ADC is triggered at the centre of each PWM period, so one conversion
+//! sees the period-mean coil current (an averaged bridge model has no ripple to alias); the tick
+//! computes during that period and writes the compare registers, which load at the next update
+//! (preload + repetition counter). The duty computed from sample n is therefore across the coil
+//! from trigger n + 1 to n + 2: [`Rig::apply`] holds the previous tick's duty for this period.
+//! Switching the bridge off (MOE cleared by software or the break input) is not preloaded: it
+//! acts at once. The bus voltage goes through a divider into a 12-bit channel. [`CoilActuator`] is the no_std plant; the workbench (host-sim) puts its
 //! plant simulator in the same rig.
 //!
 //! The rig's analog side is `f64`, the workbench plant's precision; [`CoilActuator`] rounds to
@@ -10,7 +18,7 @@
 use model_core::{Actuator, ActuatorParams, ActuatorState, Effect, ModelSpec, ParamError, StepError};
 
 use crate::tick::{RawSample, TickOutput};
-use crate::units::{AdcCode, Amps, Calibration, Micrometres, Volts};
+use crate::units::{AdcCode, Amps, Calibration, Micrometres, Volts, ADC_FULL_SCALE};
 
 /// Most faults a rig holds in its schedule.
 pub const MAX_INJECTIONS: usize = 8;
@@ -74,6 +82,9 @@ pub enum Fault {
     /// A gate-drive fault holds the bridge at full positive voltage while it is enabled (the
     /// master output enable still switches it off).
     BridgeStuckOn,
+    /// The gate driver's fault pin (or the over-current comparator) pulls the timer's break
+    /// input: the hardware switches the outputs off by itself, and the tick reads the break flag.
+    GateDriverFault,
 }
 
 /// A fault active for ticks `from..from + ticks`.
@@ -101,27 +112,37 @@ pub struct Rig<P> {
     pub calibration: Calibration,
     /// Nominal bus voltage [V].
     pub bus_v: f64,
+    /// Bus voltage at the bus channel's full-scale code [V] (the divider ratio × ADC reference).
+    pub bus_full_scale_v: f64,
+    /// Conversion noise on the current and displacement channels: uniform in ± this many codes.
+    pub adc_noise_codes: u16,
     /// Faults to inject.
     pub injections: heapless::Vec<Injection, MAX_INJECTIONS>,
     tick: u64,
     rest_um: f64,
     frozen: Option<AdcCode>,
     noise: Noise,
+    /// The duty loaded into the compare registers at the last update (across the coil now).
+    loaded_duty: f32,
 }
 
 impl<P: Plant> Rig<P> {
-    /// `plant` at rest; the probe reads 20 µm there, the bus is 24 V. `seed` fixes the noise.
+    /// `plant` at rest; the probe reads 20 µm there, the bus is 24 V through a 1:16 divider
+    /// (52.8 V full scale, 12.9 mV per code), no conversion noise. `seed` fixes the noise.
     pub fn new(plant: P, seed: u64) -> Self {
         let rest_um = plant.displacement_um();
         Self {
             plant,
             calibration: Calibration::REFERENCE_BOARD,
             bus_v: 24.0,
+            bus_full_scale_v: 52.8,
+            adc_noise_codes: 0,
             injections: heapless::Vec::new(),
             tick: 0,
             rest_um,
             frozen: None,
             noise: Noise(seed),
+            loaded_duty: 0.0,
         }
     }
 
@@ -151,7 +172,17 @@ impl<P: Plant> Rig<P> {
             .fold(self.bus_v, f64::min)
     }
 
-    /// What the ADC converts at the start of this tick.
+    /// `c` plus this conversion's noise, within the 12-bit range.
+    fn noisy(&mut self, c: AdcCode) -> AdcCode {
+        let n = self.adc_noise_codes as i32;
+        if n == 0 {
+            return c;
+        }
+        let offset = (self.noise.uniform() * (2 * n + 1) as f64) as i32 - n;
+        AdcCode((c.0 as i32 + offset).clamp(0, ADC_FULL_SCALE as i32) as u16)
+    }
+
+    /// What the ADC converts at this tick's trigger (the PWM centre).
     pub fn sample(&mut self) -> RawSample {
         let mut y = self.displacement_from_rest_um() + PROBE_AT_REST_UM;
         let mut current = self.calibration.current_code(Amps(self.current_a() as f32));
@@ -171,27 +202,40 @@ impl<P: Plant> Rig<P> {
         let mut displacement =
             if dropout { AdcCode(0) } else { self.calibration.displacement_code(Micrometres(y as f32)) };
         if frozen {
+            // A frozen front end still converts: the held level carries the converter's noise.
             displacement = *self.frozen.get_or_insert(displacement);
         } else {
             self.frozen = None;
         }
-        RawSample { current, displacement, bus: Volts(self.bus_now() as f32) }
+        let current = self.noisy(current);
+        let displacement = self.noisy(displacement);
+        // The bus channel: 12-bit code of the divided bus, back to volts as the board reads it.
+        let lsb = self.bus_full_scale_v / ADC_FULL_SCALE as f64;
+        let bus = ((self.bus_now() / lsb + 0.5).max(0.0) as u32).min(ADC_FULL_SCALE as u32) as f64 * lsb;
+        let break_tripped = self.active().any(|f| f == Fault::GateDriverFault);
+        RawSample { current, displacement, bus: Volts(bus as f32), break_tripped }
     }
 
-    /// Applies one tick's bridge command for one tick period.
+    /// Runs the PWM period after the tick that produced `out`: the duty loaded at this period's
+    /// update is the previous tick's, `out.duty` loads at the next; `out.bridge_enabled == false`
+    /// (and the break input) switches the bridge off at once.
     pub fn apply(&mut self, out: &TickOutput) -> Result<(), P::Error> {
         let bus = self.bus_now();
+        let duty = self.loaded_duty;
+        // A disabled bridge writes no duty: it restarts from the zero the firmware leaves loaded.
+        self.loaded_duty = if out.bridge_enabled { out.duty } else { 0.0 };
+        let enabled = out.bridge_enabled && !self.active().any(|f| f == Fault::GateDriverFault);
         // A clipping power stage limits whatever it puts across the coil.
         let limit = self
             .active()
             .filter_map(|f| if let Fault::AmplifierSaturation { max_v } = f { Some(max_v) } else { None })
             .fold(f64::INFINITY, f64::min);
-        let drive = if !out.bridge_enabled {
+        let drive = if !enabled {
             CoilDrive::Freewheel { bus_v: bus.min(limit) }
         } else if self.active().any(|f| f == Fault::BridgeStuckOn) {
             CoilDrive::Voltage(bus.clamp(-limit, limit))
         } else {
-            CoilDrive::Voltage((out.duty.clamp(-1.0, 1.0) as f64 * bus).clamp(-limit, limit))
+            CoilDrive::Voltage((duty.clamp(-1.0, 1.0) as f64 * bus).clamp(-limit, limit))
         };
         self.plant.step(drive)?;
         self.tick += 1;

@@ -1,6 +1,10 @@
 //! Telemetry frames: every tick's sample, CRC-16 protected and COBS framed (a zero byte ends
 //! each frame), so a receiver resynchronises after any corruption and counts — never hides —
 //! lost and corrupt frames from the sequence numbers.
+//!
+//! Two layouts, told apart by their length (the COBS delimiter gives it): format 1 ([`Frame`],
+//! 24 bytes before COBS) and format 2 ([`TimedFrame`], 26 bytes: format 1's payload, then the
+//! tick's CPU cycles as a u16, then the CRC). The board sends format 2; [`Decoder`] reads both.
 
 /// One tick's record.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -19,77 +23,136 @@ pub struct Frame {
     pub faults: u16,
 }
 
-/// Payload bytes: seq, four f32, faults.
-pub const PAYLOAD_BYTES: usize = 4 + 4 * 4 + 2;
-/// Payload plus CRC.
-const RAW_BYTES: usize = PAYLOAD_BYTES + 2;
-/// Largest encoded frame: COBS adds one byte per 254, plus the delimiter.
-pub const MAX_ENCODED: usize = RAW_BYTES + 2;
+/// A frame as the board sends it (format 2): the tick's record and the CPU cycles its interrupt
+/// took (DWT CYCCNT from handler entry to the queueing of this frame; saturates at 65 535 =
+/// 385 µs at 170 MHz, far past the 100 µs tick).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TimedFrame {
+    /// The tick's record.
+    pub frame: Frame,
+    /// CPU cycles of the tick's interrupt [cycles].
+    pub tick_cycles: u16,
+}
 
-/// CRC-16/CCITT-FALSE.
+/// Payload bytes of format 1: seq, four f32, faults.
+pub const PAYLOAD_BYTES: usize = 4 + 4 * 4 + 2;
+/// Format 1 payload plus CRC.
+const RAW_BYTES: usize = PAYLOAD_BYTES + 2;
+/// Payload bytes of format 2: format 1's, then the tick's cycles (u16).
+pub const TIMED_PAYLOAD_BYTES: usize = PAYLOAD_BYTES + 2;
+/// Format 2 payload plus CRC.
+const TIMED_RAW_BYTES: usize = TIMED_PAYLOAD_BYTES + 2;
+/// Largest encoded frame of either format: COBS adds one byte per 254, plus the delimiter.
+pub const MAX_ENCODED: usize = TIMED_RAW_BYTES + 2;
+
+/// CRC-16/CCITT-FALSE (polynomial 0x1021, initial value 0xFFFF), one table lookup per byte.
 pub fn crc16(data: &[u8]) -> u16 {
     let mut crc: u16 = 0xFFFF;
     for &b in data {
-        crc ^= (b as u16) << 8;
-        for _ in 0..8 {
-            crc = if crc & 0x8000 != 0 { (crc << 1) ^ 0x1021 } else { crc << 1 };
-        }
+        crc = (crc << 8) ^ CRC16_TABLE[((crc >> 8) as u8 ^ b) as usize];
     }
     crc
 }
 
+/// The CRC of every leading byte: the bitwise algorithm run once per table entry, at compile
+/// time (512 bytes of flash instead of eight shift-and-xor steps per byte in the interrupt).
+const CRC16_TABLE: [u16; 256] = {
+    let mut table = [0u16; 256];
+    let mut i = 0;
+    while i < 256 {
+        let mut crc = (i as u16) << 8;
+        let mut bit = 0;
+        while bit < 8 {
+            crc = if crc & 0x8000 != 0 { (crc << 1) ^ 0x1021 } else { crc << 1 };
+            bit += 1;
+        }
+        table[i] = crc;
+        i += 1;
+    }
+    table
+};
+
 impl Frame {
-    fn to_bytes(self) -> [u8; RAW_BYTES] {
-        let mut b = [0u8; RAW_BYTES];
+    fn write_payload(&self, b: &mut [u8]) {
         b[0..4].copy_from_slice(&self.seq.to_le_bytes());
         b[4..8].copy_from_slice(&self.reference_um.to_le_bytes());
         b[8..12].copy_from_slice(&self.command_v.to_le_bytes());
         b[12..16].copy_from_slice(&self.current_a.to_le_bytes());
         b[16..20].copy_from_slice(&self.displacement_um.to_le_bytes());
         b[20..22].copy_from_slice(&self.faults.to_le_bytes());
-        let crc = crc16(&b[..PAYLOAD_BYTES]);
-        b[22..24].copy_from_slice(&crc.to_le_bytes());
-        b
     }
 
-    fn from_bytes(b: &[u8]) -> Option<Frame> {
-        if b.len() != RAW_BYTES || crc16(&b[..PAYLOAD_BYTES]) != u16::from_le_bytes([b[22], b[23]]) {
-            return None;
-        }
+    fn read_payload(b: &[u8]) -> Frame {
         let f32_at = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
-        Some(Frame {
+        Frame {
             seq: u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
             reference_um: f32_at(4),
             command_v: f32_at(8),
             current_a: f32_at(12),
             displacement_um: f32_at(16),
             faults: u16::from_le_bytes([b[20], b[21]]),
-        })
+        }
     }
 
-    /// COBS-encodes the frame with its CRC into `out`, ending with the 0 delimiter; returns the
-    /// length.
+    /// COBS-encodes the frame (format 1) with its CRC into `out`, ending with the 0 delimiter;
+    /// returns the length.
     pub fn encode(&self, out: &mut [u8; MAX_ENCODED]) -> usize {
-        let raw = self.to_bytes();
-        let mut code_at = 0;
-        let mut code = 1u8;
-        let mut n = 1;
-        for &b in raw.iter() {
-            if b == 0 {
-                out[code_at] = code;
-                code_at = n;
-                n += 1;
-                code = 1;
-            } else {
-                out[n] = b;
-                n += 1;
-                code += 1;
-            }
-        }
-        out[code_at] = code;
-        out[n] = 0;
-        n + 1
+        let mut b = [0u8; RAW_BYTES];
+        self.write_payload(&mut b);
+        let crc = crc16(&b[..PAYLOAD_BYTES]);
+        b[PAYLOAD_BYTES..].copy_from_slice(&crc.to_le_bytes());
+        cobs_encode(&b, out)
     }
+}
+
+impl TimedFrame {
+    /// COBS-encodes the frame (format 2) with its CRC into `out`, ending with the 0 delimiter;
+    /// returns the length.
+    pub fn encode(&self, out: &mut [u8; MAX_ENCODED]) -> usize {
+        let mut b = [0u8; TIMED_RAW_BYTES];
+        self.frame.write_payload(&mut b);
+        b[PAYLOAD_BYTES..TIMED_PAYLOAD_BYTES].copy_from_slice(&self.tick_cycles.to_le_bytes());
+        let crc = crc16(&b[..TIMED_PAYLOAD_BYTES]);
+        b[TIMED_PAYLOAD_BYTES..].copy_from_slice(&crc.to_le_bytes());
+        cobs_encode(&b, out)
+    }
+
+    /// Reads a frame of either format (COBS removed); format 1 has no cycle count.
+    fn from_bytes(b: &[u8]) -> Option<(Frame, Option<u16>)> {
+        let payload = match b.len() {
+            RAW_BYTES => PAYLOAD_BYTES,
+            TIMED_RAW_BYTES => TIMED_PAYLOAD_BYTES,
+            _ => return None,
+        };
+        if crc16(&b[..payload]) != u16::from_le_bytes([b[payload], b[payload + 1]]) {
+            return None;
+        }
+        let cycles = (payload == TIMED_PAYLOAD_BYTES).then(|| u16::from_le_bytes([b[22], b[23]]));
+        Some((Frame::read_payload(b), cycles))
+    }
+}
+
+/// COBS: every zero byte of `raw` (shorter than 254 bytes) becomes the distance to the next one,
+/// then the 0 delimiter; returns the encoded length.
+fn cobs_encode(raw: &[u8], out: &mut [u8; MAX_ENCODED]) -> usize {
+    let mut code_at = 0;
+    let mut code = 1u8;
+    let mut n = 1;
+    for &b in raw {
+        if b == 0 {
+            out[code_at] = code;
+            code_at = n;
+            n += 1;
+            code = 1;
+        } else {
+            out[n] = b;
+            n += 1;
+            code += 1;
+        }
+    }
+    out[code_at] = code;
+    out[n] = 0;
+    n + 1
 }
 
 /// Stream decoder with loss accounting.
@@ -126,6 +189,8 @@ impl Default for Decoder {
 pub struct Decoded {
     /// The frame.
     pub frame: Frame,
+    /// CPU cycles of the tick's interrupt (format 2 frames; `None` for format 1).
+    pub tick_cycles: Option<u16>,
     /// Frames missing just before this one (0 when contiguous or after a restart).
     pub gap: u32,
     /// The sequence went backwards or repeated: the sender restarted (a new time axis).
@@ -153,9 +218,9 @@ impl Decoder {
         let frame = if overflow {
             None
         } else {
-            cobs_decode(&self.buf[..len]).and_then(|(raw, n)| Frame::from_bytes(&raw[..n]))
+            cobs_decode(&self.buf[..len]).and_then(|(raw, n)| TimedFrame::from_bytes(&raw[..n]))
         };
-        let Some(frame) = frame else {
+        let Some((frame, tick_cycles)) = frame else {
             self.corrupt += 1;
             return None;
         };
@@ -169,7 +234,7 @@ impl Decoder {
         self.lost += gap as u64;
         self.last_seq = Some(frame.seq);
         self.frames += 1;
-        Some(Decoded { frame, gap, restart })
+        Some(Decoded { frame, tick_cycles, gap, restart })
     }
 }
 
@@ -237,6 +302,76 @@ mod tests {
         let gaps: Vec<u32> = s.iter().filter_map(|&b| d.push(b)).map(|x| x.gap).filter(|&g| g > 0).collect();
         assert_eq!(gaps, vec![1; 5]);
         assert_eq!(d.lost, 5);
+    }
+
+    /// The published check value of CRC-16/CCITT-FALSE (CRC catalogue: "123456789" → 0x29B1),
+    /// and every single byte against the bitwise definition the table replaces.
+    #[test]
+    fn table_crc_matches_the_standard_and_the_bitwise_definition() {
+        assert_eq!(crc16(b"123456789"), 0x29B1);
+        let bitwise = |data: &[u8]| {
+            let mut crc: u16 = 0xFFFF;
+            for &b in data {
+                crc ^= (b as u16) << 8;
+                for _ in 0..8 {
+                    crc = if crc & 0x8000 != 0 { (crc << 1) ^ 0x1021 } else { crc << 1 };
+                }
+            }
+            crc
+        };
+        for b in 0..=255u8 {
+            assert_eq!(crc16(&[b, 0x5A, b]), bitwise(&[b, 0x5A, b]), "byte {b:#04x}");
+        }
+    }
+
+    /// Format 1 is unchanged on the wire: the encoded frame, COBS removed, is the little-endian
+    /// fields in order followed by the CRC, laid out here by hand.
+    #[test]
+    fn format_1_layout_is_unchanged() {
+        let f = Frame {
+            seq: 0x0102_0304,
+            reference_um: 1.5,
+            command_v: -3.0,
+            current_a: 0.0,
+            displacement_um: 12.25,
+            faults: 0x0081,
+        };
+        let mut raw = Vec::new();
+        raw.extend_from_slice(&[0x04, 0x03, 0x02, 0x01]);
+        for v in [1.5f32, -3.0, 0.0, 12.25] {
+            raw.extend_from_slice(&v.to_bits().to_le_bytes());
+        }
+        raw.extend_from_slice(&[0x81, 0x00]);
+        let crc = crc16(&raw);
+        raw.extend_from_slice(&crc.to_le_bytes());
+        let mut buf = [0u8; MAX_ENCODED];
+        let n = f.encode(&mut buf);
+        assert_eq!(n, raw.len() + 2);
+        let (decoded, len) = cobs_decode(&buf[..n - 1]).expect("valid COBS");
+        assert_eq!(&decoded[..len], &raw[..]);
+    }
+
+    /// A stream mixing both formats decodes in order; format 2 carries the cycle count, and its
+    /// sequence numbers count gaps like format 1's.
+    #[test]
+    fn both_formats_decode_from_one_stream() {
+        let mut s = Vec::new();
+        for seq in 0..20u32 {
+            let mut buf = [0u8; MAX_ENCODED];
+            let n = if seq % 2 == 0 {
+                frame(seq).encode(&mut buf)
+            } else {
+                TimedFrame { frame: frame(seq), tick_cycles: 4000 + seq as u16 }.encode(&mut buf)
+            };
+            s.extend_from_slice(&buf[..n]);
+        }
+        let mut d = Decoder::default();
+        let got: Vec<Decoded> = s.iter().filter_map(|&b| d.push(b)).collect();
+        assert_eq!(got.len(), 20);
+        assert_eq!(got[7].frame, frame(7));
+        assert_eq!(got[7].tick_cycles, Some(4007));
+        assert_eq!(got[8].tick_cycles, None);
+        assert_eq!((d.lost, d.corrupt), (0, 0));
     }
 
     proptest! {

@@ -12,8 +12,11 @@ pub struct RawSample {
     pub current: AdcCode,
     /// Displacement channel.
     pub displacement: AdcCode,
-    /// Bus voltage (measured, or nominal where the board has no divider).
+    /// Bus voltage, measured (its own ADC channel, converted with the divider ratio).
     pub bus: Volts,
+    /// The timer's break flag: the gate driver's fault pin or the current comparator has already
+    /// switched the outputs off in hardware.
+    pub break_tripped: bool,
 }
 
 /// What the tick asks of the power stage, and its telemetry record.

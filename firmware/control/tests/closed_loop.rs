@@ -1,13 +1,17 @@
-//! The control code in closed loop against the SIMULATED rig (issue 5): current step response,
-//! displacement tracking with the compensator alone and with the PID, and faults reaching the
-//! safe state within one tick with the right code.
+//! The control code in closed loop against the SIMULATED rig with the board's timing (the duty
+//! of tick n across the coil from trigger n + 1, 12-bit conversions, the bus measured): current
+//! step response, displacement tracking, boot idle and arming by command, the command timeout,
+//! and faults reaching the safe state in the tick that sees them with the right code. All the
+//! plants here are our own simulation (model-core's actuator behind the rig).
 
+use gma_control::command::{Command, Refusal};
 use gma_control::current::{CurrentLoop, CurrentLoopParams};
 use gma_control::faults::FaultCode;
 use gma_control::pid::PidParams;
+use gma_control::resonant::ResonantParams;
 use gma_control::sim::{CoilActuator, Fault, Injection, Rig};
-use gma_control::units::{Amps, Volts};
-use gma_control::{ControlConfig, Controller, TickOutput};
+use gma_control::units::Amps;
+use gma_control::{ControlConfig, Controller, ResetCause, TickOutput};
 use model_core::{ActuatorParams, ModelSpec};
 
 const TICK: f32 = 1e-4;
@@ -17,7 +21,9 @@ fn spec(s: &str) -> ModelSpec {
 }
 
 fn rig(model: ModelSpec, params: &ActuatorParams) -> Rig<CoilActuator> {
-    Rig::new(CoilActuator::new(model, params, TICK).unwrap(), 1)
+    let mut rig = Rig::new(CoilActuator::new(model, params, TICK).unwrap(), 1);
+    rig.adc_noise_codes = 1;
+    rig
 }
 
 /// `fault` from the rig's present tick on.
@@ -25,71 +31,329 @@ fn inject(rig: &mut Rig<CoilActuator>, fault: Fault) {
     rig.injections.push(Injection { fault, from: rig.tick(), ticks: u64::MAX }).unwrap();
 }
 
-#[test]
-fn current_step_settles_in_five_ticks_without_overshoot() {
+fn names(f: u16) -> Vec<&'static str> {
+    FaultCode(f).names().collect()
+}
+
+/// One tick of the board: sample, control, PWM period.
+fn step(ctl: &mut Controller, rig: &mut Rig<CoilActuator>) -> TickOutput {
+    let out = ctl.tick(&rig.sample());
+    rig.apply(&out).unwrap();
+    out
+}
+
+/// Boots `ctl` on `rig` through the offset calibration (asserting the bridge stays off), then
+/// arms it by command.
+fn boot_and_arm(ctl: &mut Controller, rig: &mut Rig<CoilActuator>) {
+    for _ in 0..ControlConfig::REFERENCE.offset_calibration_ticks {
+        assert!(!step(ctl, rig).bridge_enabled, "switching before the arm command");
+    }
+    let reply = ctl.command(1, &Command::Arm);
+    assert_eq!(reply.outcome, Ok(()), "arm refused, faults {:?}", names(reply.faults));
+}
+
+fn controller(model: ModelSpec) -> Controller {
+    Controller::new(ControlConfig::REFERENCE, model, &ActuatorParams::TERFENOL_DEMO, ResetCause::PowerOn)
+}
+
+/// A 0 → `target` current step on the delayed rig at `bus_v`; returns the sampled trace.
+fn current_step(target: f32, bus_v: f64) -> Vec<f32> {
     let mut rig = rig(spec("ja"), &ActuatorParams::TERFENOL_DEMO);
+    rig.bus_v = bus_v;
     let mut pi = CurrentLoop::new(CurrentLoopParams::REFERENCE).unwrap();
-    let target = 0.5;
     let mut trace = Vec::new();
-    for _ in 0..20 {
-        let i = Amps(rig.current_a() as f32);
-        let cmd = pi.step(Amps(target), i, Volts(rig.bus_v as f32));
+    for _ in 0..30 {
+        let raw = rig.sample();
+        let i = rig.calibration.current(raw.current);
+        let cmd = pi.step(Amps(target), i, raw.bus);
         rig.apply(&TickOutput { duty: cmd.duty, bridge_enabled: true, frame: Default::default() }).unwrap();
         trace.push(rig.current_a() as f32);
     }
-    let overshoot = (trace.iter().fold(f32::MIN, |m, &v| m.max(v)) - target) / target;
-    println!("current step 0 → {target} A: {:?}", &trace[..8]);
-    assert!(overshoot <= 0.10, "overshoot {:.1} %", overshoot * 100.0);
-    assert!(
-        trace[4..].iter().all(|v| (v - target).abs() <= 0.02 * target),
-        "not settled within 2 % after 5 ticks: {trace:?}"
-    );
+    trace
 }
 
-/// Tracks the reference for 0.3 s; returns the RMS error over the last 0.2 s in % of amplitude.
-fn tracking_rms_percent(pid: Option<PidParams>, plant_params: &ActuatorParams) -> f32 {
+#[test]
+fn current_step_with_the_pwm_delay_settles_without_overshoot() {
+    let target = 0.5;
+    for bus_v in [24.0, 21.0, 30.0] {
+        let trace = current_step(target, bus_v);
+        let overshoot = (trace.iter().fold(f32::MIN, |m, &v| m.max(v)) - target) / target * 100.0;
+        if bus_v == 24.0 {
+            println!(
+                "current step with the board's PWM delay: overshoot {overshoot:.2} % (0 → {target} A: {:?})",
+                &trace[..8]
+            );
+        }
+        // One code of the current channel is 4 mA: 0.8 % of the step.
+        assert!(overshoot <= 5.0, "bus {bus_v} V: overshoot {overshoot:.1} %");
+        // First-order at 0.4 behind the one-tick delay: within 2 % after 6 ticks.
+        assert!(
+            trace[6..].iter().all(|v| (v - target).abs() <= 0.02 * target + 0.008),
+            "bus {bus_v} V: not settled after 6 ticks: {trace:?}"
+        );
+    }
+}
+
+/// Tracks the reference for 0.6 s with a keep-alive every 50 ms; returns the RMS error over the
+/// last 0.4 s in % of the amplitude.
+fn tracking_rms_percent(
+    pid: Option<PidParams>,
+    plant_params: &ActuatorParams,
+    resonant: Option<ResonantParams>,
+) -> f32 {
     let model = spec("ja+eddy+mech");
     let mut rig = rig(model, plant_params);
-    let cfg = ControlConfig { pid, ..ControlConfig::REFERENCE };
-    let mut ctl = Controller::new(cfg, model, &ActuatorParams::TERFENOL_DEMO);
+    let cfg = ControlConfig { pid, resonant, ..ControlConfig::REFERENCE };
+    let mut ctl = Controller::new(cfg, model, &ActuatorParams::TERFENOL_DEMO, ResetCause::PowerOn);
+    boot_and_arm(&mut ctl, &mut rig);
     let (mut sum2, mut n) = (0.0f64, 0usize);
-    for k in 0..3000 {
+    for k in 0..6000 {
+        if k % 500 == 0 {
+            ctl.command(2, &Command::Ping);
+        }
         let y_now = rig.displacement_from_rest_um();
-        let out = ctl.tick(&rig.sample());
-        assert!(
-            out.bridge_enabled,
-            "fault {:?} at tick {k}",
-            FaultCode(out.frame.faults).names().collect::<Vec<_>>()
-        );
-        if k >= 1000 {
+        let out = step(&mut ctl, &mut rig);
+        assert!(out.bridge_enabled, "fault {:?} at tick {k}", names(out.frame.faults));
+        if k >= 2000 {
             // This tick's reference against the true displacement at the same instant.
             let e = y_now - out.frame.reference_um as f64;
             sum2 += e * e;
             n += 1;
         }
-        rig.apply(&out).unwrap();
     }
     ((sum2 / n as f64).sqrt() / 12.5 * 100.0) as f32
 }
 
 #[test]
-fn compensated_tracking_of_a_100_hz_sine() {
+fn compensated_tracking_of_a_100_hz_sine_with_the_pwm_delay() {
     let exact = ActuatorParams::TERFENOL_DEMO;
-    let open = tracking_rms_percent(None, &exact);
-    let closed = tracking_rms_percent(ControlConfig::REFERENCE.pid, &exact);
-    // A rig that differs from the identified model: 8 % more strain, 10 % stiffer pinning.
-    let mut off = exact;
-    off.magnetostriction.lambda_s *= 1.08;
-    off.ja.k_a_per_m *= 1.1;
-    let open_off = tracking_rms_percent(None, &off);
-    let closed_off = tracking_rms_percent(ControlConfig::REFERENCE.pid, &off);
-    println!("25 µm p-p, 100 Hz: compensator alone {open:.2} %, + PID {closed:.2} %; model 8–10 % off: {open_off:.2} % / {closed_off:.2} %");
+    let open = tracking_rms_percent(None, &exact, None);
+    let closed =
+        tracking_rms_percent(ControlConfig::REFERENCE.pid, &exact, ControlConfig::REFERENCE.resonant);
+    // A rig that differs from the identified model by 10 %: more strain, stiffer pinning.
+    let off = mismatched(1.1, 1.1);
+    let open_off = tracking_rms_percent(None, &off, None);
+    let pid_off = tracking_rms_percent(ControlConfig::REFERENCE.pid, &off, None);
+    let closed_off =
+        tracking_rms_percent(ControlConfig::REFERENCE.pid, &off, ControlConfig::REFERENCE.resonant);
+    println!(
+        "25 µm p-p, 100 Hz: compensator alone {open:.2} %, + PID + harmonic rejection {closed:.2} %; \
+         model 10 % off: {open_off:.2} % / PID only {pid_off:.2} % / {closed_off:.2} %"
+    );
+    println!("tracking with the board's PWM delay: {closed_off:.2} % RMS");
     assert!(open <= 5.0, "compensator alone: {open:.2} % RMS");
     assert!(closed <= 1.0, "compensator + PID: {closed:.2} % RMS");
     assert!(
         closed_off <= 1.0 && closed_off < open_off,
         "mismatched model: {open_off:.2} % → {closed_off:.2} %"
     );
+    // The other directions of a 10 % error: the PID alone leaves up to 2.1 % here.
+    for (lambda, k) in [(0.9, 0.9), (1.1, 0.9), (0.9, 1.1)] {
+        let rms = tracking_rms_percent(
+            ControlConfig::REFERENCE.pid,
+            &mismatched(lambda, k),
+            ControlConfig::REFERENCE.resonant,
+        );
+        println!("  λ_s × {lambda}, k × {k}: {rms:.2} %");
+        assert!(rms <= 1.1, "λ_s × {lambda}, k × {k}: {rms:.2} % RMS");
+    }
+}
+
+/// The demo actuator with λ_s and the J–A pinning k scaled.
+fn mismatched(lambda: f32, k: f32) -> ActuatorParams {
+    let mut p = ActuatorParams::TERFENOL_DEMO;
+    p.magnetostriction.lambda_s *= lambda;
+    p.ja.k_a_per_m *= k;
+    p
+}
+
+#[test]
+fn nothing_switches_before_an_arm_command() {
+    let model = spec("ja+eddy+mech");
+    let mut rig = rig(model, &ActuatorParams::TERFENOL_DEMO);
+    let mut ctl = controller(model);
+    for k in 0..3000 {
+        if k % 500 == 0 {
+            assert_eq!(ctl.command(0, &Command::Ping).outcome, Ok(()));
+        }
+        let out = step(&mut ctl, &mut rig);
+        assert!(!out.bridge_enabled && out.duty == 0.0, "switching at tick {k} without an arm command");
+        assert_eq!(out.frame.faults, 0, "fault {:?} at idle", names(out.frame.faults));
+    }
+    assert_eq!(rig.current_a(), 0.0, "the coil carries current before arming");
+    assert!(!ctl.armed());
+    assert_eq!(ctl.command(3, &Command::Arm).outcome, Ok(()));
+    assert!(step(&mut ctl, &mut rig).bridge_enabled);
+}
+
+#[test]
+fn arming_waits_for_the_offset_calibration_which_measures_the_zero() {
+    let model = spec("ja+eddy+mech");
+    let mut rig = rig(model, &ActuatorParams::TERFENOL_DEMO);
+    // This board's current amplifier sits 60 mV above the nominal 1.65 V.
+    rig.calibration.current_zero_v = 1.71;
+    let mut ctl = controller(model);
+    step(&mut ctl, &mut rig);
+    assert_eq!(ctl.command(0, &Command::Arm).outcome, Err(Refusal::NotCalibrated));
+    for _ in 1..ControlConfig::REFERENCE.offset_calibration_ticks {
+        step(&mut ctl, &mut rig);
+    }
+    let zero = ctl.current_zero_v().expect("calibration not finished");
+    assert!((zero - 1.71).abs() < 0.002, "measured zero {zero} V");
+    assert_eq!(ctl.command(0, &Command::Arm).outcome, Ok(()));
+}
+
+#[test]
+fn an_implausible_current_zero_latches_a_fault_and_refuses_to_arm() {
+    let model = spec("ja+eddy+mech");
+    let mut rig = rig(model, &ActuatorParams::TERFENOL_DEMO);
+    rig.calibration.current_zero_v = 1.65 + 0.3; // outside the ±0.15 V window
+    let mut ctl = controller(model);
+    for _ in 0..ControlConfig::REFERENCE.offset_calibration_ticks {
+        step(&mut ctl, &mut rig);
+    }
+    assert!(ctl.faults().contains(FaultCode::CURRENT_OFFSET), "{:?}", names(ctl.faults().0));
+    assert_eq!(ctl.command(0, &Command::ClearFaults).outcome, Err(Refusal::FaultStillPresent));
+    assert_eq!(ctl.command(0, &Command::Arm).outcome, Err(Refusal::FaultLatched));
+}
+
+#[test]
+fn a_watchdog_reset_boots_into_a_latched_fault_until_cleared() {
+    let model = spec("ja+eddy+mech");
+    let mut rig = rig(model, &ActuatorParams::TERFENOL_DEMO);
+    let mut ctl = Controller::new(
+        ControlConfig::REFERENCE,
+        model,
+        &ActuatorParams::TERFENOL_DEMO,
+        ResetCause::Watchdog,
+    );
+    assert!(ctl.faults().contains(FaultCode::WATCHDOG_RESET));
+    for k in 0..1000 {
+        if k % 100 == 0 {
+            assert_eq!(
+                ctl.command(0, &Command::Arm).outcome,
+                Err(Refusal::FaultLatched),
+                "armed at tick {k}"
+            );
+        }
+        let out = step(&mut ctl, &mut rig);
+        assert!(!out.bridge_enabled && FaultCode(out.frame.faults).contains(FaultCode::WATCHDOG_RESET));
+    }
+    assert_eq!(ctl.command(0, &Command::ClearFaults).outcome, Ok(()));
+    assert_eq!(ctl.command(0, &Command::Arm).outcome, Ok(()));
+    assert!(step(&mut ctl, &mut rig).bridge_enabled);
+    // Any other reset cause boots clean.
+    for cause in [ResetCause::PowerOn, ResetCause::Pin, ResetCause::Software, ResetCause::Brownout] {
+        let c = Controller::new(ControlConfig::REFERENCE, model, &ActuatorParams::TERFENOL_DEMO, cause);
+        assert!(c.faults().is_clear(), "{cause:?}");
+    }
+}
+
+#[test]
+fn a_command_timeout_disarms() {
+    let model = spec("ja+eddy+mech");
+    let mut rig = rig(model, &ActuatorParams::TERFENOL_DEMO);
+    let mut ctl = controller(model);
+    boot_and_arm(&mut ctl, &mut rig);
+    let timeout = ControlConfig::REFERENCE.command_timeout_ticks as usize;
+    let mut off_at = None;
+    for k in 1..=timeout + 10 {
+        if !step(&mut ctl, &mut rig).bridge_enabled {
+            off_at = Some(k);
+            break;
+        }
+    }
+    assert_eq!(off_at, Some(timeout + 1), "a silent operator must disarm the bridge after {timeout} ticks");
+    assert!(ctl.faults().contains(FaultCode::COMMAND_TIMEOUT));
+    assert!(!ctl.armed());
+    // Cleared and re-armed by command, keep-alives hold it armed past the timeout.
+    assert_eq!(ctl.command(0, &Command::ClearFaults).outcome, Ok(()));
+    assert_eq!(ctl.command(0, &Command::Arm).outcome, Ok(()));
+    for k in 0..3 * timeout {
+        if k % (timeout / 2) == 0 {
+            ctl.command(0, &Command::Ping);
+        }
+        assert!(step(&mut ctl, &mut rig).bridge_enabled, "disarmed at {k} despite keep-alives");
+    }
+}
+
+#[test]
+fn a_break_input_trip_is_the_safe_state_in_the_same_tick() {
+    let model = spec("ja+eddy+mech");
+    let mut rig = rig(model, &ActuatorParams::TERFENOL_DEMO);
+    let mut ctl = controller(model);
+    boot_and_arm(&mut ctl, &mut rig);
+    for _ in 0..300 {
+        assert!(step(&mut ctl, &mut rig).bridge_enabled);
+    }
+    inject(&mut rig, Fault::GateDriverFault);
+    let raw = rig.sample();
+    assert!(raw.break_tripped);
+    let out = ctl.tick(&raw);
+    assert!(!out.bridge_enabled && out.duty == 0.0, "break seen but still switching: {out:?}");
+    assert!(FaultCode(out.frame.faults).contains(FaultCode::BRIDGE_BREAK));
+    // Latched: refused while the break is asserted, cleared once it is released.
+    rig.apply(&out).unwrap();
+    step(&mut ctl, &mut rig);
+    assert_eq!(ctl.command(0, &Command::ClearFaults).outcome, Err(Refusal::FaultStillPresent));
+    rig.injections.clear();
+    for _ in 0..200 {
+        assert!(!step(&mut ctl, &mut rig).bridge_enabled);
+    }
+    assert_eq!(ctl.command(0, &Command::ClearFaults).outcome, Ok(()));
+    assert!(!step(&mut ctl, &mut rig).bridge_enabled, "a clear must not arm by itself");
+}
+
+#[test]
+fn bus_under_and_over_voltage_trip_after_qualification() {
+    let model = spec("ja+eddy+mech");
+    let qualify = ControlConfig::REFERENCE.limits.bus_qualify_ticks as usize;
+    for (what, bus_v, code) in
+        [("under", 9.0, FaultCode::BUS_UNDERVOLTAGE), ("over", 38.0, FaultCode::BUS_OVERVOLTAGE)]
+    {
+        let mut rig = rig(model, &ActuatorParams::TERFENOL_DEMO);
+        let mut ctl = controller(model);
+        boot_and_arm(&mut ctl, &mut rig);
+        for _ in 0..200 {
+            step(&mut ctl, &mut rig);
+        }
+        // One conversion's glitch does not trip …
+        let nominal = rig.bus_v;
+        rig.bus_v = bus_v;
+        assert!(step(&mut ctl, &mut rig).bridge_enabled, "{what}: one tick tripped");
+        rig.bus_v = nominal;
+        assert!(step(&mut ctl, &mut rig).bridge_enabled);
+        // … a sustained one does, after the qualification ticks.
+        rig.bus_v = bus_v;
+        let k = (1..=10).find(|_| !step(&mut ctl, &mut rig).bridge_enabled).expect("no bus trip");
+        assert_eq!(k, qualify, "{what}-voltage tripped after {k} ticks");
+        assert!(ctl.faults().contains(code), "{what}: {:?}", names(ctl.faults().0));
+        // Within the limits but not by the hysteresis: stays latched; then clears.
+        rig.bus_v = if what == "under" { 12.5 } else { 33.5 };
+        step(&mut ctl, &mut rig);
+        assert_eq!(ctl.command(0, &Command::ClearFaults).outcome, Err(Refusal::FaultStillPresent), "{what}");
+        rig.bus_v = nominal;
+        step(&mut ctl, &mut rig);
+        assert_eq!(ctl.command(0, &Command::ClearFaults).outcome, Ok(()), "{what}");
+    }
+}
+
+#[test]
+fn arming_is_refused_below_the_undervoltage_limit() {
+    let model = spec("ja+eddy+mech");
+    let mut rig = rig(model, &ActuatorParams::TERFENOL_DEMO);
+    let mut ctl = controller(model);
+    for _ in 0..ControlConfig::REFERENCE.offset_calibration_ticks {
+        step(&mut ctl, &mut rig);
+    }
+    // Above the 12 V trip but inside the hysteresis band: not a fault, yet no arming.
+    rig.bus_v = 12.5;
+    step(&mut ctl, &mut rig);
+    assert!(ctl.faults().is_clear());
+    assert_eq!(ctl.command(0, &Command::Arm).outcome, Err(Refusal::BusOutOfRange));
+    rig.bus_v = 24.0;
+    step(&mut ctl, &mut rig);
+    assert_eq!(ctl.command(0, &Command::Arm).outcome, Ok(()));
 }
 
 fn run_until_fault(
@@ -98,8 +362,10 @@ fn run_until_fault(
     ticks: usize,
 ) -> Option<(usize, TickOutput)> {
     for k in 0..ticks {
-        let raw = rig.sample();
-        let out = ctl.tick(&raw);
+        if k % 1000 == 0 {
+            ctl.command(0, &Command::Ping);
+        }
+        let out = ctl.tick(&rig.sample());
         if !out.bridge_enabled {
             return Some((k, out));
         }
@@ -112,8 +378,9 @@ fn run_until_fault(
 fn overcurrent_trips_in_the_tick_that_sees_it() {
     let model = spec("ja+eddy+mech");
     let mut rig = rig(model, &ActuatorParams::TERFENOL_DEMO);
-    let mut ctl = Controller::new(ControlConfig::REFERENCE, model, &ActuatorParams::TERFENOL_DEMO);
-    run_until_fault(&mut ctl, &mut rig, 200);
+    let mut ctl = controller(model);
+    boot_and_arm(&mut ctl, &mut rig);
+    assert!(run_until_fault(&mut ctl, &mut rig, 200).is_none());
     // A gate-drive fault holds the bridge on with a partly shorted winding: the current shoots up.
     inject(&mut rig, Fault::BridgeStuckOn);
     rig.plant.coil_resistance_ohm = 1.0;
@@ -137,71 +404,111 @@ fn overcurrent_trips_in_the_tick_that_sees_it() {
     );
     assert!(FaultCode(out.frame.faults).contains(FaultCode::OVERCURRENT), "code {:?}", out.frame.faults);
     assert_eq!(out.duty, 0.0);
-    println!(
-        "short circuit: tripped {k} ticks later at {i:.2} A, code {:?}",
-        FaultCode(out.frame.faults).names().collect::<Vec<_>>()
-    );
-    // Latched: stays off even when the current has decayed, until the explicit command.
+    println!("short circuit: tripped {k} ticks later at {i:.2} A, code {:?}", names(out.frame.faults));
+    // Latched: stays off even when the current has decayed, until the explicit commands.
     rig.plant.coil_resistance_ohm = 6.0;
     rig.injections.clear();
     for _ in 0..50 {
-        let out = ctl.tick(&rig.sample());
-        assert!(!out.bridge_enabled);
-        rig.apply(&out).unwrap();
+        assert!(!step(&mut ctl, &mut rig).bridge_enabled);
     }
-    assert!(ctl.clear_faults(&rig.sample()).is_clear());
-    assert!(ctl.tick(&rig.sample()).bridge_enabled);
+    assert_eq!(ctl.command(0, &Command::ClearFaults).outcome, Ok(()));
+    assert!(!step(&mut ctl, &mut rig).bridge_enabled, "cleared is not armed");
+    assert_eq!(ctl.command(0, &Command::Arm).outcome, Ok(()));
+    assert!(step(&mut ctl, &mut rig).bridge_enabled);
 }
 
 #[test]
-fn probe_disconnect_and_frozen_probe_are_caught() {
+fn probe_disconnect_and_a_noisy_frozen_probe_are_caught() {
     let model = spec("ja+eddy+mech");
+    let window = ControlConfig::REFERENCE.limits.stuck_ticks as usize;
     for (what, code) in
         [("disconnected", FaultCode::DISPLACEMENT_SENSOR_RANGE), ("frozen", FaultCode::DISPLACEMENT_STUCK)]
     {
         let mut rig = rig(model, &ActuatorParams::TERFENOL_DEMO);
-        let mut ctl = Controller::new(ControlConfig::REFERENCE, model, &ActuatorParams::TERFENOL_DEMO);
-        assert!(run_until_fault(&mut ctl, &mut rig, 300).is_none());
+        // ±2 codes of conversion noise: a frozen reading still changes almost every tick.
+        rig.adc_noise_codes = 2;
+        let mut ctl = controller(model);
+        boot_and_arm(&mut ctl, &mut rig);
+        assert!(run_until_fault(&mut ctl, &mut rig, 3 * window).is_none(), "{what}: tripped while tracking");
         inject(
             &mut rig,
             if what == "disconnected" { Fault::DisplacementDropout } else { Fault::DisplacementFrozen },
         );
-        let (k, out) = run_until_fault(&mut ctl, &mut rig, 2000).expect("no fault");
-        assert!(FaultCode(out.frame.faults).contains(code), "{what}: code {:?}", out.frame.faults);
+        let (k, out) = run_until_fault(&mut ctl, &mut rig, 4 * window).expect("no fault");
+        assert!(FaultCode(out.frame.faults).contains(code), "{what}: code {:?}", names(out.frame.faults));
         if what == "disconnected" {
             assert_eq!(k, 0, "a disconnected probe must trip in the tick that reads it");
         } else {
-            assert!(
-                k <= ControlConfig::REFERENCE.limits.stuck_ticks as usize + 1,
-                "stuck detected after {k} ticks"
-            );
+            // The window running when the probe froze may still be judged healthy; the next
+            // whole frozen window trips.
+            assert!(k <= 2 * window, "stuck detected after {k} ticks");
+            println!("noisy frozen probe (±2 codes): tripped {k} ticks after it froze");
         }
         // Still present: the recovery command refuses.
-        assert!(ctl.clear_faults(&rig.sample()).contains(code) || what == "frozen");
+        if what == "disconnected" {
+            assert_eq!(ctl.command(0, &Command::ClearFaults).outcome, Err(Refusal::FaultStillPresent));
+        }
     }
 }
 
 #[test]
-fn a_corrupt_parameter_set_never_enables_the_bridge() {
+fn a_corrupt_parameter_set_never_enables_the_bridge_until_a_valid_one_is_loaded() {
     let model = spec("ja+eddy+mech");
     let mut bad = ActuatorParams::TERFENOL_DEMO;
     bad.ja.k_a_per_m = f32::NAN;
     let mut rig = rig(model, &ActuatorParams::TERFENOL_DEMO);
-    let mut ctl = Controller::new(ControlConfig::REFERENCE, model, &bad);
-    let out = ctl.tick(&rig.sample());
-    assert!(!out.bridge_enabled);
-    assert!(FaultCode(out.frame.faults).contains(FaultCode::PARAMETERS_INVALID));
-    assert!(
-        ctl.clear_faults(&rig.sample()).contains(FaultCode::PARAMETERS_INVALID),
-        "a bad parameter set stays latched"
-    );
-    // A PID design that does not validate is refused the same way.
+    let mut ctl = Controller::new(ControlConfig::REFERENCE, model, &bad, ResetCause::PowerOn);
+    for _ in 0..ControlConfig::REFERENCE.offset_calibration_ticks {
+        let out = step(&mut ctl, &mut rig);
+        assert!(!out.bridge_enabled && FaultCode(out.frame.faults).contains(FaultCode::PARAMETERS_INVALID));
+    }
+    assert_eq!(ctl.command(0, &Command::ClearFaults).outcome, Err(Refusal::FaultStillPresent));
+    assert_eq!(ctl.command(0, &Command::Arm).outcome, Err(Refusal::FaultLatched));
+    // The same validation refuses a bad set by command …
+    let load = |params| Command::LoadParameters { spec: model, params };
+    assert_eq!(ctl.command(0, &load(bad)).outcome, Err(Refusal::InvalidParameters));
+    // … and a good one replaces it.
+    assert_eq!(ctl.command(0, &load(ActuatorParams::TERFENOL_DEMO)).outcome, Ok(()));
+    assert!(ctl.faults().is_clear(), "{:?}", names(ctl.faults().0));
+    assert_eq!(ctl.command(0, &Command::Arm).outcome, Ok(()));
+    assert_eq!(ctl.command(0, &load(ActuatorParams::TERFENOL_DEMO)).outcome, Err(Refusal::Armed));
+    assert!(step(&mut ctl, &mut rig).bridge_enabled);
+    // A PID design that does not validate is refused the same way, and no parameter load lifts it.
     let pid = ControlConfig::REFERENCE.pid.map(|p| PidParams { ki: f32::NAN, ..p });
-    let mut ctl = Controller::new(
-        ControlConfig { pid, ..ControlConfig::REFERENCE },
-        model,
-        &ActuatorParams::TERFENOL_DEMO,
-    );
-    let out = ctl.tick(&rig.sample());
-    assert!(!out.bridge_enabled && FaultCode(out.frame.faults).contains(FaultCode::PARAMETERS_INVALID));
+    let cfg = ControlConfig { pid, ..ControlConfig::REFERENCE };
+    let mut ctl = Controller::new(cfg, model, &ActuatorParams::TERFENOL_DEMO, ResetCause::PowerOn);
+    assert!(!ctl.tick(&rig.sample()).bridge_enabled);
+    assert!(ctl.faults().contains(FaultCode::PARAMETERS_INVALID));
+    assert_eq!(ctl.command(0, &load(ActuatorParams::TERFENOL_DEMO)).outcome, Err(Refusal::InvalidParameters));
+}
+
+#[test]
+fn a_commanded_reference_is_validated_and_tracked() {
+    use gma_control::command::{ReferenceCommand, Shape};
+    let model = spec("ja+eddy+mech");
+    let mut rig = rig(model, &ActuatorParams::TERFENOL_DEMO);
+    let mut ctl = controller(model);
+    let set = |shape, amplitude_um, bias_um, freq_hz| {
+        Command::SetReference(ReferenceCommand { shape, amplitude_um, bias_um, freq_hz })
+    };
+    for bad in [
+        set(Shape::Sine, f32::NAN, 10.0, 50.0),
+        set(Shape::Sine, 30.0, 30.0, 50.0),
+        set(Shape::Square, 5.0, 10.0, 0.0),
+        set(Shape::Triangle, 5.0, 10.0, 5000.0),
+        set(Shape::Constant, 5.0, 10.0, 0.0),
+        set(Shape::Sine, -1.0, 10.0, 50.0),
+    ] {
+        assert_eq!(ctl.command(0, &bad).outcome, Err(Refusal::ReferenceOutOfRange), "{bad:?}");
+    }
+    assert_eq!(ctl.command(0, &set(Shape::Constant, 0.0, 10.0, 0.0)).outcome, Ok(()));
+    boot_and_arm(&mut ctl, &mut rig);
+    for k in 0..1500 {
+        if k % 500 == 0 {
+            ctl.command(0, &Command::Ping);
+        }
+        step(&mut ctl, &mut rig);
+    }
+    let y = rig.displacement_from_rest_um();
+    assert!((y - 10.0).abs() < 0.1, "constant 10 µm reference: at {y:.3} µm");
 }

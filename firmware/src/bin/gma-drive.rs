@@ -1,58 +1,156 @@
 //! Drive firmware for an STM32G474RE board (NUCLEO-G474RE class), see firmware/README.md for
-//! the pinout and scaling. The hardware glue only: TIM1 center-aligned complementary PWM at
-//! 20 kHz drives the full bridge; its update event (every 4th half-period: 10 kHz) triggers the
-//! ADC's injected conversion of coil current and displacement; the end-of-conversion interrupt
-//! (highest priority) runs one `gma_control` tick — the same code the host and QEMU tests run —
-//! sets the bridge duty, feeds the independent watchdog and queues the telemetry frame, which the
-//! thread-mode loop streams over USART2 (the ST-LINK virtual COM port, 4 Mbaud, COBS frames).
+//! the pinout, scaling and timing. The hardware glue only: TIM1 center-aligned complementary PWM
+//! at 20 kHz drives the full bridge, with the gate driver's fault pin on its break input; its
+//! update event (every 4th half-period: 10 kHz) triggers the ADC's injected conversion of coil
+//! current, displacement and bus voltage; the end-of-conversion interrupt (highest priority) runs
+//! `firmware::drive` — one `gma_control` tick, the same code the host and QEMU tests run — which
+//! sets the bridge, feeds the watchdog, checks the deadline and queues the raw telemetry record.
+//! Thread mode encodes the records and sends them by DMA over USART2 (the ST-LINK virtual COM
+//! port, 4 Mbaud), and receives command bytes by DMA into a ring buffer.
+//!
+//! Safe state: MOE off, every gate low (OSSI = OSSR = 1, idle levels 0). It holds from before the
+//! channels are enabled, on any latched fault, on a break-input trip (hardware, in the same PWM
+//! cycle), in the panic and HardFault handlers, while a debugger halts the core (TIM1 frozen),
+//! and after a watchdog reset.
 #![no_std]
 #![no_main]
 
 use core::cell::RefCell;
 
 use cortex_m::peripheral::NVIC;
+use cortex_m_rt::{exception, ExceptionFrame};
 use critical_section::Mutex;
-use defmt::{info, warn};
+use defmt::{error, info, warn};
 use embassy_executor::Spawner;
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, Exten, InjectedAdc, SampleTime};
-use embassy_stm32::gpio::OutputType;
+use embassy_stm32::gpio::{AfType, Flex, OutputType, Pull};
+use embassy_stm32::interrupt::Priority;
 use embassy_stm32::peripherals::{ADC1, IWDG, TIM1};
 use embassy_stm32::time::Hertz;
-use embassy_stm32::timer::complementary_pwm::{ComplementaryPwm, ComplementaryPwmPin, Mms2};
+use embassy_stm32::timer::complementary_pwm::{
+    BreakInputPolarity, ComplementaryPwm, ComplementaryPwmPin, FilterValue, Mms2, Ossi, Ossr,
+};
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::PwmPin;
-use embassy_stm32::timer::Channel;
-use embassy_stm32::usart::{Config as UartConfig, UartTx};
+use embassy_stm32::timer::{BkIn1, BreakInputPin, Channel};
+use embassy_stm32::usart::{self, Config as UartConfig, RingBufferedUartRx, Uart, UartTx};
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::{interrupt, pac, Config};
-use embassy_time::Timer;
+use embassy_stm32::{bind_interrupts, dma, interrupt, pac, peripherals, Config};
+use embassy_time::{Instant, Timer};
+use firmware::drive::{
+    control_config, dead_time_ticks, encode_queued, encode_replies, execute, quiet_window_max_duty,
+    BridgeTiming, CommandPort, DriveCounters, DriveLoop, PowerStage, ReplyQueue, Slot, TelemetryQueue,
+    PWM_HZ, TELEMETRY_QUEUE,
+};
 use firmware::drive_params::{MODEL_SPEC, PARAMS_POSTCARD};
-use gma_control::telemetry::MAX_ENCODED;
-use gma_control::units::{AdcCode, Volts};
-use gma_control::{ControlConfig, Controller, RawSample};
-use heapless::Deque;
-use {defmt_rtt as _, panic_probe as _};
+use gma_control::command::{Reply, MAX_REPLY_ENCODED};
+use gma_control::telemetry::{TimedFrame, MAX_ENCODED};
+use gma_control::{Controller, ResetCause};
+use heapless::spsc::{Consumer, Producer};
+use {defmt_rtt as _, embassy_stm32 as _};
 
-/// PWM carrier [Hz]: 20 kHz, above hearing; center-aligned, so the counter's update events come
-/// at 40 kHz and a repetition count of 3 gives one ADC trigger per 4 half-periods = 10 kHz.
-const PWM_HZ: u32 = 20_000;
-/// Bus voltage [V] (the reference board has no bus divider: nominal value).
-const BUS_V: f32 = 24.0;
-/// Encoded frames buffered between the interrupt and the UART (25 ms at 10 kHz).
-const QUEUE: usize = 256;
+bind_interrupts!(struct Irqs {
+    USART2 => usart::InterruptHandler<peripherals::USART2>;
+    DMA1_CHANNEL1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
+    DMA1_CHANNEL2 => dma::InterruptHandler<peripherals::DMA1_CH2>;
+});
 
-/// Everything the 10 kHz interrupt owns.
-struct Board {
-    controller: Controller,
-    adc: InjectedAdc<'static, ADC1, 2>,
-    pwm: ComplementaryPwm<'static, TIM1>,
-    watchdog: IndependentWatchdog<'static, IWDG>,
-    frames: Deque<([u8; MAX_ENCODED], u8), QUEUE>,
-    /// Frames the queue had no room for (the host also sees them as sequence gaps).
-    overruns: u32,
+/// The interrupt's state (controller, bridge, telemetry producer) in CCM SRAM: zero-wait-state,
+/// off the DMA's bus, and written at start-up (no initial value in flash, see `Slot`).
+#[allow(unsafe_code)] // link_section: `.ccmram` is NOLOAD in memory.x and `Slot` needs no initial value.
+#[link_section = ".ccmram"]
+static DRIVE_STATE: Slot<DriveLoop<BoardStage>> = Slot::new();
+/// The interrupt's handle on `DRIVE_STATE` (None until start-up has written it).
+static DRIVE: Mutex<RefCell<Option<&'static mut DriveLoop<BoardStage>>>> = Mutex::new(RefCell::new(None));
+/// Telemetry records from the interrupt to thread mode.
+static TELEMETRY: Slot<TelemetryQueue> = Slot::new();
+/// What the interrupt publishes for the status log.
+static COUNTERS: DriveCounters = DriveCounters::new();
+/// UART RX ring for command bytes (DMA, circular).
+static COMMAND_RING: Slot<[u8; 256]> = Slot::new();
+/// Command replies from the command task to the UART writer.
+static REPLIES: Slot<ReplyQueue> = Slot::new();
+
+/// Encoded telemetry per DMA transfer: up to 8 frames (0.6 ms of UART time at 4 Mbaud), after
+/// the replies waiting then.
+const TX_BATCH: usize = 8 * MAX_ENCODED + firmware::drive::REPLY_QUEUE * MAX_REPLY_ENCODED;
+
+/// Clears MOE straight in TIM1's BDTR: works with nothing else initialised (panic, HardFault).
+fn bridge_off() {
+    pac::TIM1.bdtr().modify(|w| w.set_moe(false));
 }
 
-static BOARD: Mutex<RefCell<Option<Board>>> = Mutex::new(RefCell::new(None));
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    bridge_off();
+    error!("gma-drive: panic: {}", defmt::Display2Format(info));
+    // The watchdog, no longer fed, resets the board; the next boot sees the watchdog reset.
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+#[exception]
+#[allow(unsafe_code)]
+unsafe fn HardFault(_frame: &ExceptionFrame) -> ! {
+    bridge_off();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// The board's side of the interrupt: register accesses through the PAC, the HAL drivers kept
+/// alive so that their drops never stop the timer or the ADC.
+struct BoardStage {
+    _pwm: ComplementaryPwm<'static, TIM1>,
+    _adc: InjectedAdc<'static, ADC1, 3>,
+    _break_pin: Flex<'static>,
+    watchdog: IndependentWatchdog<'static, IWDG>,
+}
+
+impl PowerStage for BoardStage {
+    fn read_conversions(&mut self) -> [u16; 3] {
+        let adc = pac::ADC1;
+        let codes = [adc.jdr(0).read().jdata(), adc.jdr(1).read().jdata(), adc.jdr(2).read().jdata()];
+        // Write-one-to-clear: only JEOS, so that the deadline check sees the next one.
+        adc.isr().write(|w| w.set_jeos(true));
+        codes
+    }
+
+    fn take_break_flag(&mut self) -> bool {
+        let tripped = pac::TIM1.sr().read().bif(0);
+        if tripped {
+            // rc_w0: writing 0 clears BIF, 1 leaves the other flags alone.
+            pac::TIM1.sr().write(|w| {
+                w.0 = !0;
+                w.set_bif(0, false);
+            });
+        }
+        tripped
+    }
+
+    fn set_compare(&mut self, leg_a: u16, leg_b: u16) {
+        pac::TIM1.ccr(0).write(|w| w.set_ccr(leg_a));
+        pac::TIM1.ccr(1).write(|w| w.set_ccr(leg_b));
+    }
+
+    fn set_outputs_enabled(&mut self, enabled: bool) {
+        // A break input still active keeps MOE cleared whatever is written here.
+        pac::TIM1.bdtr().modify(|w| w.set_moe(enabled));
+    }
+
+    fn feed_watchdog(&mut self) {
+        self.watchdog.pet();
+    }
+
+    fn next_conversion_done(&self) -> bool {
+        pac::ADC1.isr().read().jeos()
+    }
+
+    fn cycle_count(&self) -> u32 {
+        cortex_m::peripheral::DWT::cycle_count()
+    }
+}
 
 fn clocks() -> Config {
     use embassy_stm32::rcc::{mux, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
@@ -69,26 +167,54 @@ fn clocks() -> Config {
     config.rcc.sys = Sysclk::PLL1_R;
     config.rcc.boost = true;
     config.rcc.mux.adc12sel = mux::Adcsel::SYS;
+    // UART DMA below the 10 kHz interrupt (priority 0).
+    config.bdma_interrupt_priority = Priority::P2;
     config
 }
 
+/// The reset cause from RCC_CSR, whose flags are then cleared so that the next boot reads its
+/// own.
+fn take_reset_cause() -> ResetCause {
+    let csr = pac::RCC.csr().read();
+    pac::RCC.csr().modify(|w| w.set_rmvf(true));
+    ResetCause::from_rcc_flags(
+        csr.iwdgrstf(),
+        csr.wwdgrstf(),
+        csr.sftrstf(),
+        csr.borrstf(),
+        csr.pinrstf(),
+        csr.lpwrrstf(),
+    )
+}
+
 /// The controller for the compiled-in parameter set (`GMA_PARAMS`, `GMA_MODEL` at build time);
-/// a set that does not decode or validate leaves the bridge off with PARAMETERS_INVALID.
-fn controller() -> Controller {
+/// a set that does not decode or validate leaves the bridge off with PARAMETERS_INVALID; a
+/// watchdog reset boots with WATCHDOG_RESET latched.
+fn controller(reset: ResetCause) -> Controller {
     let spec = model_core::ModelSpec::parse(MODEL_SPEC);
     let params = postcard::from_bytes::<model_core::ActuatorParams>(PARAMS_POSTCARD);
     match (spec, params) {
-        (Ok(spec), Ok(params)) => Controller::new(ControlConfig::REFERENCE, spec, &params),
-        _ => Controller::refused(ControlConfig::REFERENCE),
+        (Ok(spec), Ok(params)) => Controller::new(control_config(), spec, &params, reset),
+        _ => Controller::refused(control_config(), reset),
     }
 }
 
 #[embassy_executor::main]
-async fn main(_spawner: Spawner) {
+async fn main(spawner: Spawner) {
+    // Frozen while a debugger halts the core: TIM1 (a halted loop must not keep switching) and
+    // the watchdog (halting is not a fault).
+    pac::DBGMCU.apb2fzr().modify(|w| w.set_tim1(true));
+    pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
+    let reset_cause = take_reset_cause();
     let p = embassy_stm32::init(clocks());
-    info!("gma-drive: SYSCLK 170 MHz, model `{}`", MODEL_SPEC);
+    info!(
+        "gma-drive: SYSCLK 170 MHz, model `{}`, reset by {}",
+        MODEL_SPEC,
+        defmt::Debug2Format(&reset_cause)
+    );
 
-    // Full bridge: TIM1 CH1/CH1N (PA8/PA7) one leg, CH2/CH2N (PA9/PB0) the other.
+    // Full bridge: TIM1 CH1/CH1N (PA8/PA7) one leg, CH2/CH2N (PA9/PB0) the other. The driver
+    // sets MOE on construction, before any channel is enabled; it is cleared at once.
     let mut pwm = ComplementaryPwm::new(
         p.TIM1,
         Some(PwmPin::new(p.PA8, OutputType::PushPull)),
@@ -102,22 +228,66 @@ async fn main(_spawner: Spawner) {
         Hertz::hz(PWM_HZ),
         CountingMode::CenterAlignedBothInterrupts,
     );
+    pwm.set_master_output_enable(false);
+    // Off state: with MOE off (OSSI) and with a channel disabled while MOE is on (OSSR) the timer
+    // drives the pins to their idle levels instead of releasing them; idle level 0 on all four
+    // outputs = every gate low. All off rather than both low sides on: the break input means a
+    // gate-driver fault (desaturation, short), where switching any transistor on can feed the
+    // fault; the coil's energy (48 mJ at 4 A) returns to the bus through the body diodes, which
+    // the bus over-voltage trip and the divider's range are sized for.
+    pwm.set_off_state_selection_idle(Ossi::IDLE_LEVEL);
+    pwm.set_off_state_selection_run(Ossr::IDLE_LEVEL);
+    pac::TIM1.cr2().modify(|w| {
+        for ch in 0..2 {
+            w.set_ois(ch, false);
+            w.set_oisn(ch, false);
+        }
+    });
+    // Break input 1 from the gate driver's open-drain fault output on PA6 (low = fault), pulled
+    // up, 8-sample filter against switching noise; no automatic re-enable (AOE = 0).
+    let bkin_af = BreakInputPin::<TIM1, BkIn1>::af_num(&*p.PA6);
+    let mut break_pin = Flex::new(p.PA6);
+    break_pin.set_as_af_unchecked(bkin_af, AfType::input(Pull::Up));
+    pwm.set_break_polarity(BreakInputPolarity::ACTIVE_LOW);
+    pwm.set_break_filter(FilterValue::FCK_INT_N8);
+    pwm.set_break_input_pin_enable(true);
+    pwm.set_automatic_output_enable(false);
+    pwm.set_break_enable(true);
+
     pwm.set_repetition_counter(3);
     pwm.set_mms2(Mms2::UPDATE);
-    pwm.set_dead_time(pwm.get_max_duty() as u16 / 100);
-    let half = pwm.get_max_duty() / 2;
+    let period_ticks = pwm.get_max_duty();
+    // Center-aligned: the counter runs up and down once per PWM period, so the timer clock is
+    // 2 × ARR × f_PWM.
+    let timer_hz = 2 * period_ticks * PWM_HZ;
+    pwm.set_dead_time(dead_time_ticks(timer_hz) as u16);
+    let half = period_ticks / 2;
     pwm.set_duty(Channel::Ch1, half);
     pwm.set_duty(Channel::Ch2, half);
     pwm.enable(Channel::Ch1);
     pwm.enable(Channel::Ch2);
-    // Safe state until a tick without faults arms the bridge.
-    pwm.set_master_output_enable(false);
+    // Lock level 2 (writable once per reset): dead time, break configuration, idle levels,
+    // OSSI/OSSR and output polarities can no longer change until reset — a stray write cannot
+    // undo the safe state. MOE and the compare values stay writable.
+    pac::TIM1.bdtr().modify(|w| w.set_lock(pac::timer::vals::Lock::LEVEL2));
+    let timing = BridgeTiming { period_ticks: period_ticks as u16, max_duty: quiet_window_max_duty() };
+    info!(
+        "gma-drive: PWM ARR {} at {} Hz timer clock, dead time {} ticks, duty within ±{}",
+        period_ticks,
+        timer_hz,
+        dead_time_ticks(timer_hz),
+        timing.max_duty
+    );
 
-    // ADC1: IN1 (PA0) coil current shunt amplifier, IN2 (PA1) displacement probe; injected
-    // conversions on TIM1 TRGO2, end-of-sequence interrupt on.
+    // ADC1 injected sequence on TIM1 TRGO2: IN1 (PA0) coil current shunt amplifier first (the
+    // quiet window is computed for it), IN2 (PA1) displacement probe, IN6 (PC0) bus divider.
     let adc = Adc::new(p.ADC1, AdcConfig::default());
     let injected = adc.setup_injected_conversions(
-        [(p.PA0.degrade_adc(), SampleTime::CYCLES24_5), (p.PA1.degrade_adc(), SampleTime::CYCLES24_5)],
+        [
+            (p.PA0.degrade_adc(), SampleTime::CYCLES24_5),
+            (p.PA1.degrade_adc(), SampleTime::CYCLES24_5),
+            (p.PC0.degrade_adc(), SampleTime::CYCLES24_5),
+        ],
         embassy_stm32::triggers::TIM1_TRGO2,
         Exten::RISING_EDGE,
         true,
@@ -129,77 +299,131 @@ async fn main(_spawner: Spawner) {
 
     let mut uart_config = UartConfig::default();
     uart_config.baudrate = 4_000_000;
-    let mut uart = match UartTx::new_blocking(p.USART2, p.PA2, uart_config) {
+    let uart = match Uart::new(p.USART2, p.PA3, p.PA2, p.DMA1_CH1, p.DMA1_CH2, Irqs, uart_config) {
         Ok(u) => u,
         Err(_) => defmt::panic!("USART2 configuration refused"),
     };
-
-    let controller = controller();
-    if !controller.faults().is_clear() {
-        warn!("gma-drive: parameter set refused, bridge stays off (faults {:#x})", controller.faults().0);
-    }
-    critical_section::with(|cs| {
-        BOARD.borrow(cs).replace(Some(Board {
-            controller,
-            adc: injected,
-            pwm,
-            watchdog,
-            frames: Deque::new(),
-            overruns: 0,
-        }));
-    });
+    let (tx, rx) = uart.split();
+    // SAFETY: the only write to COMMAND_RING.
     #[allow(unsafe_code)]
-    // SAFETY: the handler only touches BOARD through the critical-section mutex, which is
-    // initialised above; the ADC interrupt gets the highest priority (0).
+    let ring = unsafe { COMMAND_RING.write([0; 256]) };
+    let rx = rx.into_ring_buffered(ring);
+
+    let controller = controller(reset_cause);
+    if !controller.faults().is_clear() {
+        warn!("gma-drive: booted with faults latched {:#x}; bridge off until cleared", controller.faults().0);
+    }
+    // SAFETY: the only write to REPLIES.
+    #[allow(unsafe_code)]
+    let (reply_producer, reply_consumer) = unsafe { REPLIES.write(ReplyQueue::new()) }.split();
+    // SAFETY: the only write to TELEMETRY.
+    #[allow(unsafe_code)]
+    let (producer, consumer) = unsafe { TELEMETRY.write(TelemetryQueue::new()) }.split();
+    let stage = BoardStage { _pwm: pwm, _adc: injected, _break_pin: break_pin, watchdog };
+    // SAFETY: the only write to DRIVE_STATE; `.ccmram` is NOLOAD, and this write initialises it.
+    #[allow(unsafe_code)]
+    let drive = unsafe { DRIVE_STATE.write(DriveLoop::new(controller, stage, timing, producer, &COUNTERS)) };
+    critical_section::with(|cs| DRIVE.borrow(cs).replace(Some(drive)));
+
+    #[allow(unsafe_code)]
+    // SAFETY: the handler only touches the drive through the critical-section mutex, set
+    // above; the ADC interrupt gets the highest priority (0), above the UART and its DMA.
     unsafe {
-        let mut nvic = cortex_m::Peripherals::steal().NVIC;
-        nvic.set_priority(pac::Interrupt::ADC1_2, 0);
+        let mut core = cortex_m::Peripherals::steal();
+        core.DCB.enable_trace();
+        core.DWT.enable_cycle_counter();
+        core.NVIC.set_priority(pac::Interrupt::ADC1_2, 0);
+        core.NVIC.set_priority(pac::Interrupt::USART2, 2 << 4);
         NVIC::unmask(pac::Interrupt::ADC1_2);
     }
 
-    // Thread mode: stream the queued frames; report overruns once a second.
-    let mut last_report = embassy_time::Instant::now();
+    match command_rx(rx, reply_producer) {
+        Ok(task) => spawner.spawn(task),
+        Err(_) => defmt::panic!("command task not spawned"),
+    }
+    telemetry_tx(tx, consumer, reply_consumer).await
+}
+
+/// Thread mode: sends the waiting command replies, then encodes the queued records (format 2,
+/// CRC-16 + COBS), by DMA; logs the drive's counters once a second when something is wrong.
+async fn telemetry_tx(
+    mut tx: UartTx<'static, embassy_stm32::mode::Async>,
+    mut queue: Consumer<'static, TimedFrame>,
+    mut replies: Consumer<'static, Reply>,
+) -> ! {
+    let mut batch = [0u8; TX_BATCH];
+    let mut last_report = Instant::now();
     loop {
-        let next =
-            critical_section::with(|cs| BOARD.borrow_ref_mut(cs).as_mut().and_then(|b| b.frames.pop_front()));
-        match next {
-            Some((bytes, len)) => {
-                let _ = uart.blocking_write(&bytes[..len as usize]);
+        let n = encode_replies(&mut replies, &mut batch);
+        let n = n + encode_queued(&mut queue, &mut batch[n..]);
+        if n > 0 {
+            if tx.write(&batch[..n]).await.is_err() {
+                warn!("gma-drive: telemetry UART error");
             }
-            None => Timer::after_micros(50).await,
+        } else {
+            Timer::after_micros(100).await;
         }
         if last_report.elapsed().as_secs() >= 1 {
-            last_report = embassy_time::Instant::now();
-            let (overruns, faults) = critical_section::with(|cs| {
-                BOARD.borrow_ref(cs).as_ref().map(|b| (b.overruns, b.controller.faults().0)).unwrap_or((0, 0))
-            });
-            if overruns > 0 || faults != 0 {
-                warn!("gma-drive: telemetry overruns {}, faults {:#x}", overruns, faults);
+            last_report = Instant::now();
+            let load = |c: &core::sync::atomic::AtomicU32| c.load(core::sync::atomic::Ordering::Relaxed);
+            let (dropped, late, trips) =
+                (load(&COUNTERS.telemetry_dropped), load(&COUNTERS.deadline_overruns), load(&COUNTERS.trips));
+            if dropped > 0 || late > 0 || trips != 0 {
+                warn!(
+                    "gma-drive: telemetry dropped {} of {}, deadline overruns {}, trips {:#x}, longest tick {} cycles",
+                    dropped,
+                    TELEMETRY_QUEUE,
+                    late,
+                    trips,
+                    load(&COUNTERS.max_tick_cycles)
+                );
             }
         }
     }
 }
 
+/// Thread mode: command bytes from the DMA ring into the command decoder (gma-control's: COBS
+/// framing, CRC, version, payload); each frame it completes is executed on the controller inside
+/// a critical section, and the reply queued for the UART writer. Corrupt frames are counted by
+/// the decoder and logged.
+#[embassy_executor::task]
+async fn command_rx(mut rx: RingBufferedUartRx<'static>, replies: Producer<'static, Reply>) {
+    let mut port = CommandPort::new(replies);
+    let mut chunk = [0u8; 32];
+    loop {
+        let n = match rx.read(&mut chunk).await {
+            Ok(n) => n,
+            Err(e) => {
+                // Overrun or framing error: the frame being assembled fails its CRC and is
+                // counted as corrupt; the decoder resynchronises at the next delimiter.
+                warn!("gma-drive: command UART {}", e);
+                continue;
+            }
+        };
+        let corrupt = port.decoder.corrupt;
+        on_command_bytes(&mut port, &chunk[..n]);
+        if port.decoder.corrupt != corrupt {
+            warn!("gma-drive: corrupt command frames {}", port.decoder.corrupt);
+        }
+    }
+}
+
+/// Received command bytes: every complete frame goes through the decoder to the controller,
+/// inside a critical section as the interrupt shares it.
+fn on_command_bytes(port: &mut CommandPort, bytes: &[u8]) {
+    port.on_bytes(bytes, |received| {
+        critical_section::with(|cs| {
+            DRIVE.borrow_ref_mut(cs).as_mut().map(|drive| execute(drive.controller(), received))
+        })
+    });
+}
+
+/// The 10 kHz end-of-conversion interrupt: the whole tick is `firmware::drive`'s.
 #[interrupt]
 fn ADC1_2() {
     critical_section::with(|cs| {
-        let mut board = BOARD.borrow_ref_mut(cs);
-        let Some(b) = board.as_mut() else { return };
-        let [current, displacement] = b.adc.read_injected_samples();
-        let raw =
-            RawSample { current: AdcCode(current), displacement: AdcCode(displacement), bus: Volts(BUS_V) };
-        let out = b.controller.tick(&raw);
-        // Bipolar full bridge: leg A at (1 + d)/2, leg B at (1 − d)/2 of the period.
-        let max = b.pwm.get_max_duty() as f32;
-        let d = out.duty.clamp(-1.0, 1.0);
-        b.pwm.set_duty(Channel::Ch1, (0.5 * (1.0 + d) * max) as u32);
-        b.pwm.set_duty(Channel::Ch2, (0.5 * (1.0 - d) * max) as u32);
-        b.pwm.set_master_output_enable(out.bridge_enabled);
-        b.watchdog.pet();
-        let mut buf = [0u8; MAX_ENCODED];
-        let n = out.frame.encode(&mut buf);
-        if b.frames.push_back((buf, n as u8)).is_err() {
-            b.overruns = b.overruns.wrapping_add(1);
+        if let Some(drive) = DRIVE.borrow_ref_mut(cs).as_mut() {
+            drive.on_conversion();
         }
     });
 }

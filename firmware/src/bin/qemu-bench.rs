@@ -18,6 +18,9 @@ use model_core::{Actuator, ActuatorParams, Compensator, ModelSpec};
 /// Measured steps per case.
 const STEPS: usize = 500;
 
+/// Ticks between keep-alive commands in the armed benches (well inside the 200 ms timeout).
+const KEEP_ALIVE_TICKS: usize = 100;
+
 /// Start marker: one `nop` (a body different from `bench_end`'s, so the two are not merged).
 #[allow(unsafe_code)] // `no_mangle` only fixes the symbol name the script looks up.
 #[no_mangle]
@@ -119,21 +122,123 @@ fn run(case: &str) -> Result<f32, &'static str> {
             })
         }
         "control-tick" => {
-            // The whole board tick (gma-control): calibration, faults, reference, compensator
-            // (ja+eddy), PID, current loop, telemetry frame; the simulated rig runs outside the
-            // markers.
+            // The whole board tick (gma-control), armed: faults, reference, compensator
+            // (ja+eddy), PID, harmonic rejection, current loop, telemetry frame. Booted through
+            // the offset calibration and armed by command first; the simulated rig and the
+            // keep-alive run outside the markers.
+            use gma_control::command::Command;
             use gma_control::sim::{CoilActuator, Rig};
-            use gma_control::{ControlConfig, Controller};
+            use gma_control::{Controller, ResetCause};
             let spec = ModelSpec::parse("ja+eddy+mech").map_err(|_| "bad spec")?;
             let mut rig = Rig::new(CoilActuator::new(spec, &p, 1e-4).map_err(err)?, 1);
-            let mut ctl = Controller::new(ControlConfig::REFERENCE, spec, &p);
+            let cfg = firmware::drive::control_config();
+            let mut ctl = Controller::new(cfg, spec, &p, ResetCause::PowerOn);
+            for _ in 0..cfg.offset_calibration_ticks {
+                let out = ctl.tick(&rig.sample());
+                rig.apply(&out).map_err(|_| "rig input out of range")?;
+            }
+            ctl.command(1, &Command::Arm).outcome.map_err(|r| r.name())?;
             let mut acc = 0.0;
-            for _ in 0..STEPS {
+            for n in 0..STEPS {
+                if n % KEEP_ALIVE_TICKS == 0 {
+                    ctl.command(2, &Command::Ping);
+                }
                 let raw = rig.sample();
                 bench_start();
                 let out = ctl.tick(black_box(&raw));
                 bench_end();
+                if !out.bridge_enabled {
+                    return Err("the controller disarmed during the bench");
+                }
                 acc += black_box(out.duty);
+                rig.apply(&out).map_err(|_| "rig input out of range")?;
+            }
+            acc
+        }
+        // The whole 10 kHz interrupt as the board runs it (firmware::drive), armed: conversions,
+        // control tick, bridge compare values and enable, watchdog, deadline check and the
+        // telemetry record into the queue. Booted through the offset calibration and armed by an
+        // encoded command frame through the command port; the rig, the keep-alive and the
+        // thread-mode encoder run outside the markers.
+        "isr" | "isr-square" | "telemetry-encode" => {
+            use firmware::drive::{
+                bus_code, control_config, encode_queued, execute, quiet_window_max_duty, BridgeTiming,
+                CommandPort, DriveCounters, DriveLoop, MemoryStage, ReplyQueue, Slot, TelemetryQueue,
+            };
+            use gma_control::command::{self, Command};
+            use gma_control::sim::{CoilActuator, Rig};
+            use gma_control::telemetry::MAX_ENCODED;
+            use gma_control::{Controller, ResetCause};
+            static QUEUE: Slot<TelemetryQueue> = Slot::new();
+            static REPLIES: Slot<ReplyQueue> = Slot::new();
+            static COUNTERS: DriveCounters = DriveCounters::new();
+            let spec = ModelSpec::parse("ja+eddy+mech").map_err(|_| "bad spec")?;
+            let mut rig = Rig::new(CoilActuator::new(spec, &p, 1e-4).map_err(err)?, 1);
+            // SAFETY: the only write to QUEUE.
+            #[allow(unsafe_code)]
+            let (producer, mut consumer) = unsafe { QUEUE.write(TelemetryQueue::new()) }.split();
+            let timing = BridgeTiming { period_ticks: 4250, max_duty: quiet_window_max_duty() };
+            // SAFETY: the only write to REPLIES.
+            #[allow(unsafe_code)]
+            let (reply_producer, mut replies) = unsafe { REPLIES.write(ReplyQueue::new()) }.split();
+            let mut port = CommandPort::new(reply_producer);
+            let ctl = Controller::new(control_config(), spec, &p, ResetCause::PowerOn);
+            let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS);
+            let mut bytes = [0u8; MAX_ENCODED];
+            let mut send = |drive: &mut DriveLoop<MemoryStage>, cmd: &Command| -> Result<(), &'static str> {
+                let mut frame = [0u8; command::MAX_ENCODED];
+                let n = cmd.encode(1, &mut frame).map_err(|r| r.name())?;
+                port.on_bytes(&frame[..n], |r| Some(execute(drive.controller(), r)));
+                match replies.dequeue() {
+                    Some(reply) => reply.outcome.map_err(|r| r.name()),
+                    None => Err("no reply to a command"),
+                }
+            };
+            let sample = |drive: &mut DriveLoop<MemoryStage>, rig: &mut Rig<CoilActuator>| {
+                let raw = rig.sample();
+                drive.stage().conversions = [raw.current.0, raw.displacement.0, bus_code(raw.bus)];
+            };
+            for _ in 0..control_config().offset_calibration_ticks {
+                sample(&mut drive, &mut rig);
+                let out = drive.on_conversion();
+                rig.apply(&out).map_err(|_| "rig input out of range")?;
+            }
+            while consumer.dequeue().is_some() {}
+            send(&mut drive, &Command::Arm)?;
+            let in_isr = case != "telemetry-encode";
+            if case == "isr-square" {
+                // 25 µm steps every 5 ms: the compensator's worst ticks (many J–A sub-steps).
+                let square = command::ReferenceCommand {
+                    shape: command::Shape::Square,
+                    amplitude_um: 12.5,
+                    bias_um: 15.0,
+                    freq_hz: 100.0,
+                };
+                send(&mut drive, &Command::SetReference(square))?;
+            }
+            let mut acc = 0.0;
+            for n in 0..STEPS {
+                if n % KEEP_ALIVE_TICKS == 0 {
+                    send(&mut drive, &Command::Ping)?;
+                }
+                sample(&mut drive, &mut rig);
+                if in_isr {
+                    bench_start();
+                }
+                let out = drive.on_conversion();
+                if in_isr {
+                    bench_end();
+                } else {
+                    bench_start();
+                }
+                let n = encode_queued(black_box(&mut consumer), &mut bytes);
+                if !in_isr {
+                    bench_end();
+                }
+                if !out.bridge_enabled {
+                    return Err("the drive disarmed during the bench");
+                }
+                acc += black_box(out.duty) + n as f32;
                 rig.apply(&out).map_err(|_| "rig input out of range")?;
             }
             acc
@@ -146,7 +251,7 @@ fn run(case: &str) -> Result<f32, &'static str> {
         _ => {
             return Err(
                 "unknown case (empty, ja-substep, ja-sample-400hz, zoh, chain, chain-400hz, inverse, \
-                 inverse-400hz, preisach, ndof, arx, control-tick)",
+                 inverse-400hz, preisach, ndof, arx, control-tick, isr, isr-square, telemetry-encode)",
             )
         }
     })

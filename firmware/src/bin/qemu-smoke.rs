@@ -6,6 +6,8 @@
 //! a failure is reported.
 #![no_std]
 #![no_main]
+// `!(error <= limit)` on purpose: a NaN error must fail the check.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use cortex_m_rt::entry;
 use cortex_m_semihosting::hprintln;
@@ -39,9 +41,10 @@ fn compare(name: &str, got: &[f32], expected: &[f32], rtol: f32, perturb: bool) 
 /// ticks (1 s at 10 kHz): tracking within 1 % RMS of amplitude, then a probe disconnect that
 /// must trip within one tick, and a corrupt parameter set that must never enable the bridge.
 fn closed_loop(force_fail: bool) -> u32 {
+    use gma_control::command::Command;
     use gma_control::faults::FaultCode;
-    use gma_control::sim::{CoilActuator, Fault, Injection, Rig};
-    use gma_control::{ControlConfig, Controller};
+    use gma_control::sim::{CoilActuator, Fault, Injection};
+    use gma_control::{Controller, ResetCause};
     use model_core::{ActuatorParams, ModelSpec};
 
     let mut failures = 0;
@@ -49,9 +52,21 @@ fn closed_loop(force_fail: bool) -> u32 {
     let p = ActuatorParams::TERFENOL_DEMO;
     let Ok(plant) = CoilActuator::new(spec, &p, 1e-4) else { return 1 };
     let mut rig = Rig::new(plant, 1);
-    let mut ctl = Controller::new(ControlConfig::REFERENCE, spec, &p);
+    let cfg = firmware::drive::control_config();
+    let mut ctl = Controller::new(cfg, spec, &p, ResetCause::PowerOn);
+    for _ in 0..cfg.offset_calibration_ticks {
+        let out = ctl.tick(&rig.sample());
+        let _ = rig.apply(&out);
+    }
+    if let Err(r) = ctl.command(1, &Command::Arm).outcome {
+        hprintln!("qemu-smoke: FAIL closed loop: arm refused ({})", r.name());
+        return 1;
+    }
     let (mut sum2, mut n) = (0.0f32, 0u32);
     for k in 0..10_000u32 {
+        if k % 1000 == 0 {
+            ctl.command(2, &Command::Ping);
+        }
         let y_now = rig.displacement_from_rest_um() as f32;
         let out = ctl.tick(&rig.sample());
         if !out.bridge_enabled {
@@ -95,13 +110,348 @@ fn closed_loop(force_fail: bool) -> u32 {
     }
     let mut bad = p;
     bad.ja.k_a_per_m = f32::NAN;
-    let mut ctl = Controller::new(ControlConfig::REFERENCE, spec, &bad);
+    let mut ctl = Controller::new(cfg, spec, &bad, ResetCause::PowerOn);
     rig.injections.clear();
     let out = ctl.tick(&rig.sample());
     if out.bridge_enabled || !FaultCode(out.frame.faults).contains(FaultCode::PARAMETERS_INVALID) {
         hprintln!("qemu-smoke: FAIL corrupt parameter set enabled the bridge");
         failures += 1;
     }
+    failures
+}
+
+/// The board's side of one simulated trigger: the rig's conversions (and its gate driver's fault
+/// pin on the break flag) into the stand-in registers, the interrupt, the bridge back to the rig.
+fn trigger(
+    drive: &mut firmware::drive::DriveLoop<firmware::drive::MemoryStage>,
+    rig: &mut Rig,
+) -> TickOutput {
+    let raw = rig.sample();
+    let stage = drive.stage();
+    stage.conversions = [raw.current.0, raw.displacement.0, firmware::drive::bus_code(raw.bus)];
+    stage.break_flag |= raw.break_tripped;
+    let out = drive.on_conversion();
+    let _ = rig.apply(&out);
+    out
+}
+
+type Rig = gma_control::sim::Rig<gma_control::sim::CoilActuator>;
+use gma_control::TickOutput;
+
+/// The operator's side of the command channel: commands encoded as `gma drive` does, through the
+/// board's command port (decoder → controller) and back as replies.
+struct Operator {
+    port: firmware::drive::CommandPort,
+    replies: heapless::spsc::Consumer<'static, gma_control::command::Reply>,
+    tag: u8,
+}
+
+impl Operator {
+    /// Sends `cmd`; the reply with its tag, or `None` when none came back.
+    fn send(
+        &mut self,
+        drive: &mut firmware::drive::DriveLoop<firmware::drive::MemoryStage>,
+        cmd: &gma_control::command::Command,
+    ) -> Option<gma_control::command::Reply> {
+        let mut frame = [0u8; gma_control::command::MAX_ENCODED];
+        self.tag = self.tag.wrapping_add(1);
+        let n = cmd.encode(self.tag, &mut frame).ok()?;
+        self.port.on_bytes(&frame[..n], |r| Some(firmware::drive::execute(drive.controller(), r)));
+        let reply = self.replies.dequeue()?;
+        (reply.tag == self.tag).then_some(reply)
+    }
+}
+
+/// The board's interrupt (`firmware::drive`) and its command channel against the simulated rig,
+/// with stand-in registers, through the whole operating sequence: boot idle (no switching)
+/// while the current zero is calibrated → arm by a command frame → tracking, telemetry through
+/// the queue and the thread-mode encoder in order with cycle counts → a corrupt frame counted
+/// and ignored → a gate-driver fault on the break input: outputs off in its own tick, latched,
+/// visible in telemetry → disarm and clear by command → idle; then a bus over-voltage trip, the
+/// deadline latch, and a watchdog reset booting latched (an arm command refused).
+fn drive_loop() -> u32 {
+    use core::sync::atomic::Ordering;
+    use firmware::drive::{
+        control_config, encode_queued, quiet_window_max_duty, trip, BridgeTiming, CommandPort, DriveCounters,
+        DriveLoop, MemoryStage, ReplyQueue, Slot, TelemetryQueue, DEADLINE_LATCH_AFTER,
+    };
+    use gma_control::command::{Command, Refusal};
+    use gma_control::faults::FaultCode;
+    use gma_control::sim::{CoilActuator, Fault, Injection};
+    use gma_control::telemetry::{Decoder, MAX_ENCODED};
+    use gma_control::{Controller, ResetCause};
+    use model_core::{ActuatorParams, ModelSpec};
+
+    static QUEUE_RUN: Slot<TelemetryQueue> = Slot::new();
+    static QUEUE_DEADLINE: Slot<TelemetryQueue> = Slot::new();
+    static QUEUE_WATCHDOG: Slot<TelemetryQueue> = Slot::new();
+    static REPLIES: Slot<ReplyQueue> = Slot::new();
+    static COUNTERS_RUN: DriveCounters = DriveCounters::new();
+    static COUNTERS_DEADLINE: DriveCounters = DriveCounters::new();
+    static COUNTERS_WATCHDOG: DriveCounters = DriveCounters::new();
+
+    let mut failures = 0;
+    let mut check = |ok: bool, what: &str| {
+        if ok {
+            hprintln!("qemu-smoke: drive loop: {}", what);
+        } else {
+            hprintln!("qemu-smoke: FAIL drive loop: {}", what);
+            failures += 1;
+        }
+    };
+    let acked = |r: Option<gma_control::command::Reply>| r.is_some_and(|r| r.outcome.is_ok());
+    let Ok(spec) = ModelSpec::parse("ja+eddy+mech") else { return 1 };
+    let p = ActuatorParams::TERFENOL_DEMO;
+    let cfg = control_config();
+    let timing = BridgeTiming { period_ticks: 4250, max_duty: quiet_window_max_duty() };
+    let rig = || CoilActuator::new(spec, &p, 1e-4).map(|plant| Rig::new(plant, 1));
+    let (Ok(mut rig_a), Ok(mut rig_b), Ok(mut rig_c)) = (rig(), rig(), rig()) else { return 1 };
+    // SAFETY: the only writes to these slots.
+    #[allow(unsafe_code)]
+    let (queue_a, queue_b, queue_c, replies) = unsafe {
+        (
+            QUEUE_RUN.write(TelemetryQueue::new()),
+            QUEUE_DEADLINE.write(TelemetryQueue::new()),
+            QUEUE_WATCHDOG.write(TelemetryQueue::new()),
+            REPLIES.write(ReplyQueue::new()),
+        )
+    };
+    let (reply_producer, reply_consumer) = replies.split();
+    let mut op = Operator { port: CommandPort::new(reply_producer), replies: reply_consumer, tag: 0 };
+    let (producer, mut consumer) = queue_a.split();
+    let ctl = Controller::new(cfg, spec, &p, ResetCause::PowerOn);
+    let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS_RUN);
+
+    // Boot idle: no switching while the current zero is calibrated; an early arm is refused.
+    let mut idle = true;
+    for _ in 0..cfg.offset_calibration_ticks / 2 {
+        let out = trigger(&mut drive, &mut rig_a);
+        idle &= !out.bridge_enabled && !drive.stage().outputs_enabled;
+    }
+    let early = op.send(&mut drive, &Command::Arm);
+    for _ in cfg.offset_calibration_ticks / 2..cfg.offset_calibration_ticks {
+        let out = trigger(&mut drive, &mut rig_a);
+        idle &= !out.bridge_enabled && !drive.stage().outputs_enabled;
+    }
+    let zero = drive.controller().current_zero_v();
+    hprintln!("qemu-smoke: drive loop: current zero calibrated at boot {:?} V", zero);
+    check(
+        idle && early.is_some_and(|r| r.outcome == Err(Refusal::NotCalibrated) && !r.armed)
+            && zero.is_some_and(|v| (v - 1.65).abs() < 0.01),
+        "boot idle: outputs off through the offset calibration, an early arm command refused",
+    );
+    while consumer.dequeue().is_some() {}
+
+    // Arm by a command frame; run.
+    let arm = op.send(&mut drive, &Command::Arm);
+    check(acked(arm) && arm.is_some_and(|r| r.armed), "arm command frame decoded, executed, acknowledged");
+    let mut decoder = Decoder::default();
+    let mut bytes = [0u8; 8 * MAX_ENCODED];
+    let (mut decoded, mut in_order, mut timed, mut first_seq) = (0u32, true, true, None);
+    let mut enabled = true;
+    let mut widest = 0u16;
+    let mut keep_alive = true;
+    for k in 0..3000 {
+        if k % 500 == 0 {
+            keep_alive &= acked(op.send(&mut drive, &Command::Ping));
+        }
+        let out = trigger(&mut drive, &mut rig_a);
+        enabled &= out.bridge_enabled && drive.stage().outputs_enabled;
+        let [a, b] = drive.stage().compare;
+        widest = widest.max(a.abs_diff(b));
+        let n = encode_queued(&mut consumer, &mut bytes);
+        for &byte in &bytes[..n] {
+            if let Some(d) = decoder.push(byte) {
+                let first = *first_seq.get_or_insert(d.frame.seq);
+                in_order &= d.frame.seq == first.wrapping_add(decoded) && d.gap == 0;
+                timed &= d.tick_cycles.is_some();
+                decoded += 1;
+            }
+        }
+    }
+    let y = rig_a.displacement_from_rest_um();
+    check(enabled && keep_alive, "armed: bridge switching for 3000 ticks with a keep-alive every 500");
+    check(
+        decoded == 3000 && in_order && timed && decoder.corrupt == 0,
+        "3000 telemetry records queued, encoded in thread mode, decoded in order (format 2)",
+    );
+    hprintln!("qemu-smoke: drive loop: displacement at the last tick {} µm (reference 15 ± 12.5 µm)", y);
+    check((1.0..=29.0).contains(&y), "tracking: the displacement is inside the reference's range");
+    let window = (timing.max_duty * timing.period_ticks as f32) as u16 + 1;
+    let full = [1.0f32, -1.0, f32::INFINITY, f32::NAN, 0.0].map(|d| timing.compare_values(d));
+    let spans = full.map(|(a, b)| a.abs_diff(b));
+    hprintln!(
+        "qemu-smoke: drive loop: duty limit {} = {} of {} ticks; widest in closed loop {}",
+        timing.max_duty,
+        window,
+        timing.period_ticks,
+        widest
+    );
+    check(
+        widest <= window
+            && spans[..3].iter().all(|&s| s <= window && s + 2 >= window)
+            && spans[3] == 0
+            && spans[4] == 0,
+        "compare values: full duty and beyond stop at the quiet-window limit, NaN and 0 give equal legs",
+    );
+
+    // A corrupt frame: counted, no reply, nothing changes.
+    let mut frame = [0u8; gma_control::command::MAX_ENCODED];
+    let n = Command::Disarm.encode(99, &mut frame).unwrap_or(0);
+    frame[n / 2] ^= 0x10;
+    let corrupt_before = op.port.decoder.corrupt;
+    op.port.on_bytes(&frame[..n], |r| Some(firmware::drive::execute(drive.controller(), r)));
+    let out = trigger(&mut drive, &mut rig_a);
+    check(
+        op.port.decoder.corrupt == corrupt_before + 1 && op.replies.dequeue().is_none() && out.bridge_enabled,
+        "corrupt command frame counted, not answered, not executed",
+    );
+
+    // A gate-driver fault on the break input (the records before it are dropped here).
+    while consumer.dequeue().is_some() {}
+    let from = rig_a.tick();
+    let gate_fault = Injection { fault: Fault::GateDriverFault, from, ticks: 5 };
+    if rig_a.injections.push(gate_fault).is_err() {
+        return failures + 1;
+    }
+    let out = trigger(&mut drive, &mut rig_a);
+    check(
+        !out.bridge_enabled
+            && !drive.stage().outputs_enabled
+            && FaultCode(out.frame.faults).contains(FaultCode::BRIDGE_BREAK),
+        "break input: outputs off in its own tick, bridge_break in its record",
+    );
+    let (mut stays_off, mut visible, mut seen) = (true, true, 0);
+    for _ in 0..20 {
+        let out = trigger(&mut drive, &mut rig_a);
+        stays_off &= !out.bridge_enabled && !drive.stage().outputs_enabled;
+        let n = encode_queued(&mut consumer, &mut bytes);
+        for &byte in &bytes[..n] {
+            if let Some(d) = decoder.push(byte) {
+                visible &= FaultCode(d.frame.faults).contains(FaultCode::BRIDGE_BREAK);
+                seen += 1;
+            }
+        }
+    }
+    check(
+        stays_off
+            && visible
+            && seen == 21
+            && COUNTERS_RUN.trips.load(Ordering::Relaxed) & trip::BREAK_INPUT != 0,
+        "break input: latched off after the pin released, bridge_break in every decoded frame",
+    );
+    rig_a.injections.clear();
+
+    // Disarm and clear through commands: back to idle, the fault gone, still not switching.
+    let disarm = op.send(&mut drive, &Command::Disarm);
+    let clear = op.send(&mut drive, &Command::ClearFaults);
+    let mut idle_again = true;
+    for _ in 0..50 {
+        let out = trigger(&mut drive, &mut rig_a);
+        idle_again &= !out.bridge_enabled && !drive.stage().outputs_enabled && out.frame.faults == 0;
+    }
+    check(
+        acked(disarm) && acked(clear) && clear.is_some_and(|r| r.faults == 0 && !r.armed) && idle_again,
+        "disarm and clear by command: faults cleared, idle (no switching without a new arm)",
+    );
+
+    // Re-armed, the bus pumped over its limit: bus_overvoltage trips and the bridge goes off.
+    let rearm = op.send(&mut drive, &Command::Arm);
+    rig_a.bus_v = 40.0;
+    let mut tripped_after = None;
+    for k in 0..10 {
+        let out = trigger(&mut drive, &mut rig_a);
+        if !out.bridge_enabled && FaultCode(out.frame.faults).contains(FaultCode::BUS_OVERVOLTAGE) {
+            tripped_after = Some(k + 1);
+            break;
+        }
+    }
+    let refused_while_over = op.send(&mut drive, &Command::ClearFaults);
+    rig_a.bus_v = 24.0;
+    trigger(&mut drive, &mut rig_a);
+    let cleared = op.send(&mut drive, &Command::ClearFaults);
+    hprintln!("qemu-smoke: drive loop: bus at 40 V tripped after {:?} ticks", tripped_after);
+    check(
+        acked(rearm)
+            && tripped_after.is_some_and(|k| k <= 3)
+            && !drive.stage().outputs_enabled
+            && refused_while_over.is_some_and(|r| r.outcome == Err(Refusal::FaultStillPresent))
+            && acked(cleared),
+        "bus over-voltage: tripped within 3 ticks, kept while present, cleared by command after",
+    );
+
+    // Deadline: one late tick is counted, three in a row latch missed_deadline in the third.
+    let (producer, _consumer) = queue_b.split();
+    let ctl = Controller::new(cfg, spec, &p, ResetCause::PowerOn);
+    let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS_DEADLINE);
+    for _ in 0..cfg.offset_calibration_ticks {
+        trigger(&mut drive, &mut rig_b);
+    }
+    let armed = acked(op.send(&mut drive, &Command::Arm));
+    for _ in 0..10 {
+        trigger(&mut drive, &mut rig_b);
+    }
+    drive.stage().late = true;
+    let mut on_while_counting = true;
+    for _ in 1..DEADLINE_LATCH_AFTER {
+        on_while_counting &= trigger(&mut drive, &mut rig_b).bridge_enabled;
+    }
+    let out = trigger(&mut drive, &mut rig_b);
+    let latched = !out.bridge_enabled
+        && !drive.stage().outputs_enabled
+        && FaultCode(out.frame.faults).contains(FaultCode::MISSED_DEADLINE);
+    drive.stage().late = false;
+    let out = trigger(&mut drive, &mut rig_b);
+    let stays_off = !out.bridge_enabled && FaultCode(out.frame.faults).contains(FaultCode::MISSED_DEADLINE);
+    check(
+        armed
+            && on_while_counting
+            && latched
+            && stays_off
+            && COUNTERS_DEADLINE.deadline_overruns.load(Ordering::Relaxed) == DEADLINE_LATCH_AFTER as u32
+            && COUNTERS_DEADLINE.trips.load(Ordering::Relaxed) & trip::DEADLINE != 0,
+        "deadline: late ticks counted, missed_deadline latched, bridge off in the 3rd late tick in a row",
+    );
+
+    // Watchdog reset: the RCC_CSR flags (IWDG with the pin flag every internal reset sets) boot
+    // the controller with watchdog_reset latched; an arm command is refused, nothing switches.
+    let cause = ResetCause::from_rcc_flags(true, false, false, false, true, false);
+    let (producer, _consumer) = queue_c.split();
+    let ctl = Controller::new(cfg, spec, &p, cause);
+    let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS_WATCHDOG);
+    let mut off = true;
+    let mut shown = true;
+    for _ in 0..cfg.offset_calibration_ticks + 10 {
+        let out = trigger(&mut drive, &mut rig_c);
+        off &= !out.bridge_enabled && !drive.stage().outputs_enabled;
+        shown &= FaultCode(out.frame.faults).contains(FaultCode::WATCHDOG_RESET);
+    }
+    let arm = op.send(&mut drive, &Command::Arm);
+    let out = trigger(&mut drive, &mut rig_c);
+    check(
+        cause == ResetCause::Watchdog
+            && ResetCause::from_rcc_flags(false, false, false, false, true, false) == ResetCause::Pin
+            && off
+            && shown
+            && arm.is_some_and(|r| r.outcome == Err(Refusal::FaultLatched) && !r.armed)
+            && !out.bridge_enabled,
+        "watchdog reset: boots with watchdog_reset latched, arm refused, never switching",
+    );
+
+    // Dead time: the smallest whole number of timer ticks that covers DEAD_TIME_NS.
+    let timer_hz = 170_000_000u64;
+    let ticks = firmware::drive::dead_time_ticks(timer_hz as u32) as u64;
+    let ns = |t: u64| t * 1_000_000_000 / timer_hz;
+    let dead = firmware::drive::DEAD_TIME_NS as u64;
+    check(
+        ns(ticks) >= dead && ns(ticks - 1) < dead,
+        "dead time: fewest 170 MHz ticks covering the datasheet value",
+    );
+    // Bus scaling: code → volts → code is exact over the range; 24 V within one code.
+    let lsb = firmware::drive::bus_volts(1).0;
+    let exact = (0..=4095u16).all(|c| firmware::drive::bus_code(firmware::drive::bus_volts(c)) == c);
+    let v24 = firmware::drive::bus_volts(firmware::drive::bus_code(gma_control::units::Volts(24.0))).0;
+    check(exact && (v24 - 24.0).abs() <= lsb, "bus voltage scaling round-trips every code");
     failures
 }
 
@@ -138,6 +488,7 @@ fn main() -> ! {
         }
     }
     failures += closed_loop(force_fail);
+    failures += drive_loop();
     if failures == 0 {
         hprintln!("qemu-smoke: PASS");
         exit(0)

@@ -31,6 +31,7 @@ pub(crate) mod common;
 mod compare;
 mod demo;
 mod diagnose;
+mod drive;
 mod effects;
 pub(crate) mod fit;
 mod mechanics;
@@ -87,6 +88,9 @@ enum Command {
     /// (m ÿ + c ẏ + k y = F, 001 eq. 14–15), discretised exactly at the loop rate.
     #[command(allow_negative_numbers = true)]
     Mechanics(mechanics::MechanicsArgs),
+    /// The drive's command channel: encode a command (arm, disarm, clear, ping, reference,
+    /// load) for its UART, or decode its replies.
+    Drive(drive::DriveArgs),
 }
 
 impl Command {
@@ -102,6 +106,7 @@ impl Command {
             Command::Demo(a) => a.json,
             Command::Simulate(a) => a.json,
             Command::Mechanics(a) => a.json,
+            Command::Drive(a) => a.json(),
         }
     }
 }
@@ -215,5 +220,6 @@ fn run(command: Command) -> Result<()> {
         Command::Simulate(a) => simulate::run(&a),
         Command::Effects(a) => effects::run(&a),
         Command::Mechanics(a) => mechanics::run(&a),
+        Command::Drive(a) => drive::run(&a),
     }
 }

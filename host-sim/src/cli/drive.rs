@@ -1,0 +1,277 @@
+//! `gma drive`: the host side of the drive's command channel. Encodes one command as the board
+//! decodes it (gma-control's `command` module: COBS + CRC-16, protocol version byte, a tag the
+//! reply echoes) and writes it to a serial device, a file or stdout; `gma drive replies` decodes
+//! what the board answered.
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Subcommand, ValueEnum};
+use gma_control::command::{self, Command, Decoder, ReferenceCommand, Refusal, Shape};
+use gma_control::faults::FaultCode;
+use model_core::ModelSpec;
+use serde_json::json;
+
+use crate::files::display;
+
+/// Options of `gma drive`.
+#[derive(Args)]
+pub struct DriveArgs {
+    #[command(subcommand)]
+    pub action: Action,
+}
+
+/// Where an encoded command goes.
+#[derive(Args)]
+pub struct Target {
+    /// Where the frame goes: a serial device already set up with `stty` (e.g. /dev/ttyACM0,
+    /// 115200 8N1 raw), a file (appended to, so a sequence of commands builds a script), or `-`
+    /// for stdout.
+    #[arg(long, short, default_value = "-")]
+    pub out: PathBuf,
+    /// The tag the board echoes in its reply (0–255), to match replies to commands.
+    #[arg(long, default_value_t = 0)]
+    pub tag: u8,
+    /// Print one JSON object on stdout saying what was sent (command, tag, bytes, where, the
+    /// frame in hex); needs `--out` to be a file or device, as stdout then carries the JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// What `gma drive` does.
+#[derive(Subcommand)]
+pub enum Action {
+    /// Keep-alive: the board disarms when nothing valid arrives for 200 ms while armed.
+    Ping(Target),
+    /// Enable the bridge (refused while a fault is latched, before the boot calibration, or
+    /// with the bus outside its limits).
+    Arm(Target),
+    /// Switch the bridge off.
+    Disarm(Target),
+    /// Clear the latched faults whose cause is gone (does not arm).
+    Clear(Target),
+    /// Set the displacement reference [µm from rest]; validated on the board too.
+    #[command(allow_negative_numbers = true)]
+    Reference(ReferenceArgs),
+    /// Load an identified parameter set (a `gma fit` parameter file) for the board's
+    /// compensator; the board validates it as at boot and refuses it while armed.
+    Load(LoadArgs),
+    /// Decode the board's replies from a capture (`-` for stdin).
+    Replies(RepliesArgs),
+}
+
+/// The reference waveforms the board generates.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum WaveShape {
+    /// bias + amplitude · sin(2π f t).
+    Sine,
+    /// bias ± amplitude.
+    Square,
+    /// bias ± amplitude, linear ramps.
+    Triangle,
+    /// bias only (amplitude and frequency 0).
+    Constant,
+}
+
+/// Options of `gma drive reference`.
+#[derive(Args)]
+pub struct ReferenceArgs {
+    /// Waveform.
+    #[arg(long, value_enum)]
+    pub shape: WaveShape,
+    /// Amplitude [µm] (≥ 0; |bias| + amplitude ≤ 50 µm on the reference board).
+    #[arg(long, default_value_t = 0.0)]
+    pub amplitude_um: f32,
+    /// DC level [µm from rest].
+    #[arg(long, default_value_t = 0.0)]
+    pub bias_um: f32,
+    /// Frequency [Hz] (0 < f ≤ 1666 Hz at the 10 kHz tick; 0 for a constant).
+    #[arg(long, default_value_t = 0.0)]
+    pub freq_hz: f32,
+    #[command(flatten)]
+    pub target: Target,
+}
+
+/// Options of `gma drive load`.
+#[derive(Args)]
+pub struct LoadArgs {
+    /// The parameter file (TOML, as `gma fit` writes it).
+    #[arg(long)]
+    pub params: PathBuf,
+    /// The model spec the parameters belong to (e.g. `ja+eddy+mech`).
+    #[arg(long)]
+    pub model: String,
+    #[command(flatten)]
+    pub target: Target,
+}
+
+/// Options of `gma drive replies`.
+#[derive(Args)]
+pub struct RepliesArgs {
+    /// The captured bytes from the board (`-` for stdin).
+    #[arg(long, short)]
+    pub input: PathBuf,
+    /// Print exactly one JSON object on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl DriveArgs {
+    /// Whether JSON output was asked for.
+    pub fn json(&self) -> bool {
+        match &self.action {
+            Action::Ping(t) | Action::Arm(t) | Action::Disarm(t) | Action::Clear(t) => t.json,
+            Action::Reference(r) => r.target.json,
+            Action::Load(l) => l.target.json,
+            Action::Replies(r) => r.json,
+        }
+    }
+}
+
+/// Runs `gma drive`.
+pub fn run(a: &DriveArgs) -> Result<()> {
+    let (cmd, target) = match &a.action {
+        Action::Ping(t) => (Command::Ping, t),
+        Action::Arm(t) => (Command::Arm, t),
+        Action::Disarm(t) => (Command::Disarm, t),
+        Action::Clear(t) => (Command::ClearFaults, t),
+        Action::Reference(r) => (reference(r)?, &r.target),
+        Action::Load(l) => (load(l)?, &l.target),
+        Action::Replies(r) => return replies(r),
+    };
+    if target.json && target.out == Path::new("-") {
+        bail!("--json with --out - (the default): stdout would carry both the frame and the JSON; give --out FILE or a device");
+    }
+    let mut frame = [0u8; command::MAX_ENCODED];
+    let n = cmd.encode(target.tag, &mut frame).map_err(|r| anyhow::anyhow!("cannot encode: {}", r.name()))?;
+    send(&target.out, &frame[..n])?;
+    if target.json {
+        let hex: String = frame[..n].iter().map(|b| format!("{b:02x}")).collect();
+        out!(
+            "{}",
+            json!({"command": opcode_name(cmd.opcode()), "tag": target.tag, "bytes": n, "out": display(&target.out), "frame_hex": hex})
+        );
+    }
+    Ok(())
+}
+
+fn reference(r: &ReferenceArgs) -> Result<Command> {
+    let shape = match r.shape {
+        WaveShape::Sine => Shape::Sine,
+        WaveShape::Square => Shape::Square,
+        WaveShape::Triangle => Shape::Triangle,
+        WaveShape::Constant => Shape::Constant,
+    };
+    let cmd =
+        ReferenceCommand { shape, amplitude_um: r.amplitude_um, bias_um: r.bias_um, freq_hz: r.freq_hz };
+    // The board's own check with the reference board's limits, so that a typo fails here.
+    let cfg = gma_control::ControlConfig::REFERENCE;
+    if cmd.waveform(cfg.max_reference_um, 1.0 / (6.0 * cfg.current_loop.tick_s)).is_err() {
+        bail!(
+            "reference --shape {} --amplitude-um {} --bias-um {} --freq-hz {}: out of range (finite, amplitude ≥ 0, \
+             |bias| + amplitude ≤ {} µm, 0 < frequency ≤ {:.0} Hz; a constant has amplitude and frequency 0)",
+            shape_name(r.shape),
+            r.amplitude_um,
+            r.bias_um,
+            r.freq_hz,
+            cfg.max_reference_um,
+            1.0 / (6.0 * cfg.current_loop.tick_s)
+        );
+    }
+    Ok(Command::SetReference(cmd))
+}
+
+fn shape_name(s: WaveShape) -> &'static str {
+    match s {
+        WaveShape::Sine => "sine",
+        WaveShape::Square => "square",
+        WaveShape::Triangle => "triangle",
+        WaveShape::Constant => "constant",
+    }
+}
+
+fn load(l: &LoadArgs) -> Result<Command> {
+    let spec = ModelSpec::parse(&l.model).map_err(|e| anyhow::anyhow!("--model {}: {e}", l.model))?;
+    let params = crate::params::load(Some(l.params.as_path()), spec)?;
+    // The board's validation, before anything is sent.
+    gma_control::compensator_model(spec, &params, gma_control::ControlConfig::REFERENCE.current_loop.tick_s)
+        .map_err(|e| {
+            anyhow::anyhow!("{}: the board would refuse this parameter set: {e}", display(&l.params))
+        })?;
+    Ok(Command::LoadParameters { spec, params })
+}
+
+/// Writes one frame: appended to a file or written to a device, or to stdout.
+fn send(out: &Path, frame: &[u8]) -> Result<()> {
+    if out == Path::new("-") {
+        let mut stdout = std::io::stdout().lock();
+        return stdout.write_all(frame).and_then(|()| stdout.flush()).context("writing to standard output");
+    }
+    let name = display(out);
+    if out.is_dir() {
+        bail!("cannot write {name}: it is a folder");
+    }
+    let mut f = std::fs::OpenOptions::new()
+        .append(true)
+        .create(true)
+        .open(out)
+        .with_context(|| format!("cannot open {name}"))?;
+    f.write_all(frame).and_then(|()| f.flush()).with_context(|| format!("writing {name}"))
+}
+
+fn opcode_name(op: u8) -> &'static str {
+    match op {
+        0x01 => "ping",
+        0x02 => "arm",
+        0x03 => "disarm",
+        0x04 => "clear",
+        0x05 => "reference",
+        0x06 => "load",
+        _ => "unknown",
+    }
+}
+
+fn replies(r: &RepliesArgs) -> Result<()> {
+    let mut bytes = Vec::new();
+    let name = display(&r.input);
+    crate::record::open_stream(&r.input)?
+        .read_to_end(&mut bytes)
+        .with_context(|| format!("reading {name}"))?;
+    let mut d = Decoder::default();
+    let mut list = Vec::new();
+    for &b in &bytes {
+        let Some(reply) = d.push_reply(b) else { continue };
+        let faults: Vec<&str> = FaultCode(reply.faults).names().collect();
+        let outcome = match reply.outcome {
+            Ok(()) => "ack".to_string(),
+            Err(reason) => format!("refused ({})", reason.name()),
+        };
+        say!(
+            r.json,
+            "tag {} {}: {outcome}; faults: {}; {}",
+            reply.tag,
+            opcode_name(reply.opcode),
+            if faults.is_empty() { "none".into() } else { faults.join("+") },
+            if reply.armed { "armed" } else { "disarmed" }
+        );
+        list.push(json!({
+            "tag": reply.tag,
+            "command": opcode_name(reply.opcode),
+            "ack": reply.outcome.is_ok(),
+            "refused": reply.outcome.err().map(Refusal::name),
+            "faults": faults,
+            "armed": reply.armed,
+        }));
+    }
+    if d.corrupt + d.refused > 0 {
+        eprintln!(
+            "gma: warning: {name}: {} corrupt chunks and {} frames that are not replies skipped",
+            d.corrupt, d.refused
+        );
+    }
+    if r.json {
+        out!("{}", json!({"replies": list, "corrupt": d.corrupt, "not_replies": d.refused}));
+    }
+    Ok(())
+}
