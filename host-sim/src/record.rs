@@ -22,6 +22,8 @@ pub struct RecordSummary {
     pub lost: u64,
     /// Chunks that failed the COBS, length or CRC check (never written).
     pub corrupt: u64,
+    /// The drive's command replies, which share its telemetry line (skipped, not errors).
+    pub replies: u64,
     /// CRC-valid frames carrying a non-finite value (never written; they end a segment).
     pub invalid: u64,
     /// Times the sequence restarted (the board was reset).
@@ -142,7 +144,7 @@ pub fn record(
         }
     }
     finish(seg.take(), &mut sum)?;
-    (sum.frames, sum.lost, sum.corrupt) = (d.frames, d.lost, d.corrupt);
+    (sum.frames, sum.lost, sum.corrupt, sum.replies) = (d.frames, d.lost, d.corrupt, d.replies);
     if sum.files.is_empty() {
         bail!(
             "no telemetry frames in the stream ({} frames, {} corrupt chunks, {} invalid frames){}; is it the drive's UART capture?",

@@ -19,8 +19,8 @@
 
 use model_core::{ActuatorParams, ModelSpec};
 
+use crate::framing::{cobs_decode, cobs_encode, crc16};
 use crate::reference::Waveform;
-use crate::telemetry::crc16;
 
 /// The protocol version this code speaks (byte 0 of every frame).
 pub const PROTOCOL_VERSION: u8 = 1;
@@ -294,6 +294,12 @@ impl Reply {
         n
     }
 
+    /// A whole decoded frame (CRC included) if it is an intact reply.
+    pub fn from_frame(raw: &[u8]) -> Option<Reply> {
+        let n = raw.len().checked_sub(2)?;
+        (crc16(&raw[..n]) == u16::from_le_bytes([raw[n], raw[n + 1]])).then(|| Reply::parse(&raw[..n]))?
+    }
+
     fn parse(raw: &[u8]) -> Option<Reply> {
         if raw.len() != REPLY_RAW - 2 || raw[0] != PROTOCOL_VERSION || raw[2] & REPLY_BIT == 0 {
             return None;
@@ -408,48 +414,6 @@ impl Decoder {
         }
         reply
     }
-}
-
-/// COBS: every 0 byte of `raw` replaced, a 0 delimiter appended; returns the encoded length.
-/// `out` must hold `raw.len() + raw.len() / 254 + 2` bytes.
-fn cobs_encode(raw: &[u8], out: &mut [u8]) -> usize {
-    let (mut code_at, mut code, mut n) = (0, 1u8, 1);
-    for &b in raw {
-        if b != 0 {
-            out[n] = b;
-            n += 1;
-            code += 1;
-        }
-        if b == 0 || code == 0xFF {
-            out[code_at] = code;
-            code_at = n;
-            n += 1;
-            code = 1;
-        }
-    }
-    out[code_at] = code;
-    out[n] = 0;
-    n + 1
-}
-
-/// Undoes [`cobs_encode`] (without the delimiter); `None` for an invalid or too long chunk.
-fn cobs_decode(enc: &[u8], out: &mut [u8]) -> Option<usize> {
-    let (mut i, mut n) = (0, 0);
-    while i < enc.len() {
-        let code = enc[i] as usize;
-        i += 1;
-        if code == 0 || i + code - 1 > enc.len() || n + code - 1 > out.len() {
-            return None;
-        }
-        out[n..n + code - 1].copy_from_slice(&enc[i..i + code - 1]);
-        n += code - 1;
-        i += code - 1;
-        if code < 0xFF && i < enc.len() {
-            *out.get_mut(n)? = 0;
-            n += 1;
-        }
-    }
-    Some(n)
 }
 
 #[cfg(test)]

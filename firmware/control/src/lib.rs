@@ -12,6 +12,7 @@
 pub mod command;
 pub mod current;
 pub mod faults;
+pub mod framing;
 pub mod pid;
 pub mod reference;
 pub mod resonant;

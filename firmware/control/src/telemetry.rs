@@ -6,6 +6,9 @@
 //! 24 bytes before COBS) and format 2 ([`TimedFrame`], 26 bytes: format 1's payload, then the
 //! tick's CPU cycles as a u16, then the CRC). The board sends format 2; [`Decoder`] reads both.
 
+use crate::command::Reply;
+use crate::framing::{cobs_decode, cobs_encode, crc16};
+
 /// One tick's record.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Frame {
@@ -44,33 +47,6 @@ pub const TIMED_PAYLOAD_BYTES: usize = PAYLOAD_BYTES + 2;
 const TIMED_RAW_BYTES: usize = TIMED_PAYLOAD_BYTES + 2;
 /// Largest encoded frame of either format: COBS adds one byte per 254, plus the delimiter.
 pub const MAX_ENCODED: usize = TIMED_RAW_BYTES + 2;
-
-/// CRC-16/CCITT-FALSE (polynomial 0x1021, initial value 0xFFFF), one table lookup per byte.
-pub fn crc16(data: &[u8]) -> u16 {
-    let mut crc: u16 = 0xFFFF;
-    for &b in data {
-        crc = (crc << 8) ^ CRC16_TABLE[((crc >> 8) as u8 ^ b) as usize];
-    }
-    crc
-}
-
-/// The CRC of every leading byte: the bitwise algorithm run once per table entry, at compile
-/// time (512 bytes of flash instead of eight shift-and-xor steps per byte in the interrupt).
-const CRC16_TABLE: [u16; 256] = {
-    let mut table = [0u16; 256];
-    let mut i = 0;
-    while i < 256 {
-        let mut crc = (i as u16) << 8;
-        let mut bit = 0;
-        while bit < 8 {
-            crc = if crc & 0x8000 != 0 { (crc << 1) ^ 0x1021 } else { crc << 1 };
-            bit += 1;
-        }
-        table[i] = crc;
-        i += 1;
-    }
-    table
-};
 
 impl Frame {
     fn write_payload(&self, b: &mut [u8]) {
@@ -132,29 +108,6 @@ impl TimedFrame {
     }
 }
 
-/// COBS: every zero byte of `raw` (shorter than 254 bytes) becomes the distance to the next one,
-/// then the 0 delimiter; returns the encoded length.
-fn cobs_encode(raw: &[u8], out: &mut [u8; MAX_ENCODED]) -> usize {
-    let mut code_at = 0;
-    let mut code = 1u8;
-    let mut n = 1;
-    for &b in raw {
-        if b == 0 {
-            out[code_at] = code;
-            code_at = n;
-            n += 1;
-            code = 1;
-        } else {
-            out[n] = b;
-            n += 1;
-            code += 1;
-        }
-    }
-    out[code_at] = code;
-    out[n] = 0;
-    n + 1
-}
-
 /// Stream decoder with loss accounting.
 #[derive(Debug, Clone)]
 pub struct Decoder {
@@ -168,6 +121,8 @@ pub struct Decoder {
     pub lost: u64,
     /// Delimited chunks that failed COBS, length or CRC checks.
     pub corrupt: u64,
+    /// Intact command replies ([`Reply`]) seen between the frames.
+    pub replies: u64,
 }
 
 impl Default for Decoder {
@@ -180,6 +135,7 @@ impl Default for Decoder {
             frames: 0,
             lost: 0,
             corrupt: 0,
+            replies: 0,
         }
     }
 }
@@ -215,13 +171,14 @@ impl Decoder {
         if len == 0 {
             return None; // idle delimiters
         }
-        let frame = if overflow {
-            None
-        } else {
-            cobs_decode(&self.buf[..len]).and_then(|(raw, n)| TimedFrame::from_bytes(&raw[..n]))
-        };
-        let Some((frame, tick_cycles)) = frame else {
-            self.corrupt += 1;
+        let mut raw = [0u8; MAX_ENCODED];
+        let n = if overflow { None } else { cobs_decode(&self.buf[..len], &mut raw) };
+        let Some((frame, tick_cycles)) = n.and_then(|n| TimedFrame::from_bytes(&raw[..n])) else {
+            // The board's command replies share the line: intact ones are not corruption.
+            match n.and_then(|n| Reply::from_frame(&raw[..n])) {
+                Some(_) => self.replies += 1,
+                None => self.corrupt += 1,
+            }
             return None;
         };
         let ahead = match self.last_seq {
@@ -236,34 +193,6 @@ impl Decoder {
         self.frames += 1;
         Some(Decoded { frame, tick_cycles, gap, restart })
     }
-}
-
-fn cobs_decode(enc: &[u8]) -> Option<([u8; MAX_ENCODED], usize)> {
-    let mut out = [0u8; MAX_ENCODED];
-    let (mut i, mut n) = (0, 0);
-    while i < enc.len() {
-        let code = enc[i] as usize;
-        i += 1;
-        if code == 0 {
-            return None;
-        }
-        for _ in 1..code {
-            if i >= enc.len() || n >= out.len() {
-                return None;
-            }
-            out[n] = enc[i];
-            n += 1;
-            i += 1;
-        }
-        if code < 0xFF && i < enc.len() {
-            if n >= out.len() {
-                return None;
-            }
-            out[n] = 0;
-            n += 1;
-        }
-    }
-    Some((out, n))
 }
 
 #[cfg(test)]
@@ -302,6 +231,27 @@ mod tests {
         let gaps: Vec<u32> = s.iter().filter_map(|&b| d.push(b)).map(|x| x.gap).filter(|&g| g > 0).collect();
         assert_eq!(gaps, vec![1; 5]);
         assert_eq!(d.lost, 5);
+    }
+
+    /// The board's command replies share the telemetry line: intact ones are counted as replies,
+    /// not corruption, and do not break the frame sequence; a damaged one is corruption.
+    #[test]
+    fn replies_between_frames_are_not_corruption() {
+        use crate::command::{Reply, MAX_REPLY_ENCODED};
+        let reply = Reply { tag: 7, opcode: 0x02, outcome: Ok(()), faults: 0, armed: true };
+        let mut r = [0u8; MAX_REPLY_ENCODED];
+        let n = reply.encode(&mut r);
+        let mut s = Vec::new();
+        for seq in 0..10 {
+            s.extend(stream(core::iter::once(frame(seq))));
+            s.extend_from_slice(&r[..n]);
+        }
+        let mut damaged = r;
+        damaged[3] ^= 0x01;
+        s.extend_from_slice(&damaged[..n]);
+        let mut d = Decoder::default();
+        let decoded = s.iter().filter_map(|&b| d.push(b)).count();
+        assert_eq!((decoded, d.replies, d.corrupt, d.lost), (10, 10, 1, 0));
     }
 
     /// The published check value of CRC-16/CCITT-FALSE (CRC catalogue: "123456789" → 0x29B1),
@@ -347,7 +297,8 @@ mod tests {
         let mut buf = [0u8; MAX_ENCODED];
         let n = f.encode(&mut buf);
         assert_eq!(n, raw.len() + 2);
-        let (decoded, len) = cobs_decode(&buf[..n - 1]).expect("valid COBS");
+        let mut decoded = [0u8; MAX_ENCODED];
+        let len = cobs_decode(&buf[..n - 1], &mut decoded).expect("valid COBS");
         assert_eq!(&decoded[..len], &raw[..]);
     }
 

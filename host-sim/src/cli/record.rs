@@ -42,12 +42,13 @@ pub fn run(a: &RecordArgs) -> Result<()> {
     }
     say!(
         a.json,
-        "{} frames, {} lost (sequence gaps), {} corrupt, {} invalid, {} restarts; wrote {}",
+        "{} frames, {} lost (sequence gaps), {} corrupt, {} invalid, {} restarts, {} command replies skipped; wrote {}",
         r.frames,
         r.lost,
         r.corrupt,
         r.invalid,
         r.restarts,
+        r.replies,
         files.join(", ")
     );
     if r.lost + r.corrupt + r.invalid + r.restarts > 0 {
@@ -64,7 +65,7 @@ pub fn run(a: &RecordArgs) -> Result<()> {
         out!(
             "{}",
             json!({"frames": r.frames, "lost": r.lost, "corrupt": r.corrupt, "invalid": r.invalid,
-                   "restarts": r.restarts, "short": r.short, "files": files,
+                   "restarts": r.restarts, "replies": r.replies, "short": r.short, "files": files,
                    "stopped_by_signal": r.ending == Ending::Stopped})
         );
     }
