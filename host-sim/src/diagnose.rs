@@ -703,6 +703,7 @@ pub fn diagnose(
     let static_amp = current_measured.then(|| StaticGain::fit(fit_files, &fit_skip));
     let mut candidates = Vec::new();
     let mut skipped = Vec::new();
+    let mut failed_refits = Vec::new();
     for (e, r) in results {
         let Some(r) = r else {
             skipped.push(e.name());
@@ -723,6 +724,15 @@ pub fn diagnose(
         };
         let n_eff: f64 = base_fit_s.iter().map(|s| effective_samples(&s.residual)).sum();
         let refit = r.ok().map(|(f, _)| f);
+        // The refit contains the given structure (the effect switched off or negligible), so a
+        // fit cost above the baseline's is a failed search, not evidence against the effect.
+        // Compared only where both costs weigh the same channels (not when `amp` adds the current).
+        if let Some(f) = refit.as_ref().filter(|_| e != Effect::AmplifierDynamics) {
+            let (b, a) = (base.fit.cost(), f.fit.cost());
+            if a > b * 1.0001 {
+                failed_refits.push(format!("`{e}` ({:.2} % > {:.2} %)", a.sqrt() * 100.0, b.sqrt() * 100.0));
+            }
+        }
         let cand_scores = |files: &[Recording], skip: &[usize]| -> Result<Vec<Scored>> {
             let f = refit.as_ref().expect("checked");
             if on_current {
@@ -775,6 +785,13 @@ pub fn diagnose(
             per_file_after: after_score_s.iter().map(|s| s.nrmse).collect(),
             refit,
         });
+    }
+    if !failed_refits.is_empty() {
+        findings.push(format!(
+            "refits that ended worse on the fit files than the structure they extend (rms of the fit cost): {}: the \
+             search failed there, so these candidates are not judged fairly",
+            failed_refits.join(", ")
+        ));
     }
     // Candidates that pass every test first, then by the size of their cut.
     candidates.sort_by(|a, b| {
