@@ -24,8 +24,10 @@ import gma
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[2]
 DATA = HERE.parent / "examples" / "data"
-FIT_CSV = DATA / "refrig-sine-fit.csv"
-VAL_CSV = DATA / "refrig-multisine-val.csv"
+# The broadband multisine is the fit file: a single sine leaves the mechanics unidentified (a
+# seed-dependent optimum with an overdamped resonance fits the sine and misses the multisine by 37 %).
+FIT_CSV = DATA / "refrig-multisine.csv"
+VAL_CSV = DATA / "refrig-sine.csv"
 CORPUS = REPO / "tests" / "fuzz" / "corpus" / "csv_reader"
 GMA_BIN = os.environ.get("GMA_BIN")
 # Short searches: the tests check the plumbing and the contract, not the optimiser's best effort.
@@ -115,10 +117,10 @@ def test_fit_on_independent_data_reports_the_clis_result_fields(fitted):
         assert key in fitted
     assert fitted["model"] == "ja+mech" and fitted["seed"] == QUICK["seed"]
     # The reference rig has eddy currents, two resonances, heating and drift that ja+mech lacks:
-    # within 5 % on the sine it saw (2.6–3.3 % over seeds 1–4 at this effort) and within 10 % on
-    # the multisine it did not see (5.3–6.6 %).
-    assert 0 < fitted["nrmse_fit"] < 0.05, fitted["nrmse_fit"]
-    assert fitted["nrmse_fit"] < fitted["nrmse_val"] < 0.10, fitted["nrmse_val"]
+    # within 7 % on the multisine it saw (5.0 % over seeds 1–4 at this effort) and within 7 % on
+    # the sine it did not see (3.8–4.9 %).
+    assert 0 < fitted["nrmse_fit"] < 0.07, fitted["nrmse_fit"]
+    assert 0 < fitted["nrmse_val"] < 0.07, fitted["nrmse_val"]
     assert [r["split"] for r in fitted["files"]] == ["fit", "val"]
     for name, e in fitted["uncertainty"].items():
         assert e["value"] == pytest.approx(fitted["params"][name])
@@ -180,8 +182,9 @@ def test_diagnose_returns_the_clis_diagnosis_object():
     assert d["model"] == "ja" and d["candidates"]
     assert {"verdict", "findings", "time_limit_reached", "nrmse_fit"} <= set(d)
     assert all(math.isfinite(c["nrmse_after"]) for c in d["candidates"])
-    # ja alone lacks the rig's rate-dependent effects: the best candidate's refit cuts the
-    # validation error by a fifth at least (7.9 % -> 4.6-5.2 % over seeds 1-4).
+    # ja alone lacks the rig's rate-dependent effects: the best candidate's refit cuts the error
+    # by a fifth at least (the rig's coil lag, judged on the measured current: 14.0 % -> 2.1-2.3 %
+    # over seeds 1-4).
     best = d["candidates"][0]
     assert best["nrmse_after"] < 0.8 * best["nrmse_before"], best
 
