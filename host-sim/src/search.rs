@@ -224,6 +224,24 @@ pub fn minimize<C: Clone + Send + Sync>(
             Unit { bounds, cost, context: $context, fidelity: $fidelity, evals: &evals, progress }
         };
     }
+    if d == 0 {
+        // Every continuous parameter fixed: nothing to search (argmin's solvers need at least
+        // one dimension), so the best of the given contexts as they stand.
+        let mut contexts: Vec<&C> = starts.iter().map(|s| &s.context).collect();
+        contexts.push(swarm_context);
+        let (context, cost) = contexts
+            .into_iter()
+            .map(|c| (c, unit!(c, Fidelity::Full).eval(&[])))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .expect("the swarm context is always there");
+        return Ok(Found {
+            best: Vec::new(),
+            context: context.clone(),
+            cost,
+            evaluations: evals.load(Ordering::Relaxed),
+            time_limited: false,
+        });
+    }
     let note_time = |reason: Option<&argmin::core::TerminationReason>| {
         if matches!(reason, Some(argmin::core::TerminationReason::Timeout)) {
             timed_out.store(true, Ordering::Relaxed);

@@ -145,6 +145,9 @@ pub fn analyse(spec: ModelSpec, res: &FitResult, files: &[Recording]) -> Result<
     let free: &[FreeParam] = &res.free;
     let p = free.len();
     let offsets = prep.len();
+    if p == 0 {
+        bail!("every parameter is fixed: there is no uncertainty to estimate");
+    }
     if n <= p + offsets + 1 {
         bail!(
             "{n} residuals for {p} parameters and {offsets} offsets: too few to estimate their uncertainty"

@@ -568,3 +568,51 @@ fn a_reader_that_goes_away_ends_the_command_quietly() {
     let o = child.wait_with_output().unwrap();
     assert!(o.status.success() && !err(&o).contains("panicked"), "{:?}: {}", o.status, err(&o));
 }
+
+/// Every continuous parameter fixed (displacement and loop fits, with and without an integer
+/// delay to scan): nothing to search, so the fit scores the set as it stands — no panic in the
+/// optimiser or the covariance, exit 0, the same NRMSE `compare` gives.
+#[test]
+fn a_fit_with_every_parameter_fixed_scores_the_set_as_it_stands() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = write(dir.path(), "rec.csv", &recording());
+    let fix = [
+        "--fix",
+        "linear.offset_a_per_m",
+        "--fix",
+        "linear.susceptibility",
+        "--fix",
+        "magnetostriction.lambda_s",
+    ];
+    for model in ["linear", "linear+delay"] {
+        let mut args = vec!["fit", "--model", model, "--json", path(&rec)];
+        args.extend(fix);
+        let o = gma(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(0), "{model}: {err}");
+        assert!(!err.contains("panicked"), "{model}: {err}");
+        let j = json(&o);
+        let fitted = j["nrmse_fit"].as_f64().unwrap();
+        assert!(fitted.is_finite() && fitted > 0.0, "{model}: {j}");
+        if model == "linear" {
+            let c = json(&gma(&[
+                "compare",
+                "--model",
+                "linear",
+                "--json",
+                "--out-dir",
+                path(dir.path()),
+                path(&rec),
+            ]));
+            assert!((c["nrmse"].as_f64().unwrap() - fitted).abs() < 1e-9, "fit {fitted} vs compare {c}");
+        }
+    }
+    let lp = write(dir.path(), "loop.csv", &oe_loop());
+    let mut args = vec!["fit", "--model", "ja", "--json", path(&lp)];
+    for p in ["ja.ms_a_per_m", "ja.a_a_per_m", "ja.alpha", "ja.k_a_per_m", "ja.c"] {
+        args.extend(["--fix", p]);
+    }
+    let o = gma(&args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!err.contains("panicked"), "loop fit: {err}");
+}
