@@ -529,6 +529,8 @@ mod tests {
             for (pos, bit) in &flips {
                 stream[pos % len] ^= 1 << bit;
             }
+            // The line goes on: a later delimiter ends a last frame whose own delimiter was hit.
+            stream.push(0);
             let (got, d) = decode_all(&stream);
             for r in &got {
                 if let Received::Command(tag, c) = r {
