@@ -446,6 +446,7 @@ pub fn compare(
                 sim.displacement_um.iter_mut().for_each(|y| *y += sc.offset_um);
                 rows.push(FileScoreRow {
                     offset_um: Some(sc.offset_um),
+                    initial_excursion_a_per_m: sc.initial_excursion_a_per_m,
                     ..FileScoreRow::new(&rec.name, None, "displacement", sc.nrmse)
                 });
                 if let Some(c) = sc.nrmse_current {
@@ -489,8 +490,14 @@ pub fn compare(
 
 /// The model's response to a drive given as arrays (`time_s` and `current_A`, or `command_V`
 /// for a model with `amp` or a rig logging the command only): the same run `compare` makes,
-/// without a measurement to score it against.
-pub fn model_response(model: &str, params: &ParamsSource, drive: &Recording) -> Result<Simulation> {
+/// without a measurement to score it against: the rod starts demagnetised, or after the
+/// pre-history `initial_excursion_a_per_m` (e.g. the state `compare` estimated for the file).
+pub fn model_response(
+    model: &str,
+    params: &ParamsSource,
+    drive: &Recording,
+    initial_excursion_a_per_m: Option<f64>,
+) -> Result<Simulation> {
     let spec = crate::params::parse_spec(model)?;
     let (p, _) = params.load(spec)?;
     let drive_kind = if spec.has(Effect::AmplifierDynamics) {
@@ -503,7 +510,16 @@ pub fn model_response(model: &str, params: &ParamsSource, drive: &Recording) -> 
     } else {
         Drive::CommandIdeal
     };
-    let prep = fit::Prepared { rec: drive, dt_s: drive.dt_s(), drive: drive_kind };
+    let prep = fit::Prepared {
+        rec: drive,
+        dt_s: drive.dt_s(),
+        drive: drive_kind,
+        initial: match initial_excursion_a_per_m {
+            Some(x) if x.is_finite() => fit::InitialState::Excursion(x),
+            Some(x) => bail!("initial_excursion_A_per_m must be finite, got {x}"),
+            None => fit::InitialState::Demagnetized,
+        },
+    };
     fit::run_model(spec, &p, &prep, true)
 }
 

@@ -1,7 +1,9 @@
 //! Identification: one parameter set for a model spec from one or more recordings jointly, a
 //! displacement offset per file (closed form: the mean residual), cost = mean over files of
 //! NRMSE² (plus the current channel's when the model has an amplifier and the file measured the
-//! current). The free parameters and their bounds come from the effect registry
+//! current). With a hysteretic law each file also starts from its own initial magnetic state
+//! ([`InitialState`]), a nuisance parameter like the offset. The free parameters and their
+//! bounds come from the effect registry
 //! ([`crate::params`]); the search is the workbench's optimiser ([`crate::search`]): a particle
 //! swarm on part of the data, then Nelder–Mead from the best points; an integer parameter (the
 //! sensor delay) is scanned. Deterministic for a given seed.
@@ -11,14 +13,14 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
 use model_core::effects::STRAIN_SCALE;
-use model_core::{Actuator, ActuatorParams, Effect, ModelSpec};
+use model_core::{Actuator, ActuatorParams, Effect, MagnetizationLaw, ModelSpec};
 use rayon::prelude::*;
 
 use crate::params::{free_params, scanned_params, FreeParam};
 use crate::progress::Progress;
 use crate::recording::Recording;
 use crate::results::StartScore;
-use crate::search::{minimize, scan, Bound, Fidelity, Plan, SearchOptions, Start};
+use crate::search::{minimize, scan, Bound, Fidelity, Found, Plan, SearchOptions, Start};
 
 /// How a file drives the model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -104,6 +106,22 @@ pub struct Simulation {
     pub field_a_per_m: Vec<f64>,
     /// Model magnetization [A/m].
     pub magnetization_a_per_m: Vec<f64>,
+    /// The pre-history the run started from: the field excursion above the bias [A/m] (0:
+    /// demagnetised, then the bias), estimated for the file unless given.
+    pub initial_excursion_a_per_m: f64,
+}
+
+/// The rod's magnetic state when a recording starts. A rod on a rig has a history the file does
+/// not show; with a hysteretic law it shifts the whole record (minor loops never wipe it out),
+/// so it is estimated per file, like the displacement offset.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum InitialState {
+    /// Demagnetised, then the bias field (the state the model boots with).
+    Demagnetized,
+    /// After a field excursion to bias + this [A/m] and back ([`Actuator::rest_state_after`]).
+    Excursion(f64),
+    /// The excursion that best explains the file's displacement (laws without memory: none).
+    Estimated,
 }
 
 /// A recording ready to be simulated: its sample period and drive worked out once (a fit
@@ -116,17 +134,25 @@ pub struct Prepared<'a> {
     pub dt_s: f64,
     /// How it drives the model.
     pub drive: Drive,
+    /// The magnetic state it starts from.
+    pub initial: InitialState,
 }
 
 impl<'a> Prepared<'a> {
     /// Checks that `spec` can be simulated on `rec` and works out its period and drive.
+    /// The initial state is estimated from the displacement.
     pub fn new(spec: ModelSpec, rec: &'a Recording) -> Result<Self> {
-        Ok(Self { rec, dt_s: rec.dt_s(), drive: drive_for(spec, rec)? })
+        Ok(Self { rec, dt_s: rec.dt_s(), drive: drive_for(spec, rec)?, initial: InitialState::Estimated })
     }
 
     /// `head` (the first samples of this recording), with this one's drive.
     fn head_of<'b>(&self, head: &'b Recording) -> Prepared<'b> {
-        Prepared { rec: head, dt_s: head.dt_s(), drive: self.drive }
+        Prepared { rec: head, dt_s: head.dt_s(), drive: self.drive, initial: self.initial }
+    }
+
+    /// This recording started from `initial`.
+    pub fn starting(self, initial: InitialState) -> Self {
+        Self { initial, ..self }
     }
 }
 
@@ -149,7 +175,13 @@ pub fn simulate_drive(
     params: &ActuatorParams,
     rec: &Recording,
 ) -> Result<(Simulation, Drive)> {
-    let prep = Prepared { rec, dt_s: rec.dt_s(), drive: model_input(spec, rec)? };
+    // Nothing measured to estimate a pre-history from: the model's own rest state.
+    let prep = Prepared {
+        rec,
+        dt_s: rec.dt_s(),
+        drive: model_input(spec, rec)?,
+        initial: InitialState::Demagnetized,
+    };
     Ok((run_model(spec, params, &prep, false)?, prep.drive))
 }
 
@@ -174,12 +206,20 @@ pub fn run_model(
         }
         Drive::CommandDynamic => rec.command_v.as_deref().unwrap_or_default().into(),
     };
-    let mut s = model.rest_state();
+    let excursion = match prep.initial {
+        _ if !model.has_magnetic_memory() => 0.0,
+        InitialState::Demagnetized => 0.0,
+        InitialState::Excursion(x) => x,
+        InitialState::Estimated if rec.displacement_um.is_none() => 0.0,
+        InitialState::Estimated => estimate_excursion(spec, params, prep)?,
+    };
+    let mut s = model.rest_state_after(excursion as f32);
     let mut out = Simulation {
         displacement_um: Vec::with_capacity(n),
         current_a: Vec::with_capacity(n),
         field_a_per_m: Vec::with_capacity(n),
         magnetization_a_per_m: Vec::with_capacity(n),
+        initial_excursion_a_per_m: excursion,
     };
     let mut y = s.mech.displacement_m as f64; // rest: the delay line holds this value too
     let mut i = if drive == Drive::CommandDynamic { 0.0 } else { input[0] };
@@ -207,6 +247,74 @@ pub fn run_model(
     Ok(out)
 }
 
+/// The range of pre-history excursions searched [A/m]: ± ten times the J–A field scales
+/// (a + k; saturated beyond), ± the Preisach plane's extent.
+pub fn excursion_range(spec: ModelSpec, params: &ActuatorParams) -> f64 {
+    match spec.law() {
+        model_core::MagnetizationLaw::Preisach => params.preisach.h_max_a_per_m as f64,
+        _ => 10.0 * (params.ja.a_a_per_m + params.ja.k_a_per_m) as f64,
+    }
+    .max(1000.0)
+}
+
+/// The pre-history excursion that best explains `prep`'s displacement (whole file): a
+/// 13-point grid over [`excursion_range`], then golden-section refinement around the best point
+/// (31 runs).
+fn estimate_excursion(spec: ModelSpec, params: &ActuatorParams, prep: &Prepared) -> Result<f64> {
+    // Judged on the whole file: the first cycle, where the state shows most, carries most of
+    // the information on it.
+    let cost = |x: f64| -> Result<f64> {
+        let sim = run_model(spec, params, &prep.starting(InitialState::Excursion(x)), false)?;
+        let e = score(spec, prep.rec, &sim).nrmse;
+        Ok(if e.is_finite() { e } else { f64::MAX })
+    };
+    let range = excursion_range(spec, params);
+    const GRID: usize = 13;
+    // The bracket shrinks to 0.618^16 ≈ 5e-4 of two grid steps (about 20 A/m for a Terfenol-D
+    // set): fine enough for the uncertainty analysis's differences around it.
+    const GOLDEN_STEPS: usize = 16;
+    let step = 2.0 * range / (GRID - 1) as f64;
+    let mut best = (f64::MAX, 0.0);
+    for j in 0..GRID {
+        let x = -range + step * j as f64;
+        let c = cost(x)?;
+        if c < best.0 {
+            best = (c, x);
+        }
+    }
+    // Golden section on [best − step, best + step].
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut lo, mut hi) = (best.1 - step, best.1 + step);
+    let (mut x1, mut x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
+    let (mut c1, mut c2) = (cost(x1)?, cost(x2)?);
+    for _ in 0..GOLDEN_STEPS {
+        if c1 < c2 {
+            (hi, x2, c2) = (x2, x1, c1);
+            x1 = hi - g * (hi - lo);
+            c1 = cost(x1)?;
+        } else {
+            (lo, x1, c1) = (x1, x2, c2);
+            x2 = lo + g * (hi - lo);
+            c2 = cost(x2)?;
+        }
+    }
+    Ok([(best.0, best.1), (c1, x1), (c2, x2)]
+        .into_iter()
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map_or(0.0, |b| b.1))
+}
+
+/// `data`, each file starting from its excursion (none given: demagnetised).
+pub fn starting_from<'a>(data: &[Prepared<'a>], excursions: &[f64]) -> Vec<Prepared<'a>> {
+    data.iter()
+        .enumerate()
+        .map(|(i, p)| match excursions.get(i) {
+            Some(&x) => p.starting(InitialState::Excursion(x)),
+            None => p.starting(InitialState::Demagnetized),
+        })
+        .collect()
+}
+
 /// How well a model matches one file.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FileScore {
@@ -216,6 +324,8 @@ pub struct FileScore {
     pub nrmse_current: Option<f64>,
     /// Fitted displacement offset [µm].
     pub offset_um: f64,
+    /// The initial state's excursion [A/m] (`None`: a law without memory).
+    pub initial_excursion_a_per_m: Option<f64>,
 }
 
 /// rms(a − b) / (max − min of a).
@@ -234,7 +344,13 @@ pub fn score(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> FileScore {
         (Some(i), true) => Some(nrmse(i, &sim.current_a)),
         _ => None,
     };
-    FileScore { nrmse: nrmse(meas, &shifted), nrmse_current, offset_um: offset }
+    let memory = matches!(spec.law(), MagnetizationLaw::JilesAtherton | MagnetizationLaw::Preisach);
+    FileScore {
+        nrmse: nrmse(meas, &shifted),
+        nrmse_current,
+        offset_um: offset,
+        initial_excursion_a_per_m: memory.then_some(sim.initial_excursion_a_per_m),
+    }
 }
 
 /// Scores of a parameter set on a set of files, and the cost the fit minimises.
@@ -620,6 +736,9 @@ const PLAN: Plan = Plan {
     tolerance: (1e-6, 1e-18),
 };
 
+/// The polish after the search (hysteretic laws): one simplex on all data, no swarm.
+const POLISH: Plan = Plan { swarms: 0, local_searches: 2, simplex: &[(0.01, Fidelity::Full)], ..PLAN };
+
 /// Identifies `spec` on `files`, starting from (and keeping the fixed parameters of) `init`.
 pub fn fit(
     spec: ModelSpec,
@@ -666,6 +785,13 @@ pub fn fit_constrained(
         bail!("no start parameters");
     }
     let full = prepare(spec, files)?;
+    // With a hysteretic law each file's pre-history excursion is a parameter too: held at 0
+    // (demagnetised) by the swarm, which then explores the physics alone (searching the states
+    // there too made it lose the physics), refined by the simplex; estimated anew, per file,
+    // wherever a set is scored afterwards.
+    let memory = matches!(spec.law(), MagnetizationLaw::JilesAtherton | MagnetizationLaw::Preisach);
+    let n_excursions = if memory { files.len() } else { 0 };
+    let excursion_bound = excursion_range(spec, &starts[0]);
     let command_driven = full.iter().any(|p| p.drive != Drive::Current);
     // λ_s is solved in closed form at every evaluation (see `evaluate_projected`).
     let c = constraints;
@@ -687,8 +813,9 @@ pub fn fit_constrained(
         })
         .collect();
     let d = free.len();
+    let dims = d + n_excursions;
     let swarm_iters = ((PLAN.swarm_iters * opts.effort).round() as u64).max(2);
-    let nm_iters = ((PLAN.simplex_iters_per_dim * d as f64 * opts.effort).round() as u64).max(20);
+    let nm_iters = ((PLAN.simplex_iters_per_dim * dims as f64 * opts.effort).round() as u64).max(20);
     let scan_len: u64 = scanned.iter().map(|p| (p.hi - p.lo) as u64 + 1).sum();
     let planned = (PLAN.particles.0 + PLAN.particles.1 * d) as u64 * (swarm_iters + 1)
         + nm_iters * 8
@@ -720,17 +847,17 @@ pub fn fit_constrained(
         if multivalued_ja(spec, &p).is_some() {
             return FAILED_COST;
         }
-        projected_cost(spec, &p, data(fidelity), lambda_range)
+        projected_cost(spec, &p, &starting_from(data(fidelity), &values[d..]), lambda_range)
     };
     // Integer parameters (the sensor delay): scanned with everything else fixed.
-    let scan_integers = |p: &mut ActuatorParams| {
+    let scan_integers = |p: &mut ActuatorParams, full: &[Prepared]| {
         for sp in &scanned {
             let best = scan(sp.lo as i64, sp.hi as i64, &|k| {
                 let mut q = *p;
                 (sp.set)(&mut q, k as f64);
                 evals.fetch_add(1, Ordering::Relaxed);
                 bar.inc(1);
-                projected_cost(spec, &q, &full, lambda_range)
+                projected_cost(spec, &q, full, lambda_range)
             });
             (sp.set)(p, best as f64);
         }
@@ -747,30 +874,77 @@ pub fn fit_constrained(
             for sp in &scanned {
                 (sp.set)(&mut b, (sp.get)(st));
             }
-            scan_integers(&mut b);
-            Start { values: free.iter().map(|f| (f.get)(&b)).collect(), context: b }
+            let excursions: Vec<f64> = if memory {
+                full.iter()
+                    .map(|prep| {
+                        Ok(estimate_excursion(spec, &b, prep)?.clamp(-excursion_bound, excursion_bound))
+                    })
+                    .collect::<Result<_>>()?
+            } else {
+                Vec::new()
+            };
+            scan_integers(&mut b, &starting_from(&full, &excursions));
+            let values = free.iter().map(|f| (f.get)(&b)).chain(excursions).collect();
+            Ok(Start { values, context: b })
         })
+        .collect::<Result<Vec<_>>>()?;
+    // Each start also as the model's own rest state (every file demagnetised): an estimate made
+    // at poor start values can be further from the truth than that.
+    let bases: Vec<Start<ActuatorParams>> = if memory {
+        let rest = bases.iter().map(|b| Start {
+            values: b.values[..d].iter().copied().chain(std::iter::repeat_n(0.0, n_excursions)).collect(),
+            context: b.context,
+        });
+        bases.iter().cloned().chain(rest).collect()
+    } else {
+        bases
+    };
+    let bounds: Vec<Bound> = free
+        .iter()
+        .map(|f| f.bound)
+        .chain((0..n_excursions).map(|_| Bound {
+            swarm_holds: Some(0.0),
+            ..Bound::lin("initial excursion", -excursion_bound, excursion_bound)
+        }))
         .collect();
-    let bounds: Vec<Bound> = free.iter().map(|f| f.bound).collect();
     let opts_search = SearchOptions { seed: opts.seed, effort: opts.effort, deadline: opts.deadline };
-    let found = minimize(&bounds, &cost, &bases[0].context, &bases, &PLAN, opts_search, &bar)?;
+    let mut found = minimize(&bounds, &cost, &bases[0].context, &bases, &PLAN, opts_search, &bar)?;
+    if memory && !found.time_limited {
+        // The states estimated again at the point found, and one more simplex from there.
+        let at = with_values(&found.context, &found.best);
+        let mut values = found.best[..d].to_vec();
+        for prep in &full {
+            values.push(estimate_excursion(spec, &at, prep)?);
+        }
+        let again = [
+            Start { values: found.best.clone(), context: found.context },
+            Start { values, context: found.context },
+        ];
+        let polished = minimize(&bounds, &cost, &found.context, &again, &POLISH, opts_search, &bar)?;
+        if polished.cost < found.cost {
+            found = Found { evaluations: found.evaluations + polished.evaluations, ..polished };
+        } else {
+            found.evaluations += polished.evaluations;
+        }
+    }
     let mut params = with_values(&found.context, &found.best);
-    scan_integers(&mut params);
+    let found_start = starting_from(&full, &found.best[d..]);
+    scan_integers(&mut params, &found_start);
     bar.finish_and_clear();
-    let with_lambda = |mut p: ActuatorParams| -> Result<ActuatorParams> {
+    let with_lambda = |mut p: ActuatorParams, data: &[Prepared]| -> Result<ActuatorParams> {
         let lambda = match lambda_range {
-            Some(range) => evaluate_projected_in(spec, &p, &full, range)?.1,
+            Some(range) => evaluate_projected_in(spec, &p, data, range)?.1,
             None => p.magnetostriction.lambda_s as f64,
         };
         p.magnetostriction.lambda_s = lambda as f32;
         Ok(p)
     };
-    params = with_lambda(params)?;
+    params = with_lambda(params, &found_start)?;
     // The first start, as the search began from it: scored on all files (NRMSE as reported).
     let start_params = bases[0].context;
     let start_score = match multivalued_ja(spec, &start_params) {
         Some(why) => Err(why),
-        None => with_lambda(start_params)
+        None => with_lambda(start_params, &full)
             .and_then(|p| Ok((evaluate(spec, &p, files)?.mean_nrmse(), p)))
             .map_err(|e| format!("the model cannot be run there: {e}")),
     };

@@ -59,7 +59,7 @@ impl FreeParam {
     /// From the registry's description of a parameter.
     pub fn of(p: &'static Param) -> Self {
         FreeParam {
-            bound: Bound { name: p.key, lo: p.lo, hi: p.hi, log: p.scale == Scale::Log },
+            bound: Bound { name: p.key, lo: p.lo, hi: p.hi, log: p.scale == Scale::Log, swarm_holds: None },
             get: p.get,
             set: p.set,
         }

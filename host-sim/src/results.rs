@@ -26,6 +26,10 @@ pub struct FileScoreRow {
     /// Fitted displacement offset [µm] (displacement rows).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub offset_um: Option<f64>,
+    /// The estimated initial magnetic state: the pre-history field excursion above the bias
+    /// [A/m] (displacement rows of hysteretic models).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub initial_excursion_a_per_m: Option<f64>,
     /// Plots written for the file (compare).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub plots: Option<Vec<String>>,
@@ -49,6 +53,7 @@ impl FileScoreRow {
             channel,
             nrmse,
             offset_um: None,
+            initial_excursion_a_per_m: None,
             plots: None,
             measured: None,
             model: None,

@@ -31,17 +31,20 @@ pub struct Bound {
     pub hi: f64,
     /// Searched in log scale.
     pub log: bool,
+    /// A nuisance the swarm holds at this value (the simplex refines it with the rest): the
+    /// global search then explores the physics alone.
+    pub swarm_holds: Option<f64>,
 }
 
 impl Bound {
     /// A linear range.
     pub fn lin(name: &'static str, lo: f64, hi: f64) -> Self {
-        Self { name, lo, hi, log: false }
+        Self { name, lo, hi, log: false, swarm_holds: None }
     }
 
     /// A logarithmic range (positive bounds).
     pub fn log(name: &'static str, lo: f64, hi: f64) -> Self {
-        Self { name, lo, hi, log: true }
+        Self { name, lo, hi, log: true, swarm_holds: None }
     }
 
     /// Position of `v` in the range, 0 at `lo` and 1 at `hi` (unclamped; NaN when the scale
@@ -180,6 +183,21 @@ impl<C> Unit<'_, C> {
     }
 }
 
+/// The swarm's view of a [`Unit`]: the dimensions it searches, the held ones appended.
+struct SwarmUnit<'a, C> {
+    unit: Unit<'a, C>,
+    /// Unit-cube values of the held dimensions, in their order after the searched ones.
+    held: Vec<f64>,
+}
+
+impl<C: Sync> CostFunction for SwarmUnit<'_, C> {
+    type Param = Vec<f64>;
+    type Output = f64;
+    fn cost(&self, u: &Vec<f64>) -> Result<f64, argmin::core::Error> {
+        Ok(self.unit.eval(&[&u[..], &self.held[..]].concat()))
+    }
+}
+
 impl<C: Sync> CostFunction for Unit<'_, C> {
     type Param = Vec<f64>;
     type Output = f64;
@@ -248,20 +266,33 @@ pub fn minimize<C: Clone + Send + Sync>(
         }
     };
 
-    // Global: independent swarms over the unit cube.
-    let particles = plan.particles.0 + plan.particles.1 * d;
+    // Global: independent swarms over the unit cube of the searched dimensions (the held ones
+    // come last: see `swarm_holds`).
+    let held: Vec<f64> = bounds.iter().filter_map(|b| b.swarm_holds.map(|v| b.to_unit(v))).collect();
+    assert!(
+        bounds.iter().skip_while(|b| b.swarm_holds.is_none()).all(|b| b.swarm_holds.is_some()),
+        "dimensions the swarm holds come last"
+    );
+    let d_swarm = d - held.len();
+    let particles = plan.particles.0 + plan.particles.1 * d_swarm;
     let iters = ((plan.swarm_iters * opts.effort).round() as u64).max(2);
     let swarm_bests: Vec<Vec<f64>> = (0..plan.swarms as u64)
         .into_par_iter()
         .map(|k| -> Result<Vec<f64>> {
-            let pso = ParticleSwarm::new((vec![0.0; d], vec![1.0; d]), particles)
+            let pso = ParticleSwarm::new((vec![0.0; d_swarm], vec![1.0; d_swarm]), particles)
                 .with_rng_generator(rand::rngs::StdRng::seed_from_u64(opts.seed.wrapping_add(k)));
-            let res = bounded(Executor::new(unit!(swarm_context, Fidelity::Swarm), pso), opts.deadline)
+            let problem = SwarmUnit { unit: unit!(swarm_context, Fidelity::Swarm), held: held.clone() };
+            let res = bounded(Executor::new(problem, pso), opts.deadline)
                 .configure(|s| s.max_iters(iters))
                 .run()
                 .map_err(|e| anyhow::anyhow!("particle swarm: {e}"))?;
             note_time(res.state().get_termination_reason());
-            Ok(res.state().get_best_param().map(|p| p.position.clone()).unwrap_or_else(|| vec![0.5; d]))
+            let best = res
+                .state()
+                .get_best_param()
+                .map(|p| p.position.clone())
+                .unwrap_or_else(|| vec![0.5; d_swarm]);
+            Ok([best, held.clone()].concat())
         })
         .collect::<Result<_>>()?;
 

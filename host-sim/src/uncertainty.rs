@@ -35,7 +35,7 @@ use model_core::ModelSpec;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
-use crate::fit::{prepare, residual_blocks, FitResult, Prepared};
+use crate::fit::{excursion_range, prepare, residual_blocks, starting_from, FitResult, Prepared};
 use crate::params::FreeParam;
 use crate::recording::Recording;
 use crate::search::Bound;
@@ -137,7 +137,11 @@ fn coord(b: &Bound, v: f64) -> f64 {
 
 /// The uncertainty of `res`'s continuous parameters on its fit files.
 pub fn analyse(spec: ModelSpec, res: &FitResult, files: &[Recording]) -> Result<Uncertainty> {
-    let prep = prepare(spec, files)?;
+    // Each file's initial magnetic state as the fit scored it: a nuisance parameter, so it gets
+    // a column of its own and the parameters' covariance is the marginal one.
+    let excursions: Vec<f64> = res.fit.files.iter().filter_map(|f| f.initial_excursion_a_per_m).collect();
+    let excursions = if excursions.len() == files.len() { excursions } else { Vec::new() };
+    let prep = starting_from(&prepare(spec, files)?, &excursions);
     let base = res.params;
     let blocks = residual_blocks(spec, &base, &prep)?;
     let r: Vec<f64> = blocks.iter().flat_map(|b| &b.1).copied().collect();
@@ -189,6 +193,26 @@ pub fn analyse(spec: ModelSpec, res: &FitResult, files: &[Recording]) -> Result<
             a.1.iter().zip(&b.1).map(|(x, y)| (x - y) / du).collect()
         })
         .collect();
+    let h = LINEAR_STEP * 2.0 * excursion_range(spec, &base);
+    let nuisance: Vec<Vec<f64>> = (0..excursions.len())
+        .into_par_iter()
+        .map(|i| {
+            let shifted = |dx: f64| -> Option<Vec<f64>> {
+                let mut x = excursions.clone();
+                x[i] += dx;
+                let r = residual_blocks(spec, &base, &starting_from(&prep, &x)).ok()?;
+                let r: Vec<f64> = r.into_iter().flat_map(|b| b.1).collect();
+                r.iter().all(|v| v.is_finite()).then_some(r)
+            };
+            match (shifted(h), shifted(-h)) {
+                (Some(a), Some(b)) => a.iter().zip(&b).map(|(x, y)| (x - y) / (2.0 * h)).collect(),
+                _ => vec![0.0; n],
+            }
+        })
+        .collect();
+    let columns: Vec<Vec<f64>> = columns.into_iter().chain(nuisance).collect();
+    // p parameters, then the nuisance columns; only the first p are reported.
+    let (p_reported, p) = (p, columns.len());
     let j = DMatrix::from_fn(n, p, |i, k| columns[k][i]);
     let norms: Vec<f64> = (0..p).map(|k| j.column(k).norm()).collect();
     let js = DMatrix::from_fn(n, p, |i, k| if norms[k] > 0.0 { j[(i, k)] / norms[k] } else { 0.0 });
@@ -247,6 +271,7 @@ pub fn analyse(spec: ModelSpec, res: &FitResult, files: &[Recording]) -> Result<
             sandwich[(a, b)] / (norms[a] * norms[b])
         }
     });
+    let p = p_reported;
     let params = free
         .iter()
         .enumerate()

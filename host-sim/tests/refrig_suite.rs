@@ -299,3 +299,66 @@ fn hidden_effects_on_the_independent_rig() {
     }
     assert_eq!(rows.len(), laws.len() * seeds.len() * 9 + seeds.len() * usize::from(full));
 }
+
+/// Where the complete structure's error comes from on the independent rig: the rig with all
+/// effects on, then with one rig feature switched off at a time; the complete J–A structure
+/// (the rig's variant where we have it) fitted on the fit files, scored per validation file
+/// after the burn-in. Prints only.
+///   cargo test --release -p host-sim --test refrig_suite error_budget -- --ignored --nocapture
+#[test]
+#[ignore = "minutes of CPU: run with --ignored"]
+fn error_budget_of_the_complete_structure() {
+    let (fit_exc, val_exc) = excitations();
+    let law = Law::JilesAtherton(JaVariant::Original1986);
+    let mut init = engineer_init();
+    init.ja.variant = model_core::magnetization::JaVariant::Original1986;
+    let model = complete(Effect::Hysteresis);
+    type Switch = fn(&mut refrig::Effects);
+    let switches: Vec<(&str, Switch)> = vec![
+        ("nothing", |_| {}),
+        ("eddy_currents", |e| e.eddy_currents = false),
+        ("prestress", |e| e.prestress = false),
+        ("delta_e", |e| e.delta_e = false),
+        ("second_mode", |e| e.second_mode = false),
+        ("prehistory", |e| e.prehistory = false),
+        ("current_limit", |e| e.current_limit = false),
+        ("sensor_offset_drift", |e| e.sensor_offset_drift = false),
+        ("coil_heating", |e| e.coil_heating = false),
+    ];
+    for (name, switch) in switches {
+        let run = |exc: &Excitation, salt: u64| {
+            let mut rig = Rig {
+                duration_s: exc.duration_s,
+                seed: 100 + salt,
+                drive: Drive { waveform: exc.waveform.clone(), offset_v: exc.offset_v },
+                ..Rig::default()
+            };
+            rig.material.law = law;
+            switch(&mut rig.effects);
+            let rec = rig.simulate().expect("refrig simulation");
+            let mut bytes = Vec::new();
+            rec.write_csv(&mut bytes, false).expect("csv");
+            let path = cache_dir().join(format!("budget-{name}-{}.csv", exc.label));
+            std::fs::create_dir_all(cache_dir()).expect("cache folder");
+            std::fs::write(&path, bytes).expect("write");
+            Recording::read(&path).expect("read")
+        };
+        let fit_files: Vec<Recording> = fit_exc.iter().enumerate().map(|(i, e)| run(e, i as u64)).collect();
+        let val_files: Vec<Recording> =
+            val_exc.iter().enumerate().map(|(i, e)| run(e, 10 + i as u64)).collect();
+        let f = host_sim::fit::fit(model, &init, &fit_files, FitOptions::default()).expect("fit");
+        let score = |rec: &Recording| {
+            let sim = host_sim::fit::simulate(model, &f.params, rec).expect("simulate");
+            let k = host_sim::diagnose::burn_in(rec);
+            let m = &rec.displacement_um.as_deref().expect("displacement")[k..];
+            let y = &sim.displacement_um[k..];
+            // The sensor's offset is not a model property: scored as the fit scores it.
+            let off = m.iter().zip(y).map(|(a, b)| a - b).sum::<f64>() / m.len() as f64;
+            let shifted: Vec<f64> = y.iter().map(|v| v + off).collect();
+            host_sim::fit::nrmse(m, &shifted) * 100.0
+        };
+        let fit: Vec<String> = fit_files.iter().map(|r| format!("{:.2}", score(r))).collect();
+        let val: Vec<String> = val_files.iter().map(|r| format!("{:.2}", score(r))).collect();
+        println!("rig without {name:>20}: fit files {} %, validation {} %", fit.join(" / "), val.join(" / "));
+    }
+}

@@ -298,20 +298,51 @@ impl Actuator {
 
     /// The state at rest with zero input (demagnetised rod, cold coil).
     pub fn rest_state(&self) -> ActuatorState {
+        self.rest_state_after(0.0)
+    }
+
+    /// Whether the magnetization law carries a history (J–A, Preisach): then the state at rest
+    /// depends on the fields the rod has seen, not only on the field it sits in.
+    pub fn has_magnetic_memory(&self) -> bool {
+        matches!(self.magnetization, Magnetization::JilesAtherton(_) | Magnetization::Preisach(_))
+    }
+
+    /// The state at rest after a pre-history: from the demagnetised state the field goes to
+    /// bias + `excursion_a_per_m` and back to the bias (cold coil). A rod on a real rig has
+    /// seen fields before a recording starts; one excursion reaches every J–A state at the
+    /// bias (J–A's state there is M_irr alone) and the last reversal of a Preisach history.
+    /// `rest_state_after(0.0)` is [`Actuator::rest_state`].
+    pub fn rest_state_after(&self, excursion_a_per_m: f32) -> ActuatorState {
         // The bias field magnetizes the rod before the first sample: settle the magnetization
         // there so that the recording starts at its operating point.
         let mut ja = JaState::default();
-        let mut preisach = PreisachState::default();
+        let mut preisach = match &self.magnetization {
+            Magnetization::Preisach(p) => p.demagnetized(),
+            _ => PreisachState::default(),
+        };
         let h0 = self.coil.bias_a_per_m;
-        let m0 = match &self.magnetization {
-            Magnetization::Linear(l) => l.magnetization(h0),
-            Magnetization::Anhysteretic(a) => a.magnetization(h0),
-            Magnetization::JilesAtherton(j) => j.step(&mut ja, h0),
-            Magnetization::Preisach(p) => {
-                preisach = p.demagnetized();
-                p.step(&mut preisach, h0)
+        let excursion = if excursion_a_per_m.is_finite() { excursion_a_per_m } else { 0.0 };
+        let mut m0 = 0.0;
+        // `n` equal steps: the state then depends smoothly on the excursion (a fit
+        // differentiates through it), and J–A's sub-step cap (64 × min(a, k)/4 per step) covers
+        // legs of 64² · min(a, k)/4.
+        let mut walk = |from: f32, to: f32, n: u32, m0: &mut f32| {
+            for k in 1..=n {
+                let h = from + (to - from) * k as f32 / n as f32;
+                *m0 = match &self.magnetization {
+                    Magnetization::Linear(l) => l.magnetization(h),
+                    Magnetization::Anhysteretic(a) => a.magnetization(h),
+                    Magnetization::JilesAtherton(j) => j.step(&mut ja, h),
+                    Magnetization::Preisach(p) => p.step(&mut preisach, h),
+                };
             }
         };
+        if excursion != 0.0 {
+            walk(0.0, h0 + excursion, 64, &mut m0);
+            walk(h0 + excursion, h0, 64, &mut m0);
+        } else {
+            walk(0.0, h0, 1, &mut m0); // one step, as the firmware boots
+        }
         let y0 = self.rod_length_m * self.magnetostriction.strain(m0);
         let delay = DelayLine::clamped(self.delay_samples, y0); // checked ≤ capacity in `new`
         ActuatorState {

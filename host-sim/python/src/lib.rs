@@ -423,14 +423,18 @@ fn simulate<'py>(
 
 /// The model's response to a drive given as arrays: `drive` is a dict with `time_s` [s] and
 /// `current_A` [A] (or `command_V` [V] for a model with `amp`). Returns `time_s`,
-/// `displacement_um`, `current_A`, `field_A_per_m`, `magnetization_A_per_m`.
+/// `displacement_um`, `current_A`, `field_A_per_m`, `magnetization_A_per_m`. The rod starts
+/// demagnetised, or after `initial_excursion_A_per_m` (a state `compare` estimated: its
+/// `files[].initial_excursion_a_per_m`).
 #[pyfunction]
-#[pyo3(signature = (model, drive, *, params=None))]
+#[pyo3(signature = (model, drive, *, params=None, initial_excursion_A_per_m=None))]
+#[allow(non_snake_case)]
 fn model_response<'py>(
     py: Python<'py>,
     model: String,
     drive: &Bound<'py, PyAny>,
     params: Option<&Bound<'py, PyAny>>,
+    initial_excursion_A_per_m: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let m = drive.cast::<PyMapping>().map_err(|_| {
         to_py_err(
@@ -442,7 +446,7 @@ fn model_response<'py>(
     })?;
     let rec = recording_from_mapping(py, m, "<drive>")?;
     let ps = params_source(py, params)?;
-    let sim = run(py, || api::model_response(&model, &ps, &rec))?;
+    let sim = run(py, || api::model_response(&model, &ps, &rec, initial_excursion_A_per_m))?;
     let d = PyDict::new(py);
     d.set_item("time_s", array(py, &rec.time_s))?;
     simulation_items(py, &d, &sim)?;

@@ -169,6 +169,7 @@ fn compare_recordings(
         }
         rows.push(FileScoreRow {
             offset_um: Some(sc.offset_um),
+            initial_excursion_a_per_m: sc.initial_excursion_a_per_m,
             plots: Some(written),
             analysis: summary,
             ..FileScoreRow::new(&rec.name, None, "displacement", sc.nrmse)

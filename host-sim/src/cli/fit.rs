@@ -171,6 +171,7 @@ fn rows(split: &'static str, recs: &[Recording], scores: &[fit::FileScore]) -> V
     for (r, s) in recs.iter().zip(scores) {
         v.push(FileScoreRow {
             offset_um: Some(s.offset_um),
+            initial_excursion_a_per_m: s.initial_excursion_a_per_m,
             ..FileScoreRow::new(&r.name, Some(split), "displacement", s.nrmse)
         });
         if let Some(c) = s.nrmse_current {
