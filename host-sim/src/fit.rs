@@ -257,15 +257,18 @@ pub fn excursion_range(spec: ModelSpec, params: &ActuatorParams) -> f64 {
     .max(1000.0)
 }
 
-/// The pre-history excursion that best explains `prep`'s displacement (whole file): a
+/// The pre-history excursion that best explains the start of `prep`'s displacement: a
 /// 13-point grid over [`excursion_range`], then golden-section refinement around the best point
 /// (31 runs).
 fn estimate_excursion(spec: ModelSpec, params: &ActuatorParams, prep: &Prepared) -> Result<f64> {
-    // Judged on the whole file: the first cycle, where the state shows most, carries most of
-    // the information on it.
+    // Judged from the start of the file, where the state shows most (its first quarter, at
+    // least 4000 samples: long records cost no more than that).
+    let n = prep.rec.len();
+    let head = prep.rec.head(n.min(4000.max(n / 4)));
+    let head_prep = prep.head_of(&head);
     let cost = |x: f64| -> Result<f64> {
-        let sim = run_model(spec, params, &prep.starting(InitialState::Excursion(x)), false)?;
-        let e = score(spec, prep.rec, &sim).nrmse;
+        let sim = run_model(spec, params, &head_prep.starting(InitialState::Excursion(x)), false)?;
+        let e = score(spec, &head, &sim).nrmse;
         Ok(if e.is_finite() { e } else { f64::MAX })
     };
     let range = excursion_range(spec, params);
