@@ -412,36 +412,42 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
     s / n.max(1) as f64
 }
 
+/// The channel a candidate is scored on.
+#[derive(Clone, Copy)]
+enum Channel {
+    Displacement,
+    Current,
+}
+
+/// Per file, the scored residual on `channel` after the file's burn-in `skip`.
+fn channel_scores(
+    spec: ModelSpec,
+    params: &model_core::ActuatorParams,
+    files: &[Recording],
+    skip: &[usize],
+    channel: Channel,
+) -> Result<Vec<Scored>> {
+    files
+        .par_iter()
+        .zip(skip)
+        .map(|(rec, &k)| {
+            let sim = simulate(spec, params, rec)?;
+            let (measured, model) = match channel {
+                Channel::Displacement => (rec.displacement_um.as_deref(), &sim.displacement_um),
+                Channel::Current => (rec.current_a.as_deref(), &sim.current_a),
+            };
+            Ok(scored(measured.unwrap_or_default(), model, k))
+        })
+        .collect()
+}
+
 fn displacement_scores(
     spec: ModelSpec,
     params: &model_core::ActuatorParams,
     files: &[Recording],
     skip: &[usize],
 ) -> Result<Vec<Scored>> {
-    files
-        .par_iter()
-        .zip(skip)
-        .map(|(rec, &k)| {
-            let sim = simulate(spec, params, rec)?;
-            Ok(scored(rec.displacement_um.as_deref().unwrap_or_default(), &sim.displacement_um, k))
-        })
-        .collect()
-}
-
-fn current_scores(
-    spec: ModelSpec,
-    params: &model_core::ActuatorParams,
-    files: &[Recording],
-    skip: &[usize],
-) -> Result<Vec<Scored>> {
-    files
-        .par_iter()
-        .zip(skip)
-        .map(|(rec, &k)| {
-            let sim = simulate(spec, params, rec)?;
-            Ok(scored(rec.current_a.as_deref().unwrap_or_default(), &sim.current_a, k))
-        })
-        .collect()
+    channel_scores(spec, params, files, skip, Channel::Displacement)
 }
 
 /// Effective number of independent samples of a residual: N (1 − ρ)/(1 + ρ) with ρ its lag-1
@@ -744,7 +750,7 @@ pub fn diagnose(
         let cand_scores = |files: &[Recording], skip: &[usize]| -> Result<Vec<Scored>> {
             let f = refit.as_ref().expect("checked");
             if on_current {
-                current_scores(s2, &f.params, files, skip)
+                channel_scores(s2, &f.params, files, skip, Channel::Current)
             } else {
                 displacement_scores(s2, &f.params, files, skip)
             }

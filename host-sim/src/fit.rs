@@ -247,6 +247,13 @@ pub fn run_model(
     Ok(out)
 }
 
+/// Whether `spec`'s magnetization law carries a history (J–A, Preisach), so that each file
+/// starts from an initial state of its own (the spec-level twin of
+/// [`Actuator::has_magnetic_memory`]).
+fn has_memory(spec: ModelSpec) -> bool {
+    matches!(spec.law(), MagnetizationLaw::JilesAtherton | MagnetizationLaw::Preisach)
+}
+
 /// The range of pre-history excursions searched [A/m]: ± ten times the J–A field scales
 /// (a + k; saturated beyond), ± the Preisach plane's extent.
 pub fn excursion_range(spec: ModelSpec, params: &ActuatorParams) -> f64 {
@@ -347,7 +354,7 @@ pub fn score(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> FileScore {
         (Some(i), true) => Some(nrmse(i, &sim.current_a)),
         _ => None,
     };
-    let memory = matches!(spec.law(), MagnetizationLaw::JilesAtherton | MagnetizationLaw::Preisach);
+    let memory = has_memory(spec);
     FileScore {
         nrmse: nrmse(meas, &shifted),
         nrmse_current,
@@ -792,7 +799,7 @@ pub fn fit_constrained(
     // (demagnetised) by the swarm, which then explores the physics alone (searching the states
     // there too made it lose the physics), refined by the simplex; estimated anew, per file,
     // wherever a set is scored afterwards.
-    let memory = matches!(spec.law(), MagnetizationLaw::JilesAtherton | MagnetizationLaw::Preisach);
+    let memory = has_memory(spec);
     let n_excursions = if memory { files.len() } else { 0 };
     let excursion_bound = excursion_range(spec, &starts[0]);
     let command_driven = full.iter().any(|p| p.drive != Drive::Current);
