@@ -596,17 +596,17 @@ pub fn diagnose(
     let base = fit::fit(spec, init, fit_files, opts)?;
     let mut time_limited = base.time_limited;
     let score_files = if val_files.is_empty() { fit_files } else { val_files };
-    // Scores leave out each file's burn-in (the unknown initial magnetic state).
-    let before = mean(
-        displacement_scores(
-            spec,
-            &base.params,
-            score_files,
-            &score_files.iter().map(burn_in).collect::<Vec<_>>(),
-        )?
-        .iter()
-        .map(|s| s.nrmse),
-    );
+    // Per-file scores of the baseline, for the refits to be compared with. Scores leave out each
+    // file's burn-in (the unknown initial magnetic state).
+    let fit_skip: Vec<usize> = fit_files.iter().map(burn_in).collect();
+    let score_skip: Vec<usize> = score_files.iter().map(burn_in).collect();
+    let base_fit_disp = displacement_scores(spec, &base.params, fit_files, &fit_skip)?;
+    let base_score_disp = if val_files.is_empty() {
+        base_fit_disp.clone()
+    } else {
+        displacement_scores(spec, &base.params, score_files, &score_skip)?
+    };
+    let before = mean(base_score_disp.iter().map(|s| s.nrmse));
     let nrmse_val = if val_files.is_empty() { None } else { Some(before) };
 
     // Evidence on the fit files' residuals.
@@ -705,11 +705,6 @@ pub fn diagnose(
         })
         .collect();
     refitting.finish();
-    // Per-file scores of the baseline, after the burn-in, for the refits to be compared with.
-    let fit_skip: Vec<usize> = fit_files.iter().map(burn_in).collect();
-    let score_skip: Vec<usize> = score_files.iter().map(burn_in).collect();
-    let base_fit_disp = displacement_scores(spec, &base.params, fit_files, &fit_skip)?;
-    let base_score_disp = displacement_scores(spec, &base.params, score_files, &score_skip)?;
     // With `current_A` and `command_V` in every file, amplifier dynamics is judged on the current
     // channel: command → current by a static gain (the baseline) against the refit's amplifier.
     let current_measured =

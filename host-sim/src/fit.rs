@@ -735,18 +735,20 @@ impl Constraints {
 
 /// The displacement fit's search: one swarm on the first part of each file, then from the two
 /// best of the swarm's result and the start points a 5 % simplex on the first half of long
-/// files and a 1 % simplex on everything.
+/// files, and from the better of those a 1 % simplex on everything.
 const PLAN: Plan = Plan {
     particles: (8, 3),
     swarm_iters: 12.0,
     swarms: 1,
     simplex_iters_per_dim: 40.0,
     local_searches: 2,
+    finalists: 1,
     simplex: &[(0.05, Fidelity::Coarse), (0.01, Fidelity::Full)],
     tolerance: (1e-6, 1e-18),
 };
 
-/// The polish after the search (hysteretic laws): one simplex on all data, no swarm.
+/// The polish after the search (hysteretic laws): one simplex on all data, no swarm, from the
+/// better of its two starts.
 const POLISH: Plan = Plan { swarms: 0, local_searches: 2, simplex: &[(0.01, Fidelity::Full)], ..PLAN };
 
 /// Identifies `spec` on `files`, starting from (and keeping the fixed parameters of) `init`.

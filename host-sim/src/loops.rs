@@ -27,6 +27,7 @@ const PLAN: Plan = Plan {
     swarms: 2,
     simplex_iters_per_dim: 80.0,
     local_searches: 2,
+    finalists: 2,
     simplex: &[(0.05, Fidelity::Full), (0.01, Fidelity::Full)],
     tolerance: (1e-7, 1e-20),
 };

@@ -125,6 +125,9 @@ pub struct Plan {
     pub simplex_iters_per_dim: f64,
     /// The best this many of starts and swarm results are refined, in parallel.
     pub local_searches: usize,
+    /// Of those, the best this many (by cost on all data after the earlier runs) go on to the
+    /// last simplex run: the most expensive run is spent only where it can win.
+    pub finalists: usize,
     /// The simplex runs: initial step (unit-cube fraction) and the data each runs on.
     pub simplex: &'static [(f64, Fidelity)],
     /// Converged when the simplex's costs agree to this fraction of the cost (and the floor).
@@ -313,11 +316,16 @@ pub fn minimize<C: Clone + Send + Sync>(
     seeds.sort_by(|a, b| a.2.total_cmp(&b.2));
     seeds.truncate(plan.local_searches.max(1));
 
-    // Local: the plan's simplex runs from each seed, in parallel.
+    // Local: the plan's simplex runs from each seed, in parallel; the last run only from the
+    // finalists.
     let nm_iters = ((plan.simplex_iters_per_dim * d as f64 * opts.effort).round() as u64).max(20);
-    let local = |(context, start, _): &(C, Vec<f64>, f64)| -> Result<(C, Vec<f64>, f64)> {
+    let local = |seed: &(C, Vec<f64>, f64), runs: &[(f64, Fidelity)]| -> Result<(C, Vec<f64>, f64)> {
+        let (context, start, _) = seed;
+        if runs.is_empty() {
+            return Ok(seed.clone()); // its cost on all data is known
+        }
         let mut best = start.clone();
-        for &(step, fidelity) in plan.simplex {
+        for &(step, fidelity) in runs {
             if passed(opts.deadline) {
                 timed_out.store(true, Ordering::Relaxed);
                 break;
@@ -341,7 +349,13 @@ pub fn minimize<C: Clone + Send + Sync>(
         let c = unit!(context, Fidelity::Full).eval(&best);
         Ok((context.clone(), best, c))
     };
-    let refined: Vec<(C, Vec<f64>, f64)> = seeds.par_iter().map(local).collect::<Result<_>>()?;
+    let (early, last) = plan.simplex.split_at(plan.simplex.len().saturating_sub(1));
+    let mut refined: Vec<(C, Vec<f64>, f64)> =
+        seeds.par_iter().map(|s| local(s, early)).collect::<Result<_>>()?;
+    refined.sort_by(|a, b| a.2.total_cmp(&b.2));
+    refined.truncate(plan.finalists.max(1));
+    let refined: Vec<(C, Vec<f64>, f64)> =
+        refined.par_iter().map(|s| local(s, last)).collect::<Result<_>>()?;
     let (context, best, cost) =
         refined.into_iter().min_by(|a, b| a.2.total_cmp(&b.2)).expect("at least one seed");
     let values = bounds.iter().zip(&best).map(|(b, &x)| b.from_unit(x)).collect();
