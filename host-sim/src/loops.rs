@@ -299,7 +299,8 @@ impl LoopModel {
                 vec![j.ms_a_per_m, j.a_a_per_m, j.alpha, j.k_a_per_m, j.c]
             }
             LoopModel::Preisach => {
-                vec![p.preisach.ms_a_per_m, p.preisach.coercive_a_per_m, p.preisach.spread_a_per_m]
+                let q = p.preisach;
+                vec![q.ms_a_per_m, q.coercive_a_per_m, q.spread_a_per_m, q.h_max_a_per_m]
             }
         };
         v.into_iter().map(f64::from).collect()
@@ -330,6 +331,10 @@ impl LoopModel {
                 ms,
                 field("coercive_a_per_m", 1e-3 * h_max, 0.8 * h_max),
                 field("spread_a_per_m", 1e-3 * h_max, 2.0 * h_max),
+                // The relay plane's range is the field where the material saturates, which can lie
+                // well inside the measured range (hard magnets): fitted, since the fixed grid's
+                // resolution is 2·H_max/31 and a plane wider than needed blurs the switching.
+                Bound::log("h_max_a_per_m", 0.2 * h_max, 1.05 * h_max),
             ],
         }
     }
@@ -379,7 +384,7 @@ impl LoopModel {
             LoopModel::Linear => &["offset_a_per_m", "susceptibility"],
             LoopModel::Anhysteretic => &["ms_a_per_m", "a_a_per_m"],
             LoopModel::JilesAtherton(_) => &["ms_a_per_m", "a_a_per_m", "alpha", "k_a_per_m", "c"],
-            LoopModel::Preisach => &["ms_a_per_m", "coercive_a_per_m", "spread_a_per_m"],
+            LoopModel::Preisach => &["ms_a_per_m", "coercive_a_per_m", "spread_a_per_m", "h_max_a_per_m"],
         }
     }
 }
@@ -427,7 +432,7 @@ pub fn run(model: LoopModel, p: &[f64], h: &[f64], h_max: f64) -> Result<Vec<f64
                 ms_a_per_m: p[0] as f32,
                 coercive_a_per_m: p[1] as f32,
                 spread_a_per_m: p[2] as f32,
-                h_max_a_per_m: (1.05 * h_max) as f32,
+                h_max_a_per_m: p[3] as f32,
             })
             .map_err(|e| RunError(e.to_string()))?;
             let mut s = pr.demagnetized();
@@ -502,6 +507,7 @@ impl LoopFit {
                 p.preisach.ms_a_per_m = v[0] as f32;
                 p.preisach.coercive_a_per_m = v[1] as f32;
                 p.preisach.spread_a_per_m = v[2] as f32;
+                p.preisach.h_max_a_per_m = v[3] as f32;
                 p.magnetostriction.ms_a_per_m = v[0] as f32;
             }
         }
@@ -605,6 +611,9 @@ pub fn fit(
         for (b, v) in bounds.iter().zip(&found.best) {
             if b.at_edge(*v) {
                 warnings.push(Warning::AtEdge { param: b.name, value: *v, lo: b.lo, hi: b.hi });
+                if b.name == "mean_field_ratio" && *v > 0.0 {
+                    warnings.push(Warning::SquarerThanJa { ratio: *v });
+                }
             }
         }
     }

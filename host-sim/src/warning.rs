@@ -24,6 +24,12 @@ pub enum Warning {
         /// α·M_s/(3a).
         ratio: f64,
     },
+    /// A J–A loop fit's mean-field ratio α·M_s/(3a) ended at its upper limit: the loop is
+    /// squarer than single-valued J–A can follow (hard magnets).
+    SquarerThanJa {
+        /// The ratio it ended at.
+        ratio: f64,
+    },
     /// The model could not be integrated along a file's path at the result.
     IntegrationFailed {
         /// The file.
@@ -78,6 +84,12 @@ impl fmt::Display for Warning {
                 f,
                 "J–A region α·M_s/(3a) = {ratio:.2} ≥ 1: the mean field makes the anhysteretic curve multivalued; \
                  the loop there is an artefact of the integration limits, not physics"
+            ),
+            Warning::SquarerThanJa { ratio } => write!(
+                f,
+                "the loop is squarer than Jiles–Atherton can follow: α·M_s/(3a) = {ratio:.2} is at its limit \
+                 (at ≥ 1 the model is multivalued and refused); the Preisach law follows square loops: \
+                 fit with `--model preisach`"
             ),
             Warning::IntegrationFailed { file, why } => {
                 write!(f, "{file}: the model integration failed at the best parameters: {why}")
