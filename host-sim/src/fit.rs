@@ -454,21 +454,8 @@ fn evaluate_projected_in(
             let rec = prep.rec;
             let sim_a = run_model(spec, params, prep, false)?;
             if thermal {
-                let mut p2 = *params;
-                p2.magnetostriction.lambda_s = (2.0 * lambda_ref) as f32;
-                let sim_b = run_model(spec, &p2, prep, false)?;
-                let g = sim_a
-                    .displacement_um
-                    .iter()
-                    .zip(&sim_b.displacement_um)
-                    .map(|(a, b)| (b - a) / lambda_ref)
-                    .collect();
-                let t = sim_a
-                    .displacement_um
-                    .iter()
-                    .zip(&sim_b.displacement_um)
-                    .map(|(a, b)| 2.0 * a - b)
-                    .collect();
+                let t = thermal_share(spec, params, prep, &sim_a)?;
+                let g = sim_a.displacement_um.iter().zip(&t).map(|(y, t)| (y - t) / lambda_ref).collect();
                 Ok((g, t, sim_a))
             } else {
                 let g = sim_a.displacement_um.iter().map(|a| a / lambda_ref).collect();
@@ -501,6 +488,26 @@ fn evaluate_projected_in(
         })
         .collect();
     Ok((Evaluation { files: scores }, lambda))
+}
+
+/// The coil-heating share [µm] of `sim`'s displacement (a run of `spec` at `params` on `prep`):
+/// the thermal elongation through the mechanics and delay, driven by the currents the run
+/// reported ([`Actuator::thermal_tail_step`]). Sample k's output follows the steps before it,
+/// whose currents are the run's samples 1..=k.
+fn thermal_share(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    prep: &Prepared,
+    sim: &Simulation,
+) -> Result<Vec<f64>> {
+    let mut p = *params;
+    p.dt_s = prep.dt_s as f32;
+    let model = Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut s = model.thermal_tail_rest();
+    let mut t = Vec::with_capacity(sim.current_a.len());
+    t.push(0.0);
+    t.extend(sim.current_a.iter().skip(1).map(|&i| model.thermal_tail_step(&mut s, i as f32) as f64 * 1e6));
+    Ok(t)
 }
 
 /// Scores `params` as they are (λ_s included; offsets in closed form) on prepared files.

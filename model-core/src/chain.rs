@@ -193,6 +193,14 @@ pub struct ActuatorState {
     pub delay: DelayLine<MAX_DELAY_SAMPLES>,
 }
 
+/// State of [`Actuator::thermal_tail_step`] (the coil-heating share of the displacement).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ThermalTailState {
+    temperature_rise_c: f32,
+    mech: MechState,
+    delay: DelayLine<MAX_DELAY_SAMPLES>,
+}
+
 /// What one step produces (SI units).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ActuatorOutput {
@@ -355,6 +363,33 @@ impl Actuator {
             mech: MechState { displacement_m: y0, velocity_m_per_s: 0.0 },
             delay,
         }
+    }
+
+    /// The start of [`Actuator::thermal_tail_step`]: cold coil, mechanics and delay line at 0.
+    pub fn thermal_tail_rest(&self) -> ThermalTailState {
+        ThermalTailState {
+            temperature_rise_c: 0.0,
+            mech: MechState::default(),
+            delay: DelayLine::clamped(self.delay_samples, 0.0),
+        }
+    }
+
+    /// The part of the measured displacement [m] that coil heating alone makes: the thermal
+    /// elongation at coil current `current_a` (the current [`Actuator::step`] reported) through
+    /// the same mechanics and sensor delay. Both are linear, so the chain's displacement is this
+    /// plus what the magnetostriction makes: the workbench splits the two (to solve λ_s in
+    /// closed form) without running the magnetization twice. 0 without `thermal_drift`.
+    #[inline]
+    pub fn thermal_tail_step(&self, s: &mut ThermalTailState, current_a: f32) -> f32 {
+        let elongation = match &self.thermal {
+            Some(th) => th.step(&mut s.temperature_rise_c, current_a),
+            None => 0.0,
+        };
+        let y = match &self.mech {
+            Some(zoh) => zoh.step(&mut s.mech, elongation),
+            None => elongation,
+        };
+        s.delay.step(y)
     }
 
     /// One sample. `input` is the command voltage [V] when the amplifier is modelled, else the

@@ -16,7 +16,9 @@ pub mod sinusoidal;
 pub mod slow;
 pub mod spec;
 
-pub use chain::{Actuator, ActuatorOutput, ActuatorParams, ActuatorState, StepError, DT_MAX_S, DT_MIN_S};
+pub use chain::{
+    Actuator, ActuatorOutput, ActuatorParams, ActuatorState, StepError, ThermalTailState, DT_MAX_S, DT_MIN_S,
+};
 pub use effects::{Effect, MagnetizationLaw};
 pub use error::ParamError;
 pub use inverse::{Compensator, CompensatorState};
