@@ -23,6 +23,22 @@ fn simulate_writes_the_csv_contract() {
     assert!(hi - lo > 5.0, "stroke {} µm", hi - lo);
 }
 
+/// The JSON states the sample period and duration as a user set them, not their f32 images
+/// (`dt_s` 1e-4, not 9.999999747378752e-5).
+#[test]
+fn simulate_reports_the_sample_period_as_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sim.csv");
+    let o =
+        gma(&["simulate", "--model", "ja", "--duration-s", "0.05", "--json", "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["dt_s"].as_f64(), Some(1e-4), "{}", j["dt_s"]);
+    assert_eq!(j["samples"].as_u64(), Some(500));
+    let duration = j["duration_s"].as_f64().unwrap();
+    assert!((duration - 0.0499).abs() < 1e-15, "{duration}");
+}
+
 /// The rod's eddy currents are distributed unless the lumped lag is asked for; stderr says which.
 #[test]
 fn simulate_names_its_eddy_current_model() {

@@ -171,8 +171,8 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
             "simulated": true,
             "model": spec.to_string(),
             "samples": rec.len(),
-            "duration_s": rec.duration_s(),
-            "dt_s": rec.dt_s(),
+            "duration_s": twelve_digits(rec.duration_s()),
+            "dt_s": twelve_digits(rec.dt_s()),
             "columns": crate::recording::COLUMNS.iter().filter(|c| rec.column(c).is_some()).collect::<Vec<_>>(),
             "drive_file": drive_file,
             "drive_column": drive_column,
@@ -185,6 +185,12 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// `x` to 12 significant digits: a time axis built as k·dt carries rounding in its last bits
+/// (a 1e-4 s step reads 9.99999999999994e-5), which a report should not repeat.
+fn twelve_digits(x: f64) -> f64 {
+    format!("{x:.11e}").parse().unwrap_or(x)
 }
 
 /// The model run on `measured`'s drive: the file's time and command, the drive current (the
