@@ -120,9 +120,7 @@ impl Plant {
             bail!("duration must be > 0 s, got {duration_s}");
         }
         let (model, fine_dt) = self.fine_model()?;
-        // The time axis at the sample period as written (1e-4, not its f32 9.9999997e-5): what the
-        // CSV holds and the JSON reports.
-        let dt: f64 = self.params.dt_s.to_string().parse().unwrap_or(self.params.dt_s as f64);
+        let dt = self.params.dt_s as f64;
         let n = (duration_s / dt).round() as usize;
         let mut rec = Recording::with_time(name, n, dt);
         let voltage = model.chain.input_is_voltage();

@@ -206,6 +206,35 @@ fn diagnose_names_the_missing_effect_in_the_json_contract() {
     }
     assert_eq!(d["verdict"], "eddy_current", "{d:#}");
     assert_eq!(c[0]["effect"], "eddy_current");
+    assert!(d.get("ja_variants").is_none(), "only with --ja-variants");
+}
+
+/// `--ja-variants` scores the given structure in every J–A form (the given one first, as the
+/// baseline) and says in a finding whether one fits clearly better; without a J–A law it is
+/// refused with the reason. On this rig (the default `bulk` form, simulated by our own plant)
+/// no other form may be named: the data were made in the given form.
+#[test]
+fn diagnose_compares_the_ja_forms_on_request() {
+    let dir = tempfile::tempdir().unwrap();
+    let (fit, fit2, val) = rig(dir.path());
+    let d = json(&gma(&["diagnose", "--model", "ja", "--ja-variants", "--json", "--val", &val, &fit, &fit2]));
+    let rows = d["ja_variants"].as_array().unwrap_or_else(|| panic!("no ja_variants in {d:#}"));
+    let names: Vec<&str> = rows.iter().map(|r| r["variant"].as_str().unwrap()).collect();
+    assert_eq!(names, ["bulk", "ja1986", "szewczyk"]);
+    assert_eq!(rows[0]["given"], true);
+    assert!((rows[0]["nrmse"].as_f64().unwrap() - d["nrmse_val"].as_f64().unwrap()).abs() < 1e-12);
+    assert!(
+        rows.iter().all(|r| r["nrmse"].as_f64().unwrap().is_finite() && r["fits_better"] == false),
+        "{d:#}"
+    );
+    let findings = d["findings"].as_array().unwrap();
+    assert!(
+        findings.iter().any(|f| f.as_str().unwrap().starts_with("J–A form: no form fits clearly better")),
+        "{d:#}"
+    );
+    let o = gma(&["diagnose", "--model", "linear+mech", "--ja-variants", &fit, &fit2]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("no J–A law"), "{err}");
 }
 
 #[test]

@@ -12,6 +12,10 @@ use crate::provenance::Provenance;
 pub struct DiagnoseArgs {
     #[command(flatten)]
     pub mf: ModelFiles,
+    /// Also refit the model in each other form of Jiles–Atherton (`[ja] variant`) and say
+    /// whether one fits clearly better (two more fits)
+    #[arg(long)]
+    pub ja_variants: bool,
 }
 
 /// Runs `gma diagnose`.
@@ -20,7 +24,13 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
     let Data::Recordings(fit_files, val_files) = &p.data else {
         bail!("diagnose works on displacement recordings; for magnetization loops use `gma fit` and `gma compare`");
     };
-    let d = diagnose(p.spec, &p.init, fit_files, val_files, p.opts)?;
+    if a.ja_variants && p.spec.law() != model_core::MagnetizationLaw::JilesAtherton {
+        bail!("--ja-variants compares the forms of Jiles–Atherton; `{}` has no J–A law (add `ja`)", p.spec);
+    }
+    let mut d = diagnose(p.spec, &p.init, fit_files, val_files, p.opts)?;
+    if a.ja_variants {
+        d.compare_ja_variants(p.spec, &p.init, fit_files, val_files, p.opts)?;
+    }
     say!(a.mf.json, "{d}");
     a.mf.warn_if_time_limited(d.time_limited);
     if a.mf.json {

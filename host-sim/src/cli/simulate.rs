@@ -165,14 +165,21 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     rec.write(&a.out).with_context(|| format!("writing {name}"))?;
     eprintln!("gma: wrote {} samples of SIMULATED data ({what}) to {name}", rec.len());
     if a.json {
+        // The sample period as the parameter file states it (1e-4, not its f32 image
+        // 9.9999997e-5), or a measured drive's own.
+        let dt_s = match drive {
+            None => p.dt_s.to_string().parse().unwrap_or(p.dt_s as f64),
+            Some(_) => twelve_digits(rec.dt_s()),
+        };
+        let duration_s = twelve_digits((rec.len().max(1) - 1) as f64 * dt_s);
         let (drive_file, drive_column) = drive.unzip();
         let result = json!({
             "out": name,
             "simulated": true,
             "model": spec.to_string(),
             "samples": rec.len(),
-            "duration_s": twelve_digits(rec.duration_s()),
-            "dt_s": twelve_digits(rec.dt_s()),
+            "duration_s": duration_s,
+            "dt_s": dt_s,
             "columns": crate::recording::COLUMNS.iter().filter(|c| rec.column(c).is_some()).collect::<Vec<_>>(),
             "drive_file": drive_file,
             "drive_column": drive_column,
