@@ -167,11 +167,13 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     if a.json {
         // The sample period as the parameter file states it (1e-4, not its f32 image
         // 9.9999997e-5), or a measured drive's own.
-        let dt_s = match drive {
-            None => p.dt_s.to_string().parse().unwrap_or(p.dt_s as f64),
-            Some(_) => twelve_digits(rec.dt_s()),
+        let (dt_s, duration_s) = match drive {
+            None => {
+                let dt: f64 = p.dt_s.to_string().parse().unwrap_or(p.dt_s as f64);
+                (dt, twelve_digits((rec.len().max(1) - 1) as f64 * dt))
+            }
+            Some(_) => (twelve_digits(rec.dt_s()), twelve_digits(rec.duration_s())),
         };
-        let duration_s = twelve_digits((rec.len().max(1) - 1) as f64 * dt_s);
         let (drive_file, drive_column) = drive.unzip();
         let result = json!({
             "out": name,
