@@ -52,6 +52,9 @@ pub const CHI2_1_95: f64 = 3.841;
 /// Probability of a file improving by chance under "the effect does nothing" (a fair coin), and
 /// the one-sided significance of the sign test over the scored files.
 const SIGN_TEST_ALPHA: f64 = 0.05;
+/// A BIC difference below this is not strong evidence for one model over another (Kass &
+/// Raftery 1995: 6 is "strong", posterior odds about 20 : 1).
+const BIC_STRONG: f64 = 6.0;
 
 /// Fewest samples per fit file for a verdict: the refits have up to about ten parameters, and
 /// comparing them needs far more samples than parameters (20 per parameter).
@@ -839,16 +842,17 @@ pub fn diagnose(
     let mut verdict = None;
     let mut undistinguished = Vec::new();
     if candidates.first().is_some_and(Candidate::passes) {
-        // Passing candidates on the same channel that the best does not beat on every scored file
-        // cannot be told apart by these data. Among them the signature evidence decides, then the
-        // information criterion — never the list order.
+        // Passing candidates on the same channel that the best does not beat on every scored file,
+        // or not by strong evidence of the information criterion, cannot be told apart by these
+        // data. Among them the signature evidence decides, then the information criterion —
+        // never the list order.
         let best = candidates[0].clone();
         let tied: Vec<usize> = (0..candidates.len())
             .filter(|&i| {
                 let c = &candidates[i];
-                c.passes()
-                    && c.channel == best.channel
-                    && (i == 0 || !best.per_file_after.iter().zip(&c.per_file_after).all(|(b, o)| b < o))
+                let beaten = best.per_file_after.iter().zip(&c.per_file_after).all(|(b, o)| b < o)
+                    && best.delta_bic - c.delta_bic >= BIC_STRONG;
+                c.passes() && c.channel == best.channel && (i == 0 || !beaten)
             })
             .collect();
         let chosen = tied

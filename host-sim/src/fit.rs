@@ -20,7 +20,7 @@ use crate::params::{free_params, scanned_params, FreeParam};
 use crate::progress::Progress;
 use crate::recording::Recording;
 use crate::results::StartScore;
-use crate::search::{minimize, scan, Bound, Fidelity, Found, Plan, SearchOptions, Start};
+use crate::search::{minimize, scan, Bound, Fidelity, Found, Local, Plan, SearchOptions, Start};
 
 /// How a file drives the model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -445,6 +445,19 @@ fn evaluate_projected_in(
     files: &[Prepared],
     lambda_range: (f64, f64),
 ) -> Result<(Evaluation, f64)> {
+    let (sims, lambda) = projected_runs(spec, params, files, lambda_range)?;
+    let scores = files.iter().zip(&sims).map(|(prep, sim)| score(spec, prep.rec, sim)).collect();
+    Ok((Evaluation { files: scores }, lambda))
+}
+
+/// The runs of `params` on `files` with the displacement rescaled to the closed-form λ_s (clamped
+/// to `lambda_range`), and that λ_s.
+fn projected_runs(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    files: &[Prepared],
+    lambda_range: (f64, f64),
+) -> Result<(Vec<Simulation>, f64)> {
     let lambda_ref = params.magnetostriction.lambda_s as f64;
     let thermal = spec.has(Effect::ThermalDrift);
     // Per file: (g, t, simulation) with y = λ g + t.
@@ -479,15 +492,36 @@ fn evaluate_projected_in(
         }
     }
     let lambda = if den > 0.0 { (num / den).clamp(lambda_range.0, lambda_range.1) } else { lambda_ref };
-    let scores = files
-        .iter()
-        .zip(parts)
-        .map(|(prep, (g, t, mut sim))| {
+    let sims = parts
+        .into_iter()
+        .map(|(g, t, mut sim)| {
             sim.displacement_um = g.iter().zip(&t).map(|(g, t)| lambda * g + t).collect();
-            score(spec, prep.rec, &sim)
+            sim
         })
         .collect();
-    Ok((Evaluation { files: scores }, lambda))
+    Ok((sims, lambda))
+}
+
+/// The residuals of the fit's cost at `params` (λ_s solved within `lambda`, or kept when `None`),
+/// all blocks in one vector scaled so that its sum of squares is the cost; `None` where the model
+/// cannot be run or leaves a non-finite residual.
+fn projected_residuals(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    files: &[Prepared],
+    lambda: Option<(f64, f64)>,
+) -> Option<Vec<f64>> {
+    let sims = match lambda {
+        Some(range) => projected_runs(spec, params, files, range).ok()?.0,
+        None => {
+            files.par_iter().map(|prep| run_model(spec, params, prep, false)).collect::<Result<_>>().ok()?
+        }
+    };
+    let blocks: Vec<Vec<f64>> =
+        files.iter().zip(&sims).flat_map(|(prep, sim)| blocks_of(spec, prep.rec, sim)).map(|b| b.1).collect();
+    let w = 1.0 / (blocks.len().max(1) as f64).sqrt();
+    let r: Vec<f64> = blocks.into_iter().flatten().map(|x| w * x).collect();
+    r.iter().all(|x| x.is_finite()).then_some(r)
 }
 
 /// The coil-heating share [µm] of `sim`'s displacement (a run of `spec` at `params` on `prep`):
@@ -528,26 +562,28 @@ pub fn residual_blocks(
     params: &ActuatorParams,
     files: &[Prepared],
 ) -> Result<Vec<(bool, Vec<f64>)>> {
+    let per_file: Vec<Vec<(bool, Vec<f64>)>> = files
+        .par_iter()
+        .map(|prep| Ok(blocks_of(spec, prep.rec, &run_model(spec, params, prep, false)?)))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(per_file.into_iter().flatten().collect())
+}
+
+/// [`residual_blocks`] of one file's run.
+fn blocks_of(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> Vec<(bool, Vec<f64>)> {
     fn scaled(measured: &[f64], model: impl Iterator<Item = f64>) -> Vec<f64> {
         let (lo, hi) = measured.iter().fold((f64::MAX, f64::MIN), |(l, h), &v| (l.min(v), h.max(v)));
         let w = 1.0 / ((hi - lo).max(1e-12) * (measured.len() as f64).sqrt());
         measured.iter().zip(model).map(|(a, b)| w * (a - b)).collect()
     }
-    let per_file: Vec<Vec<(bool, Vec<f64>)>> = files
-        .par_iter()
-        .map(|prep| {
-            let sim = run_model(spec, params, prep, false)?;
-            let s = score(spec, prep.rec, &sim);
-            let meas = prep.rec.displacement_um.as_deref().unwrap_or_default();
-            let mut blocks = vec![(true, scaled(meas, sim.displacement_um.iter().map(|y| y + s.offset_um)))];
-            if s.nrmse_current.is_some() {
-                let i = prep.rec.current_a.as_deref().unwrap_or_default();
-                blocks.push((false, scaled(i, sim.current_a.iter().copied())));
-            }
-            Ok(blocks)
-        })
-        .collect::<Result<Vec<_>>>()?;
-    Ok(per_file.into_iter().flatten().collect())
+    let s = score(spec, rec, sim);
+    let meas = rec.displacement_um.as_deref().unwrap_or_default();
+    let mut blocks = vec![(true, scaled(meas, sim.displacement_um.iter().map(|y| y + s.offset_um)))];
+    if s.nrmse_current.is_some() {
+        let i = rec.current_a.as_deref().unwrap_or_default();
+        blocks.push((false, scaled(i, sim.current_a.iter().copied())));
+    }
+    blocks
 }
 
 /// Fit settings.
@@ -557,7 +593,8 @@ pub struct FitOptions {
     pub seed: u64,
     /// Show progress on stderr (a bar on a terminal, else a line every few seconds).
     pub progress: bool,
-    /// Effort multiplier (1 = default; the swarm and the simplex iterations scale with it).
+    /// Effort multiplier (1 = default; the swarm iterations, simplex steps and least-squares
+    /// Jacobians scale with it).
     pub effort: f64,
     /// Stop searching at this instant and return the best point found so far.
     pub deadline: Option<Instant>,
@@ -742,22 +779,28 @@ impl Constraints {
 
 /// The displacement fit's search: one swarm on the first part of each file, then from the two
 /// best of the swarm's result and the start points a 5 % simplex on the first half of long
-/// files, and from the better of those a 1 % simplex on everything.
+/// files (the landscape's shape, cheaply) and Levenberg–Marquardt on everything (the cost is a
+/// smooth sum of squares near a minimum, where it needs tens of evaluations, not hundreds).
 const PLAN: Plan = Plan {
     particles: (8, 3),
     swarm_iters: 12.0,
     swarms: 1,
     simplex_iters_per_dim: 40.0,
     local_searches: 2,
-    finalists: 1,
-    simplex: &[(0.05, Fidelity::Coarse), (0.01, Fidelity::Full)],
+    finalists: 2,
+    local: &[Local::Simplex(0.05, Fidelity::Coarse), Local::LeastSquares(Fidelity::Full)],
     tolerance: (1e-6, 1e-18),
 };
 
-/// The polish after the search (hysteretic laws): one simplex on all data, no swarm, from both
-/// of its starts (the states estimated anew often polish lower from a higher start cost).
-const POLISH: Plan =
-    Plan { swarms: 0, local_searches: 2, finalists: 2, simplex: &[(0.01, Fidelity::Full)], ..PLAN };
+/// The polish after the search (hysteretic laws): Levenberg–Marquardt on all data, no swarm,
+/// from both of its starts (the states estimated anew often polish lower from a higher start cost).
+const POLISH: Plan = Plan {
+    swarms: 0,
+    local_searches: 2,
+    finalists: 2,
+    local: &[Local::LeastSquares(Fidelity::Full)],
+    ..PLAN
+};
 
 /// Identifies `spec` on `files`, starting from (and keeping the fixed parameters of) `init`.
 pub fn fit(
@@ -807,7 +850,7 @@ pub fn fit_constrained(
     let full = prepare(spec, files)?;
     // With a hysteretic law each file's pre-history excursion is a parameter too: held at 0
     // (demagnetised) by the swarm, which then explores the physics alone (searching the states
-    // there too made it lose the physics), refined by the simplex; estimated anew, per file,
+    // there too made it lose the physics), refined by the local search; estimated anew, per file,
     // wherever a set is scored afterwards.
     let memory = has_memory(spec);
     let n_excursions = if memory { files.len() } else { 0 };
@@ -869,6 +912,13 @@ pub fn fit_constrained(
         }
         projected_cost(spec, &p, &starting_from(data(fidelity), &values[d..]), lambda_range)
     };
+    let residuals = |base: &ActuatorParams, values: &[f64], fidelity: Fidelity| {
+        let p = with_values(base, values);
+        if multivalued_ja(spec, &p).is_some() {
+            return None;
+        }
+        projected_residuals(spec, &p, &starting_from(data(fidelity), &values[d..]), lambda_range)
+    };
     // Integer parameters (the sensor delay): scanned with everything else fixed.
     let scan_integers = |p: &mut ActuatorParams, full: &[Prepared]| {
         for sp in &scanned {
@@ -928,9 +978,10 @@ pub fn fit_constrained(
         }))
         .collect();
     let opts_search = SearchOptions { seed: opts.seed, effort: opts.effort, deadline: opts.deadline };
-    let mut found = minimize(&bounds, &cost, &bases[0].context, &bases, &PLAN, opts_search, &bar)?;
+    let mut found =
+        minimize(&bounds, &cost, Some(&residuals), &bases[0].context, &bases, &PLAN, opts_search, &bar)?;
     if memory && !found.time_limited {
-        // The states estimated again at the point found, and one more simplex from there.
+        // The states estimated again at the point found, and one more least-squares run from there.
         let at = with_values(&found.context, &found.best);
         let mut values = found.best[..d].to_vec();
         for prep in &full {
@@ -940,7 +991,8 @@ pub fn fit_constrained(
             Start { values: found.best.clone(), context: found.context },
             Start { values, context: found.context },
         ];
-        let polished = minimize(&bounds, &cost, &found.context, &again, &POLISH, opts_search, &bar)?;
+        let polished =
+            minimize(&bounds, &cost, Some(&residuals), &found.context, &again, &POLISH, opts_search, &bar)?;
         if polished.cost < found.cost {
             found = Found { evaluations: found.evaluations + polished.evaluations, ..polished };
         } else {
@@ -1015,4 +1067,45 @@ pub fn fit_constrained(
             Err(why) => StartScore { nrmse: None, kept: false, refused: Some(why) },
         },
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::excitation::Excitation;
+    use crate::plant::Plant;
+
+    /// Levenberg–Marquardt minimises the sum of squares of [`projected_residuals`], the simplex
+    /// and every report [`projected_cost`]: they must be the same number, with the current
+    /// channel scored, coil heating split off and λ_s solved or kept, away from the truth.
+    #[test]
+    fn the_residuals_square_to_the_cost() {
+        let spec = ModelSpec::parse("amp+ja+mech+thermal").unwrap();
+        let truth = ActuatorParams::TERFENOL_DEMO;
+        let rig = Plant::new(spec, truth);
+        let files: Vec<Recording> = [(30.0, 1.5, 0), (120.0, 1.0, 1)]
+            .iter()
+            .map(|&(f, a, seed)| {
+                rig.record(
+                    &format!("f{seed}"),
+                    &Excitation::Sine { freq_hz: f, amplitude: a, bias: 0.2 },
+                    0.1,
+                    seed,
+                )
+                .unwrap()
+            })
+            .collect();
+        assert!(files.iter().all(|r| r.current_a.is_some()), "the rig logs the current");
+        let prepared = prepare(spec, &files).unwrap();
+        let mut off = truth;
+        off.ja.a_a_per_m *= 1.3;
+        off.mech.natural_frequency_hz *= 0.8;
+        for lambda in [Some(LAMBDA_RANGE), None] {
+            let cost = projected_cost(spec, &off, &prepared, lambda);
+            let r = projected_residuals(spec, &off, &prepared, lambda).expect("the model runs");
+            let squares: f64 = r.iter().map(|x| x * x).sum();
+            assert!(cost > 1e-6, "the point is off the truth (cost {cost})");
+            assert!((squares - cost).abs() <= 1e-9 * cost, "λ_s {lambda:?}: Σr² = {squares}, cost = {cost}");
+        }
+    }
 }

@@ -16,7 +16,7 @@ use crate::files::{echo, Input};
 use crate::located;
 use crate::progress::Progress;
 use crate::results::StartScore;
-use crate::search::{minimize, Bound, Fidelity, Plan, SearchOptions, Start};
+use crate::search::{minimize, Bound, Fidelity, Local, Plan, SearchOptions, Start};
 use crate::warning::Warning;
 
 /// The loop fit's search: two swarms (seeds `seed`, `seed + 1`), each best refined by a 5 % and
@@ -28,7 +28,7 @@ const PLAN: Plan = Plan {
     simplex_iters_per_dim: 80.0,
     local_searches: 2,
     finalists: 2,
-    simplex: &[(0.05, Fidelity::Full), (0.01, Fidelity::Full)],
+    local: &[Local::Simplex(0.05, Fidelity::Full), Local::Simplex(0.01, Fidelity::Full)],
     tolerance: (1e-7, 1e-20),
 };
 
@@ -581,7 +581,7 @@ pub fn fit(
         Err(_) => Vec::new(),
     };
     starts.extend(model.start_from_features(files).map(|values| Start { values, context: () }));
-    let found = minimize(&bounds, &cost, &(), &starts, &PLAN, opts, &Progress::new("", 0, false))?;
+    let found = minimize(&bounds, &cost, None, &(), &starts, &PLAN, opts, &Progress::new("", 0, false))?;
     let mut best = model.model_values(&found.best);
     let mut warnings = Vec::new();
     let mut per_file = Vec::new();

@@ -42,7 +42,8 @@ pub struct ModelFiles {
     /// Seed of the global search (same seed, same result).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Search effort (1 = default; 2 doubles the swarm iterations and simplex steps).
+    /// Search effort (1 = default; 2 doubles the swarm iterations, simplex steps and
+    /// least-squares Jacobians).
     #[arg(long, default_value_t = 1.0)]
     pub effort: f64,
     /// Stop searching after this many seconds and use the best result found so far (said so in

@@ -51,11 +51,18 @@ pub fn run(a: &DemoArgs) -> Result<()> {
     let opts = FitOptions { seed: a.seed, ..FitOptions::default() };
     let rungs = report::ladder(case.model, &case.init, &fit_files, &val_files, opts, |r| {
         let d = &r.diagnosis;
-        say!(j, "\n  model `{}`: validation NRMSE {:.2} %", r.spec, r.headline() * 100.0);
+        // The headline scores whole files; diagnose scores each file after its burn-in (the
+        // unknown initial state), so its figures differ and are labelled so.
+        say!(
+            j,
+            "\n  model `{}`: validation NRMSE {:.2} % (whole files); after each file's burn-in, as diagnose scores:",
+            r.spec,
+            r.headline() * 100.0
+        );
         for c in d.candidates.iter().take(3) {
             say!(
                 j,
-                "    {:22} {:.2} % → {:.2} % after adding it",
+                "    {:22} {:.2} % → {:.2} % with it added",
                 c.effect,
                 c.nrmse_before * 100.0,
                 c.nrmse_after * 100.0
