@@ -972,6 +972,15 @@ pub fn diagnose(
     })
 }
 
+/// Refuses `--ja-variants` on a structure without a J–A law (the CLI asks before the diagnosis,
+/// so the mistake costs no fit).
+pub fn check_ja_variants(spec: ModelSpec) -> Result<()> {
+    if spec.law() != model_core::MagnetizationLaw::JilesAtherton {
+        bail!("--ja-variants compares the forms of Jiles–Atherton; `{spec}` has no J–A law (add `ja`)");
+    }
+    Ok(())
+}
+
 impl Diagnosis {
     /// The given structure (a J–A law) refitted in each other J–A form ([`JaVariant`]), started
     /// from the baseline's values and from `init` in that form, and scored like the candidates
@@ -987,9 +996,7 @@ impl Diagnosis {
         val_files: &[Recording],
         opts: FitOptions,
     ) -> Result<()> {
-        if spec.law() != model_core::MagnetizationLaw::JilesAtherton {
-            bail!("--ja-variants compares the forms of Jiles–Atherton; `{spec}` has no J–A law (add `ja`)");
-        }
+        check_ja_variants(spec)?;
         let Some(base) = self.baseline.as_ref() else {
             bail!("this diagnosis carries no baseline fit to compare the J–A forms with");
         };

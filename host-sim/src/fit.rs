@@ -880,8 +880,13 @@ pub fn fit_constrained(
     let swarm_iters = ((PLAN.swarm_iters * opts.effort).round() as u64).max(2);
     let nm_iters = ((PLAN.simplex_iters_per_dim * dims as f64 * opts.effort).round() as u64).max(20);
     let scan_len: u64 = scanned.iter().map(|p| (p.hi - p.lo) as u64 + 1).sum();
+    // The progress bar's length: the swarm, then per seed the coarse simplex and a least-squares
+    // run (and one more least-squares run each in the polish), then the scans.
+    let least_squares = crate::search::least_squares_evaluations(dims, opts.effort);
+    let seeds = PLAN.local_searches as u64;
     let planned = (PLAN.particles.0 + PLAN.particles.1 * d) as u64 * (swarm_iters + 1)
-        + nm_iters * 8
+        + seeds * (nm_iters + least_squares)
+        + if memory { seeds * least_squares } else { 0 }
         + (starts.len() as u64 + 1) * scan_len;
     let bar = Progress::new(&format!("fitting {spec}"), planned, opts.progress);
     let evals = AtomicUsize::new(0);

@@ -336,7 +336,7 @@ pub fn minimize<C: Clone + Send + Sync>(
 
     // Local: the plan's runs from each seed, in parallel; the last run only from the finalists.
     let nm_iters = ((plan.simplex_iters_per_dim * d as f64 * opts.effort).round() as u64).max(20);
-    let lm_jacobians = ((LM_JACOBIANS as f64 * opts.effort).round() as usize).max(3);
+    let max_jacobians = lm_jacobians(opts.effort);
     let local = |seed: &(C, Vec<f64>, f64), runs: &[Local]| -> Result<(C, Vec<f64>, f64)> {
         let (context, start, _) = seed;
         if runs.is_empty() {
@@ -358,7 +358,7 @@ pub fn minimize<C: Clone + Send + Sync>(
                         progress.inc(n as u64);
                     };
                     let res = |u: &[f64]| r(context, &unit!(context, fidelity).values(u), fidelity);
-                    best = levenberg_marquardt(&res, best, lm_jacobians, opts.deadline, &count);
+                    best = levenberg_marquardt(&res, best, max_jacobians, opts.deadline, &count);
                     continue;
                 }
             };
@@ -405,6 +405,17 @@ pub fn minimize<C: Clone + Send + Sync>(
 const LM_JACOBIANS: usize = 12;
 /// Accepted steps between two finite-difference Jacobians (Broyden updates in between).
 const LM_REFRESH: usize = 4;
+
+/// The evaluations a least-squares run over `d` dimensions may take at `effort` (for progress
+/// bars): its Jacobians and the steps between them.
+pub fn least_squares_evaluations(d: usize, effort: f64) -> u64 {
+    (lm_jacobians(effort) * (d + LM_REFRESH)) as u64
+}
+
+/// Finite-difference Jacobians a least-squares run may take at `effort`.
+fn lm_jacobians(effort: f64) -> usize {
+    ((LM_JACOBIANS as f64 * effort).round() as usize).max(3)
+}
 
 /// Minimises ‖r(u)‖² over the unit cube from `u` by Levenberg–Marquardt: forward-difference
 /// Jacobians (the columns in parallel), refreshed every [`LM_REFRESH`] accepted steps and kept up

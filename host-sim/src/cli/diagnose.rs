@@ -4,7 +4,7 @@ use anyhow::{bail, Result};
 use clap::Args;
 
 use super::common::{Data, ModelFiles};
-use crate::diagnose::diagnose;
+use crate::diagnose::{check_ja_variants, diagnose};
 use crate::provenance::Provenance;
 
 /// Options of `gma diagnose`.
@@ -24,8 +24,8 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
     let Data::Recordings(fit_files, val_files) = &p.data else {
         bail!("diagnose works on displacement recordings; for magnetization loops use `gma fit` and `gma compare`");
     };
-    if a.ja_variants && p.spec.law() != model_core::MagnetizationLaw::JilesAtherton {
-        bail!("--ja-variants compares the forms of Jiles–Atherton; `{}` has no J–A law (add `ja`)", p.spec);
+    if a.ja_variants {
+        check_ja_variants(p.spec)?;
     }
     let mut d = diagnose(p.spec, &p.init, fit_files, val_files, p.opts)?;
     if a.ja_variants {
