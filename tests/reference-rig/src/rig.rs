@@ -4,7 +4,9 @@
 
 use crate::drive::Drive;
 use crate::integrator::{DormandPrince, IntegrationError, OdeSystem};
-use crate::magnetics::{JaParams, JaVariant, Material, PreisachParams, ShellState, MU0};
+use crate::magnetics::{
+    JaParams, JaVariant, Material, PreisachParams, ShellState, DEFAULT_REVERSAL_THRESHOLD, MU0,
+};
 use crate::mechanics::Mechanics;
 use crate::recording::Recording;
 use crate::sensor::{Sensor, SensorChain, SensorSwitches};
@@ -422,7 +424,11 @@ impl Default for Rig {
             },
             prehistory: PreHistory { fields_rel_a_per_m: vec![50e3, -35e3, 15e3] },
             effects: Effects::ALL,
-            solver: Solver { rtol: 1e-5, max_step_s: 1e-4, reversal_threshold_a_per_m: 2.0 },
+            solver: Solver {
+                rtol: 1e-5,
+                max_step_s: 1e-4,
+                reversal_threshold_a_per_m: DEFAULT_REVERSAL_THRESHOLD,
+            },
         }
     }
 }
