@@ -5,8 +5,9 @@
 //! ([`InitialState`]), a nuisance parameter like the offset. The free parameters and their
 //! bounds come from the effect registry
 //! ([`crate::params`]); the search is the workbench's optimiser ([`crate::search`]): a particle
-//! swarm on part of the data, then Nelder–Mead from the best points; an integer parameter (the
-//! sensor delay) is scanned. Deterministic for a given seed.
+//! swarm on part of the data, then Nelder–Mead and Levenberg–Marquardt from the best points; an
+//! integer parameter (the sensor delay) is scanned, and its neighbours tried with the others
+//! refitted. Deterministic for a given seed.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
@@ -802,6 +803,20 @@ const POLISH: Plan = Plan {
     ..PLAN
 };
 
+/// The integers' neighbourhood after the search: the continuous parameters refitted at each
+/// neighbouring value by least squares on the coarse data (all of it when the files are short);
+/// a move is polished on all data once it stays.
+const NEIGHBOURS: Plan = Plan {
+    swarms: 0,
+    finalists: 2 * NEIGHBOUR_REACH,
+    local: &[Local::LeastSquares(Fidelity::Coarse)],
+    ..PLAN
+};
+/// How far (in steps of 1) the neighbourhood reaches on each side.
+const NEIGHBOUR_REACH: usize = 1;
+/// Moves at most this many times.
+const NEIGHBOUR_ROUNDS: usize = 3;
+
 /// Identifies `spec` on `files`, starting from (and keeping the fixed parameters of) `init`.
 pub fn fit(
     spec: ModelSpec,
@@ -887,6 +902,9 @@ pub fn fit_constrained(
     let planned = (PLAN.particles.0 + PLAN.particles.1 * d) as u64 * (swarm_iters + 1)
         + seeds * (nm_iters + least_squares)
         + if memory { seeds * least_squares } else { 0 }
+        // One round of the integers' neighbourhood (each neighbour from the point found and
+        // with its range-end parameters released, the point itself released) and its polish.
+        + scanned.len() as u64 * (4 * NEIGHBOUR_REACH as u64 + 2) * least_squares
         + (starts.len() as u64 + 1) * scan_len;
     let bar = Progress::new(&format!("fitting {spec}"), planned, opts.progress);
     let evals = AtomicUsize::new(0);
@@ -1003,6 +1021,83 @@ pub fn fit_constrained(
         } else {
             found.evaluations += polished.evaluations;
         }
+    }
+    // The integers were held at their start scan during the continuous search, and lags that
+    // the continuous parameters took over (eddy, amplifier, mechanics) can leave the sensor
+    // delay a few samples off in a basin of its own: the neighbouring delays, each with the
+    // continuous parameters refitted, until the best stays.
+    let mut polish = false;
+    for sp in &scanned {
+        for _round in 0..NEIGHBOUR_ROUNDS {
+            if found.time_limited {
+                break;
+            }
+            let k = (sp.get)(&found.context);
+            // A parameter the search left at an end of its range may sit where it has no
+            // gradient (an eddy lag of 1 µs at 10 kHz): each delay is also tried with those
+            // parameters back at the first start's values.
+            let released: Vec<f64> = found
+                .best
+                .iter()
+                .zip(&bounds)
+                .zip(&bases[0].values)
+                .map(|((&v, b), &v0)| {
+                    let u = b.to_unit(v);
+                    if b.swarm_holds.is_none() && !(1e-3..=1.0 - 1e-3).contains(&u) {
+                        v0
+                    } else {
+                        v
+                    }
+                })
+                .collect();
+            let any_released = released != found.best;
+            let starts: Vec<Start<ActuatorParams>> = (1..=NEIGHBOUR_REACH)
+                .flat_map(|r| [k - r as f64, k + r as f64])
+                .filter(|&j| (sp.lo..=sp.hi).contains(&j))
+                .flat_map(|j| {
+                    let mut context = found.context;
+                    (sp.set)(&mut context, j);
+                    let from_found = Start { values: found.best.clone(), context };
+                    let from_released = any_released.then(|| Start { values: released.clone(), context });
+                    std::iter::once(from_found).chain(from_released)
+                })
+                .chain(any_released.then(|| Start { values: released.clone(), context: found.context }))
+                .collect();
+            if starts.is_empty() {
+                break;
+            }
+            let plan = Plan { local_searches: starts.len(), finalists: starts.len(), ..NEIGHBOURS };
+            let moved = minimize(
+                &bounds,
+                &cost,
+                Some(&residuals),
+                &found.context,
+                &starts,
+                &plan,
+                // A trial only has to tell which delay wins: half the Jacobians; the polish refines.
+                SearchOptions { effort: 0.5 * opts_search.effort, ..opts_search },
+                &bar,
+            )?;
+            let evaluations = found.evaluations + moved.evaluations;
+            if moved.cost < found.cost {
+                found = Found { evaluations, ..moved };
+                polish = true;
+            } else {
+                found.evaluations = evaluations;
+                break;
+            }
+        }
+    }
+    if polish && !found.time_limited {
+        let at = [Start { values: found.best.clone(), context: found.context }];
+        let polished =
+            minimize(&bounds, &cost, Some(&residuals), &found.context, &at, &POLISH, opts_search, &bar)?;
+        let evaluations = found.evaluations + polished.evaluations;
+        found = if polished.cost < found.cost {
+            Found { evaluations, ..polished }
+        } else {
+            Found { evaluations, ..found }
+        };
     }
     let mut params = with_values(&found.context, &found.best);
     let found_start = starting_from(&full, &found.best[d..]);
