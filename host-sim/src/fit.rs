@@ -806,16 +806,18 @@ const POLISH: Plan = Plan {
 /// The integers' neighbourhood after the search: the continuous parameters refitted at each
 /// neighbouring value by least squares on the coarse data (all of it when the files are short);
 /// a move is polished on all data once it stays.
-const NEIGHBOURS: Plan = Plan {
-    swarms: 0,
-    finalists: 2 * NEIGHBOUR_REACH,
-    local: &[Local::LeastSquares(Fidelity::Coarse)],
-    ..PLAN
-};
+const NEIGHBOURS: Plan = Plan { swarms: 0, local: &[Local::LeastSquares(Fidelity::Coarse)], ..PLAN };
 /// How far (in steps of 1) the neighbourhood reaches on each side.
 const NEIGHBOUR_REACH: usize = 1;
 /// Moves at most this many times.
 const NEIGHBOUR_ROUNDS: usize = 3;
+
+/// The lower-cost of two search results, with the evaluations of both.
+fn lower_of<C>(a: Found<C>, b: Found<C>) -> Found<C> {
+    let evaluations = a.evaluations + b.evaluations;
+    let lower = if b.cost < a.cost { b } else { a };
+    Found { evaluations, ..lower }
+}
 
 /// Identifies `spec` on `files`, starting from (and keeping the fixed parameters of) `init`.
 pub fn fit(
@@ -1016,11 +1018,7 @@ pub fn fit_constrained(
         ];
         let polished =
             minimize(&bounds, &cost, Some(&residuals), &found.context, &again, &POLISH, opts_search, &bar)?;
-        if polished.cost < found.cost {
-            found = Found { evaluations: found.evaluations + polished.evaluations, ..polished };
-        } else {
-            found.evaluations += polished.evaluations;
-        }
+        found = lower_of(found, polished);
     }
     // The integers were held at their start scan during the continuous search, and lags that
     // the continuous parameters took over (eddy, amplifier, mechanics) can leave the sensor
@@ -1066,6 +1064,7 @@ pub fn fit_constrained(
             if starts.is_empty() {
                 break;
             }
+            // Every start gets its run (a single local run is the plan's last, run by finalists).
             let plan = Plan { local_searches: starts.len(), finalists: starts.len(), ..NEIGHBOURS };
             let moved = minimize(
                 &bounds,
@@ -1078,12 +1077,11 @@ pub fn fit_constrained(
                 SearchOptions { effort: 0.5 * opts_search.effort, ..opts_search },
                 &bar,
             )?;
-            let evaluations = found.evaluations + moved.evaluations;
-            if moved.cost < found.cost {
-                found = Found { evaluations, ..moved };
+            let before = found.cost;
+            found = lower_of(found, moved);
+            if found.cost < before {
                 polish = true;
             } else {
-                found.evaluations = evaluations;
                 break;
             }
         }
@@ -1092,12 +1090,7 @@ pub fn fit_constrained(
         let at = [Start { values: found.best.clone(), context: found.context }];
         let polished =
             minimize(&bounds, &cost, Some(&residuals), &found.context, &at, &POLISH, opts_search, &bar)?;
-        let evaluations = found.evaluations + polished.evaluations;
-        found = if polished.cost < found.cost {
-            Found { evaluations, ..polished }
-        } else {
-            Found { evaluations, ..found }
-        };
+        found = lower_of(found, polished);
     }
     let mut params = with_values(&found.context, &found.best);
     let found_start = starting_from(&full, &found.best[d..]);
