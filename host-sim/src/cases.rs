@@ -71,7 +71,7 @@ fn rig() -> ActuatorParams {
     base.anhysteretic.a_a_per_m = 7500.0;
     base.magnetostriction.lambda_s = 1.2e-3;
     base.mech = model_core::chain::ModalMechanics { natural_frequency_hz: 1300.0, damping_ratio: 0.25 };
-    base.delay_samples = 4;
+    base.delay_samples = 4.0;
     base
 }
 

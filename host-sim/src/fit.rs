@@ -5,9 +5,8 @@
 //! ([`InitialState`]), a nuisance parameter like the offset. The free parameters and their
 //! bounds come from the effect registry
 //! ([`crate::params`]); the search is the workbench's optimiser ([`crate::search`]): a particle
-//! swarm on part of the data, then Nelder–Mead and Levenberg–Marquardt from the best points; an
-//! integer parameter (the sensor delay) is scanned, and its neighbours tried with the others
-//! refitted. Deterministic for a given seed.
+//! swarm on part of the data, then Nelder–Mead and Levenberg–Marquardt from the best points.
+//! Deterministic for a given seed.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
@@ -17,11 +16,11 @@ use model_core::effects::STRAIN_SCALE;
 use model_core::{Actuator, ActuatorParams, Effect, MagnetizationLaw, ModelSpec};
 use rayon::prelude::*;
 
-use crate::params::{free_params, scanned_params, FreeParam};
+use crate::params::{free_params, FreeParam};
 use crate::progress::Progress;
 use crate::recording::Recording;
 use crate::results::StartScore;
-use crate::search::{minimize, scan, Bound, Fidelity, Found, Local, Plan, SearchOptions, Start};
+use crate::search::{minimize, Bound, Fidelity, Found, Local, Plan, SearchOptions, Start};
 
 /// How a file drives the model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -660,14 +659,10 @@ pub struct Constraints {
     pub bounds: Vec<(&'static str, f64, f64)>,
 }
 
-/// Every parameter `spec` identifies on these files: the continuous ones (λ_s first) and the
-/// scanned integers (flagged `true`), with the registry's ranges.
-pub fn identifiable(spec: ModelSpec, files: &[Recording]) -> Result<Vec<(FreeParam, bool)>> {
+/// Every parameter `spec` identifies on these files (λ_s first), with the registry's ranges.
+pub fn identifiable(spec: ModelSpec, files: &[Recording]) -> Result<Vec<FreeParam>> {
     let command_driven = prepare(spec, files)?.iter().any(|p| p.drive != Drive::Current);
-    let mut v: Vec<(FreeParam, bool)> =
-        free_params(spec, command_driven).into_iter().map(|f| (f, false)).collect();
-    v.extend(scanned_params(spec).into_iter().map(|p| (FreeParam::of(p), true)));
-    Ok(v)
+    Ok(free_params(spec, command_driven))
 }
 
 impl Constraints {
@@ -683,10 +678,10 @@ impl Constraints {
         init: &mut ActuatorParams,
     ) -> Result<Self> {
         let known = identifiable(spec, files)?;
-        let names = || known.iter().map(|(f, _)| format!("`{}`", f.name())).collect::<Vec<_>>().join(", ");
-        let find = |opt: &str, name: &str| -> Result<(FreeParam, bool)> {
+        let names = || known.iter().map(|f| format!("`{}`", f.name())).collect::<Vec<_>>().join(", ");
+        let find = |opt: &str, name: &str| -> Result<FreeParam> {
             let name = name.trim();
-            known.iter().find(|(f, _)| f.name() == name).copied().ok_or_else(|| {
+            known.iter().find(|f| f.name() == name).copied().ok_or_else(|| {
                 anyhow::anyhow!(
                     "{opt} {}: model `{spec}` identifies no such parameter on these files (it identifies {})",
                     crate::files::echo(name),
@@ -713,19 +708,13 @@ impl Constraints {
                 Some((n, v)) => (n, Some(v)),
                 None => (arg.as_str(), None),
             };
-            let (f, integer) = find("--fix", name)?;
+            let f = find("--fix", name)?;
             once("--fix", f.name())?;
             if let Some(text) = value {
                 let v = number("--fix", f.name(), text)?;
                 let b = f.bound;
-                if !(b.lo..=b.hi).contains(&v) || (integer && v.fract() != 0.0) {
-                    bail!(
-                        "--fix {}={v}: outside its range [{}, {}]{}",
-                        f.name(),
-                        b.lo,
-                        b.hi,
-                        if integer { " of integers" } else { "" }
-                    );
+                if !(b.lo..=b.hi).contains(&v) {
+                    bail!("--fix {}={v}: outside its range [{}, {}]", f.name(), b.lo, b.hi);
                 }
                 (f.set)(init, v);
             }
@@ -735,7 +724,7 @@ impl Constraints {
             let Some((name, range)) = arg.split_once('=') else {
                 bail!("--bound {}: expected NAME=LO:HI", crate::files::echo(arg));
             };
-            let (f, integer) = find("--bound", name)?;
+            let f = find("--bound", name)?;
             once("--bound", f.name())?;
             let Some((lo, hi)) = range.split_once(':') else {
                 bail!("--bound {}: expected NAME=LO:HI, got `{}`", f.name(), crate::files::echo(range));
@@ -755,9 +744,6 @@ impl Constraints {
                     b.lo,
                     b.hi
                 );
-            }
-            if integer && (lo.fract() != 0.0 || hi.fract() != 0.0) {
-                bail!("--bound {}={lo}:{hi}: an integer parameter takes integer bounds", f.name());
             }
             c.bounds.push((f.name(), lo, hi));
         }
@@ -803,14 +789,9 @@ const POLISH: Plan = Plan {
     ..PLAN
 };
 
-/// The integers' neighbourhood after the search: the continuous parameters refitted at each
-/// neighbouring value by least squares on the coarse data (all of it when the files are short);
-/// a move is polished on all data once it stays.
-const NEIGHBOURS: Plan = Plan { swarms: 0, local: &[Local::LeastSquares(Fidelity::Coarse)], ..PLAN };
-/// How far (in steps of 1) the neighbourhood reaches on each side.
-const NEIGHBOUR_REACH: usize = 1;
-/// Moves at most this many times.
-const NEIGHBOUR_ROUNDS: usize = 3;
+/// [`refine`]'s search: the polish's, from the start alone (with a hysteretic law, the better of
+/// its estimated initial states and the demagnetised one).
+const REFINE: Plan = Plan { local_searches: 1, finalists: 1, ..POLISH };
 
 /// The lower-cost of two search results, with the evaluations of both.
 fn lower_of<C>(a: Found<C>, b: Found<C>) -> Found<C> {
@@ -840,13 +821,16 @@ pub fn fit_from(
     fit_constrained(spec, starts, files, opts, &Constraints::default())
 }
 
-/// A scanned integer parameter and its range.
-struct Scanned {
-    key: &'static str,
-    lo: f64,
-    hi: f64,
-    get: fn(&ActuatorParams) -> f64,
-    set: fn(&mut ActuatorParams, f64),
+/// The local search alone from `start` (no swarm, no simplex: Levenberg–Marquardt, then with a
+/// hysteretic law the initial states estimated again and the polish, as in [`fit`]): for a start
+/// already near an optimum of a nested structure, e.g. a baseline's with one effect added.
+pub fn refine(
+    spec: ModelSpec,
+    start: &ActuatorParams,
+    files: &[Recording],
+    opts: FitOptions,
+) -> Result<FitResult> {
+    fit_planned(spec, &[*start], files, opts, &Constraints::default(), &REFINE)
 }
 
 /// As [`fit_from`], with parameters held fixed (at the first start's values) and search ranges
@@ -857,6 +841,18 @@ pub fn fit_constrained(
     files: &[Recording],
     opts: FitOptions,
     constraints: &Constraints,
+) -> Result<FitResult> {
+    fit_planned(spec, starts, files, opts, constraints, &PLAN)
+}
+
+/// The displacement fit with the search `plan` ([`PLAN`] for `gma fit`).
+fn fit_planned(
+    spec: ModelSpec,
+    starts: &[ActuatorParams],
+    files: &[Recording],
+    opts: FitOptions,
+    constraints: &Constraints,
+    plan: &Plan,
 ) -> Result<FitResult> {
     if files.is_empty() {
         bail!("no files to fit");
@@ -884,30 +880,25 @@ pub fn fit_constrained(
         .filter(|f| f.name() != STRAIN_SCALE.key && !c.is_fixed(f.name()))
         .map(|f| FreeParam { bound: c.narrow(f.bound), ..f })
         .collect();
-    let scanned: Vec<Scanned> = scanned_params(spec)
-        .into_iter()
-        .filter(|p| !c.is_fixed(p.key))
-        .map(|p| {
-            let b = c.narrow(FreeParam::of(p).bound);
-            Scanned { key: p.key, lo: b.lo, hi: b.hi, get: p.get, set: p.set }
-        })
-        .collect();
     let d = free.len();
     let dims = d + n_excursions;
-    let swarm_iters = ((PLAN.swarm_iters * opts.effort).round() as u64).max(2);
-    let nm_iters = ((PLAN.simplex_iters_per_dim * dims as f64 * opts.effort).round() as u64).max(20);
-    let scan_len: u64 = scanned.iter().map(|p| (p.hi - p.lo) as u64 + 1).sum();
-    // The progress bar's length: the swarm, then per seed the coarse simplex and a least-squares
-    // run (and one more least-squares run each in the polish), then the scans.
+    // The progress bar's length: the swarm, then per seed the plan's simplex and least-squares
+    // runs (and one more least-squares run each in the polish).
+    let swarm_iters = ((plan.swarm_iters * opts.effort).round() as u64).max(2);
+    let nm_iters = ((plan.simplex_iters_per_dim * dims as f64 * opts.effort).round() as u64).max(20);
     let least_squares = crate::search::least_squares_evaluations(dims, opts.effort);
-    let seeds = PLAN.local_searches as u64;
-    let planned = (PLAN.particles.0 + PLAN.particles.1 * d) as u64 * (swarm_iters + 1)
-        + seeds * (nm_iters + least_squares)
-        + if memory { seeds * least_squares } else { 0 }
-        // One round of the integers' neighbourhood (each neighbour from the point found and
-        // with its range-end parameters released, the point itself released) and its polish.
-        + scanned.len() as u64 * (4 * NEIGHBOUR_REACH as u64 + 2) * least_squares
-        + (starts.len() as u64 + 1) * scan_len;
+    let per_seed: u64 = plan
+        .local
+        .iter()
+        .map(|run| match run {
+            Local::Simplex(..) => nm_iters,
+            Local::LeastSquares(_) => least_squares,
+        })
+        .sum();
+    let seeds = plan.local_searches as u64;
+    let planned = plan.swarms as u64 * (plan.particles.0 + plan.particles.1 * d) as u64 * (swarm_iters + 1)
+        + seeds * per_seed
+        + if memory { POLISH.local_searches as u64 * least_squares } else { 0 };
     let bar = Progress::new(&format!("fitting {spec}"), planned, opts.progress);
     let evals = AtomicUsize::new(0);
 
@@ -944,30 +935,14 @@ pub fn fit_constrained(
         }
         projected_residuals(spec, &p, &starting_from(data(fidelity), &values[d..]), lambda_range)
     };
-    // Integer parameters (the sensor delay): scanned with everything else fixed.
-    let scan_integers = |p: &mut ActuatorParams, full: &[Prepared]| {
-        for sp in &scanned {
-            let best = scan(sp.lo as i64, sp.hi as i64, &|k| {
-                let mut q = *p;
-                (sp.set)(&mut q, k as f64);
-                evals.fetch_add(1, Ordering::Relaxed);
-                bar.inc(1);
-                projected_cost(spec, &q, full, lambda_range)
-            });
-            (sp.set)(p, best as f64);
-        }
-    };
     // Start points: the fixed parameters come from the first; each start's identified values
-    // are clamped into the bounds and its integers scanned.
+    // are clamped into the bounds.
     let bases: Vec<Start<ActuatorParams>> = starts
         .iter()
         .map(|st| {
             let mut b = starts[0];
             for f in &free {
                 (f.set)(&mut b, f.from_unit(f.to_unit((f.get)(st))));
-            }
-            for sp in &scanned {
-                (sp.set)(&mut b, (sp.get)(st));
             }
             let excursions: Vec<f64> = if memory {
                 full.iter()
@@ -978,7 +953,6 @@ pub fn fit_constrained(
             } else {
                 Vec::new()
             };
-            scan_integers(&mut b, &starting_from(&full, &excursions));
             let values = free.iter().map(|f| (f.get)(&b)).chain(excursions).collect();
             Ok(Start { values, context: b })
         })
@@ -1004,7 +978,7 @@ pub fn fit_constrained(
         .collect();
     let opts_search = SearchOptions { seed: opts.seed, effort: opts.effort, deadline: opts.deadline };
     let mut found =
-        minimize(&bounds, &cost, Some(&residuals), &bases[0].context, &bases, &PLAN, opts_search, &bar)?;
+        minimize(&bounds, &cost, Some(&residuals), &bases[0].context, &bases, plan, opts_search, &bar)?;
     if memory && !found.time_limited {
         // The states estimated again at the point found, and one more least-squares run from there.
         let at = with_values(&found.context, &found.best);
@@ -1020,81 +994,8 @@ pub fn fit_constrained(
             minimize(&bounds, &cost, Some(&residuals), &found.context, &again, &POLISH, opts_search, &bar)?;
         found = lower_of(found, polished);
     }
-    // The integers were held at their start scan during the continuous search, and lags that
-    // the continuous parameters took over (eddy, amplifier, mechanics) can leave the sensor
-    // delay a few samples off in a basin of its own: the neighbouring delays, each with the
-    // continuous parameters refitted, until the best stays.
-    let mut polish = false;
-    for sp in &scanned {
-        for _round in 0..NEIGHBOUR_ROUNDS {
-            if found.time_limited {
-                break;
-            }
-            let k = (sp.get)(&found.context);
-            // A parameter the search left at an end of its range may sit where it has no
-            // gradient (an eddy lag of 1 µs at 10 kHz): each delay is also tried with those
-            // parameters back at the first start's values.
-            let released: Vec<f64> = found
-                .best
-                .iter()
-                .zip(&bounds)
-                .zip(&bases[0].values)
-                .map(|((&v, b), &v0)| {
-                    let u = b.to_unit(v);
-                    if b.swarm_holds.is_none() && !(1e-3..=1.0 - 1e-3).contains(&u) {
-                        v0
-                    } else {
-                        v
-                    }
-                })
-                .collect();
-            let any_released = released != found.best;
-            let starts: Vec<Start<ActuatorParams>> = (1..=NEIGHBOUR_REACH)
-                .flat_map(|r| [k - r as f64, k + r as f64])
-                .filter(|&j| (sp.lo..=sp.hi).contains(&j))
-                .flat_map(|j| {
-                    let mut context = found.context;
-                    (sp.set)(&mut context, j);
-                    let from_found = Start { values: found.best.clone(), context };
-                    let from_released = any_released.then(|| Start { values: released.clone(), context });
-                    std::iter::once(from_found).chain(from_released)
-                })
-                .chain(any_released.then(|| Start { values: released.clone(), context: found.context }))
-                .collect();
-            if starts.is_empty() {
-                break;
-            }
-            // Every start gets its run (a single local run is the plan's last, run by finalists).
-            let plan = Plan { local_searches: starts.len(), finalists: starts.len(), ..NEIGHBOURS };
-            let moved = minimize(
-                &bounds,
-                &cost,
-                Some(&residuals),
-                &found.context,
-                &starts,
-                &plan,
-                // A trial only has to tell which delay wins: half the Jacobians; the polish refines.
-                SearchOptions { effort: 0.5 * opts_search.effort, ..opts_search },
-                &bar,
-            )?;
-            let before = found.cost;
-            found = lower_of(found, moved);
-            if found.cost < before {
-                polish = true;
-            } else {
-                break;
-            }
-        }
-    }
-    if polish && !found.time_limited {
-        let at = [Start { values: found.best.clone(), context: found.context }];
-        let polished =
-            minimize(&bounds, &cost, Some(&residuals), &found.context, &at, &POLISH, opts_search, &bar)?;
-        found = lower_of(found, polished);
-    }
     let mut params = with_values(&found.context, &found.best);
     let found_start = starting_from(&full, &found.best[d..]);
-    scan_integers(&mut params, &found_start);
     bar.finish_and_clear();
     let with_lambda = |mut p: ActuatorParams, data: &[Prepared]| -> Result<ActuatorParams> {
         let lambda = match lambda_range {
@@ -1139,11 +1040,10 @@ pub fn fit_constrained(
     let mut identified: Vec<(&'static str, f64)> =
         if lambda_fixed { Vec::new() } else { vec![(STRAIN_SCALE.key, lambda)] };
     identified.extend(free.iter().map(|f| (f.name(), (f.get)(&params))));
-    identified.extend(scanned.iter().map(|p| (p.key, (p.get)(&params))));
     let fixed = identifiable(spec, files)?
         .into_iter()
-        .filter(|(f, _)| c.is_fixed(f.name()))
-        .map(|(f, _)| (f.name(), (f.get)(&params)))
+        .filter(|f| c.is_fixed(f.name()))
+        .map(|f| (f.name(), (f.get)(&params)))
         .collect();
     let free = (!lambda_fixed).then_some(lambda_param).into_iter().chain(free).collect();
     Ok(FitResult {

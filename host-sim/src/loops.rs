@@ -517,8 +517,10 @@ impl LoopFit {
 
 /// Why J–A values cannot be used: α·M_s/(3a) ≥ 1 (the anhysteretic is multivalued).
 fn multivalued(model: LoopModel, v: &[f64]) -> Option<f64> {
+    // Only J–A has a mean field (the other laws have fewer values: index them only for J–A).
+    let LoopModel::JilesAtherton(_) = model else { return None };
     let ratio = v[2] * v[0] / (3.0 * v[1]);
-    (matches!(model, LoopModel::JilesAtherton(_)) && ratio >= 1.0).then_some(ratio)
+    (ratio >= 1.0).then_some(ratio)
 }
 
 /// Mean NRMSE over `files` of the model at `values` (its own parameters), or why it cannot run.

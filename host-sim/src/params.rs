@@ -68,21 +68,15 @@ impl FreeParam {
 
 /// The continuous parameters `spec` identifies, from the effect registry: the strain scale, the
 /// magnetization law's, the amplifier gain when `command_driven` (the files give the command,
-/// not the current), and each effect's in chain order. Integer parameters (the sensor delay)
-/// are scanned instead: [`scanned_params`].
+/// not the current), and each effect's in chain order.
 pub fn free_params(spec: ModelSpec, command_driven: bool) -> Vec<FreeParam> {
     let mut v: Vec<&'static Param> = vec![&STRAIN_SCALE];
     v.extend(spec.law().params());
     if command_driven {
         v.push(&AMPLIFIER_GAIN);
     }
-    v.extend(spec.effects().flat_map(|e| e.info().params).filter(|p| p.scale != Scale::Integer));
+    v.extend(spec.effects().flat_map(|e| e.info().params));
     v.into_iter().map(FreeParam::of).collect()
-}
-
-/// The integer parameters `spec` identifies by scanning their range.
-pub fn scanned_params(spec: ModelSpec) -> Vec<&'static Param> {
-    spec.effects().flat_map(|e| e.info().params).filter(|p| p.scale == Scale::Integer).collect()
 }
 
 /// Loads a parameter file (TOML as `--params-out` writes), or the built-in demo set, and checks
@@ -309,6 +303,18 @@ mod tests {
         let again = parse_file("new.toml", &to_toml(&f.params, "test").unwrap(), spec("ja+mech")).unwrap();
         assert_eq!(again.format_version, FORMAT_VERSION);
         assert_eq!(again.params, f.params);
+    }
+
+    /// A whole sensor delay is written as an integer (as files held it before fractional
+    /// delays), a fractional one as a float, and both read back exactly.
+    #[test]
+    fn a_whole_delay_is_written_as_an_integer_and_a_fraction_reads_back() {
+        for (delay, line) in [(3.0, "delay_samples = 3\n"), (3.25, "delay_samples = 3.25\n")] {
+            let p = ActuatorParams { delay_samples: delay, ..ActuatorParams::TERFENOL_DEMO };
+            let text = to_toml(&p, "test").unwrap();
+            assert!(text.contains(line), "{text}");
+            assert_eq!(parse_file("p.toml", &text, spec("ja+delay")).unwrap().params.delay_samples, delay);
+        }
     }
 
     #[test]

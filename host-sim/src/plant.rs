@@ -84,8 +84,19 @@ impl Plant {
         let fine_dt = self.params.dt_s as f64 / self.oversample as f64;
         let mut fine = self.params;
         fine.dt_s = fine_dt as f32;
-        let delay = self.params.delay_samples as u32 * self.oversample;
-        fine.delay_samples = u16::try_from(delay).context("delay too long")?;
+        fine.delay_samples = self.params.delay_samples * self.oversample as f32;
+        if self.spec.has(Effect::SensorDelay)
+            && fine.delay_samples >= model_core::chain::MAX_DELAY_SAMPLES as f32
+        {
+            bail!(
+                "delay_samples = {} at {}× oversampling is {} integration steps; the delay line holds \
+                 fewer than {}: lower the oversampling or the delay",
+                self.params.delay_samples,
+                self.oversample,
+                fine.delay_samples,
+                model_core::chain::MAX_DELAY_SAMPLES
+            );
+        }
         // Distributed: the chain without its lumped lag, the rod's diffusion in its place.
         let distributed = self.spec.has(Effect::EddyCurrent) && self.eddy == EddyModel::Distributed;
         let chain_spec = if distributed { self.spec.without(Effect::EddyCurrent) } else { self.spec };

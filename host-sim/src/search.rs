@@ -7,8 +7,7 @@
 //!
 //! Hooks for the displacement fit: the cost can be evaluated on cheaper data subsets
 //! ([`Fidelity`]: the swarm and the coarse simplex need only the landscape's shape), the search
-//! can start from given points that carry a context (e.g. an integer parameter held fixed), and
-//! [`scan`] searches an integer parameter exhaustively.
+//! can start from given points that carry a context (the parameters held fixed).
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
@@ -151,7 +150,7 @@ pub enum Local {
 pub struct Start<C> {
     /// Values (in the parameters' units).
     pub values: Vec<f64>,
-    /// What the cost needs besides the values (e.g. an integer parameter held fixed).
+    /// What the cost needs besides the values (the parameters held fixed).
     pub context: C,
 }
 
@@ -558,13 +557,6 @@ fn damped_step(
         }
         newly.into_iter().for_each(|k| held[k] = true);
     }
-}
-
-/// The integer in `lo..=hi` with the lowest `cost` (all evaluated, in parallel; ties go to the
-/// smallest).
-pub fn scan(lo: i64, hi: i64, cost: &(dyn Fn(i64) -> f64 + Sync)) -> i64 {
-    let costs: Vec<(i64, f64)> = (lo..=hi).into_par_iter().map(|k| (k, cost(k))).collect();
-    costs.iter().min_by(|a, b| a.1.total_cmp(&b.1)).map(|c| c.0).unwrap_or(lo)
 }
 
 #[cfg(test)]

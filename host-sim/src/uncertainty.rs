@@ -5,8 +5,7 @@
 //! and the current residual where the cost scores it, each block scaled by 1/(range·√n) so that
 //! rᵀr = (number of blocks) × cost. λ_s is one more parameter of the Jacobian (the model run
 //! with it, not re-solved), so it gets an uncertainty too; the per-file offsets are re-solved at
-//! every evaluation, i.e. projected out. Parameters held fixed (`--fix`) and the scanned integer
-//! sensor delay are not in J.
+//! every evaluation, i.e. projected out. Parameters held fixed (`--fix`) are not in J.
 //!
 //! J by central differences in each parameter's search coordinate: ln θ for log-scaled
 //! parameters (so σ is a relative uncertainty), θ for linear ones (step 10⁻³ of the range;

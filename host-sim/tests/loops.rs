@@ -106,3 +106,31 @@ fn jiles_atherton_is_recovered_from_loops_of_three_materials() {
     }
     assert!(failures.is_empty(), "{failures:#?}");
 }
+
+/// The laws without hysteresis fit loop files too (`gma fit --model linear|anhysteretic` on a
+/// loop panicked on J–A's mean-field check until 2026-11-24). A Langevin curve made by our own
+/// loop model (plumbing, not physics): the anhysteretic law recovers its M_s and a, and the
+/// linear law fits it, worse, without failing.
+#[test]
+fn the_laws_without_hysteresis_fit_a_loop() {
+    let truth = [7.6e5, 7000.0];
+    let h: Vec<f64> =
+        (0..=300).map(|k| 6.0e4 * (2.0 * std::f64::consts::PI * k as f64 / 300.0).cos()).collect();
+    let value = loops::run(LoopModel::Anhysteretic, &truth, &h, 6.0e4).unwrap();
+    let f = LoopFile { name: "langevin".into(), h, value, channel: LoopChannel::Magnetization };
+    let fit = |model| {
+        loops::fit(model, std::slice::from_ref(&f), &ActuatorParams::TERFENOL_DEMO, SearchOptions::default())
+            .unwrap()
+    };
+    let an = fit(LoopModel::Anhysteretic);
+    for (got, want) in an.values().iter().zip(truth) {
+        assert!(((got - want) / want).abs() < 0.01, "anhysteretic: {:?} for {truth:?}", an.values());
+    }
+    let lin = fit(LoopModel::Linear);
+    assert!(
+        lin.nrmse[0].is_finite() && lin.nrmse[0] > 10.0 * an.nrmse[0],
+        "{} vs {}",
+        lin.nrmse[0],
+        an.nrmse[0]
+    );
+}

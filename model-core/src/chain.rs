@@ -23,7 +23,7 @@ use crate::mechanics::{MassSpringDamper, MechState, SecondOrderZoh};
 use crate::slow::{Aftereffect, AftereffectParams, DelayLine, ThermalDrift, ThermalParams};
 use crate::spec::ModelSpec;
 
-/// Longest sensor delay the chain supports [samples].
+/// The chain's sensor delays lie below this [samples] (its delay line's capacity).
 pub const MAX_DELAY_SAMPLES: usize = 64;
 
 /// Largest |command| [V] or |current| [A] a step accepts: beyond it the input is a fault, not
@@ -98,8 +98,21 @@ pub struct ActuatorParams {
     pub aftereffect: AftereffectParams,
     /// `thermal_drift`.
     pub thermal: ThermalParams,
-    /// `sensor_delay` [samples], at most [`MAX_DELAY_SAMPLES`].
-    pub delay_samples: u16,
+    /// `sensor_delay` [samples], below [`MAX_DELAY_SAMPLES`]; a fraction interpolates linearly
+    /// between samples (a sensor's delay need not be a whole number of our sample periods).
+    #[cfg_attr(feature = "serde", serde(serialize_with = "whole_as_integer"))]
+    pub delay_samples: f32,
+}
+
+/// Writes a whole number as an integer: parameter files from before fractional delays (and the
+/// readers of their time) take `delay_samples` as one.
+#[cfg(feature = "serde")]
+fn whole_as_integer<S: serde::Serializer>(v: &f32, s: S) -> Result<S::Ok, S::Error> {
+    if v.fract() == 0.0 && (0.0..=f32::from(u16::MAX)).contains(v) {
+        s.serialize_u16(*v as u16)
+    } else {
+        s.serialize_f32(*v)
+    }
 }
 
 impl ActuatorParams {
@@ -136,7 +149,7 @@ impl ActuatorParams {
             rod_length_m: 0.08,
             expansion_per_c: ThermalParams::TERFENOL_EXPANSION_PER_C,
         },
-        delay_samples: 3,
+        delay_samples: 3.0,
     };
 }
 
@@ -169,7 +182,7 @@ pub struct Actuator {
     pub(crate) rod_length_m: f32,
     pub(crate) mech: Option<SecondOrderZoh>,
     pub(crate) thermal: Option<ThermalDrift>,
-    pub(crate) delay_samples: usize,
+    pub(crate) delay_samples: f32,
 }
 
 /// Everything that evolves from sample to sample.
@@ -272,12 +285,12 @@ impl Actuator {
         let thermal =
             if spec.has(Effect::ThermalDrift) { Some(ThermalDrift::new(p.thermal, dt)?) } else { None };
         let delay_samples = if spec.has(Effect::SensorDelay) {
-            if p.delay_samples as usize > MAX_DELAY_SAMPLES {
-                return Err(ParamError::OutOfRange("delay_samples", "at most 64"));
+            if !(0.0..MAX_DELAY_SAMPLES as f32).contains(&p.delay_samples) {
+                return Err(ParamError::OutOfRange("delay_samples", "in [0, 64) samples"));
             }
-            p.delay_samples as usize
+            p.delay_samples
         } else {
-            0
+            0.0
         };
         Ok(Self {
             spec,

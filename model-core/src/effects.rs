@@ -119,8 +119,6 @@ pub enum Scale {
     Linear,
     /// Searched uniformly in log between its (positive) bounds.
     Log,
-    /// An integer, scanned over its bounds.
-    Integer,
 }
 
 /// One identifiable parameter: its key in parameter files, unit, identification range and
@@ -317,11 +315,11 @@ pub const EFFECTS: [EffectInfo; 9] = [
         effect: Effect::SensorDelay,
         name: "sensor_delay",
         alias: Some("delay"),
-        adds: "transport delay of the displacement measurement, in samples",
+        adds: "transport delay of the displacement measurement, in samples (a fraction interpolates between samples)",
         stage: Stage::Sensor,
         law: None,
         implies: None,
-        params: &[param!("delay_samples", "samples", 0.0, 16.0, Integer, delay_samples)],
+        params: &[param!("delay_samples", "samples", 0.0, 16.0, Linear, delay_samples)],
         signature: Signature::Lag,
         inverse: Inverse::LeftToFeedback,
         candidacy: Candidacy::Always,
@@ -538,7 +536,7 @@ mod tests {
         let all = EFFECTS.iter().flat_map(|e| e.params).chain(laws).chain([&STRAIN_SCALE, &AMPLIFIER_GAIN]);
         for p in all {
             let mut set = ActuatorParams::TERFENOL_DEMO;
-            let v = if p.scale == Scale::Integer { 3.0 } else { 0.5 * (p.lo + p.hi) };
+            let v = 0.5 * (p.lo + p.hi);
             (p.set)(&mut set, v);
             assert!(((p.get)(&set) - v).abs() <= 1e-6 * v.abs().max(1.0), "{}", p.key);
             let default = (p.get)(&ActuatorParams::TERFENOL_DEMO);

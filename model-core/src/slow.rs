@@ -115,36 +115,47 @@ impl ThermalDrift {
     }
 }
 
-/// Pure transport delay of `delay` samples, at most `N` (fixed-size ring buffer).
+/// Transport delay of `delay` samples, at most `N` (fixed-size ring buffer). A fractional
+/// delay interpolates linearly between the two samples around it: exact at whole samples,
+/// continuous in `delay` (a fit can move it smoothly), and at half a sample a mild low-pass
+/// (|H| = cos(ω/2): −0.1 dB at a twentieth of the sample rate, −1.8 dB at a fifth).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DelayLine<const N: usize> {
     buf: [f32; N],
     head: usize,
-    delay: usize,
+    whole: usize,
+    fraction: f32,
 }
 
 impl<const N: usize> DelayLine<N> {
     /// A delay of `delay` samples (0 ≤ delay ≤ N), initially filled with `initial`.
-    pub fn new(delay: usize, initial: f32) -> Result<Self, ParamError> {
-        if delay > N {
-            return Err(ParamError::OutOfRange("delay.samples", "at most the delay line's capacity"));
+    pub fn new(delay: f32, initial: f32) -> Result<Self, ParamError> {
+        if !(delay.is_finite() && (0.0..=N as f32).contains(&delay)) {
+            return Err(ParamError::OutOfRange("delay.samples", "0 to the delay line's capacity"));
         }
         Ok(Self::clamped(delay, initial))
     }
 
-    /// A delay of min(`delay`, N) samples, initially filled with `initial`.
-    pub fn clamped(delay: usize, initial: f32) -> Self {
-        Self { buf: [initial; N], head: 0, delay: delay.min(N) }
+    /// A delay of `delay` samples clamped to [0, N] (0 when not finite), initially filled with
+    /// `initial`.
+    pub fn clamped(delay: f32, initial: f32) -> Self {
+        let d = if delay.is_finite() { delay.clamp(0.0, N as f32) } else { 0.0 };
+        let whole = (d as usize).min(N);
+        Self { buf: [initial; N], head: 0, whole, fraction: d - whole as f32 }
     }
 
     /// Pushes `x`, returns the value from `delay` samples ago.
     #[inline]
     pub fn step(&mut self, x: f32) -> f32 {
-        if self.delay == 0 || N == 0 {
+        if N == 0 {
             return x;
         }
-        // The slot written `delay` samples ago is `delay` positions behind head.
-        let out = self.buf[(self.head + N - self.delay) % N];
+        // The slot written k samples ago is k positions behind head (k = 0: the input itself;
+        // k = N: the slot about to be overwritten).
+        let ago = |k: usize| if k == 0 { x } else { self.buf[(self.head + N - k) % N] };
+        let near = ago(self.whole);
+        let out =
+            if self.fraction > 0.0 { near + self.fraction * (ago(self.whole + 1) - near) } else { near };
         self.buf[self.head] = x;
         self.head = (self.head + 1) % N;
         out
@@ -157,13 +168,41 @@ mod tests {
 
     #[test]
     fn delay_line_delays_exactly() {
-        let mut d = DelayLine::<8>::new(3, 0.0).unwrap();
+        let mut d = DelayLine::<8>::new(3.0, 0.0).unwrap();
         let out: Vec<f32> = (1..=6).map(|x| d.step(x as f32)).collect();
         assert_eq!(out, [0.0, 0.0, 0.0, 1.0, 2.0, 3.0]);
-        let mut full = DelayLine::<4>::new(4, -1.0).unwrap();
+        let mut full = DelayLine::<4>::new(4.0, -1.0).unwrap();
         let out: Vec<f32> = (1..=6).map(|x| full.step(x as f32)).collect();
         assert_eq!(out, [-1.0, -1.0, -1.0, -1.0, 1.0, 2.0]);
-        assert!(DelayLine::<4>::new(5, 0.0).is_err());
+        assert!(DelayLine::<4>::new(5.0, 0.0).is_err());
+        assert!(DelayLine::<4>::new(f32::NAN, 0.0).is_err());
+    }
+
+    /// A fractional delay shifts a sine by δ samples (at 200 Hz, 10 kHz, the interpolation's
+    /// low-pass takes δ(1 − δ)ω²/2 ≤ 0.2 % of the amplitude), is continuous across whole samples,
+    /// and its step response settles to the step.
+    #[test]
+    fn a_fractional_delay_shifts_a_sine_by_its_fraction() {
+        let (f, fs) = (200.0_f64, 10_000.0_f64);
+        let w = 2.0 * core::f64::consts::PI * f / fs;
+        for delay in [0.25_f32, 1.5, 3.7, 7.5] {
+            let mut d = DelayLine::<8>::new(delay, 0.0).unwrap();
+            let err = (0..2000)
+                .map(|k| (d.step((w * k as f64).sin() as f32) as f64, k as f64))
+                .filter(|&(_, k)| k > 16.0)
+                .map(|(y, k)| (y - (w * (k - delay as f64)).sin()).abs())
+                .fold(0.0, f64::max);
+            assert!(err < 2e-3, "delay {delay}: {err} from the sine shifted by {delay} samples");
+            let mut s = DelayLine::<8>::new(delay, 0.0).unwrap();
+            let last = (0..20).map(|_| s.step(1.0)).last().unwrap();
+            assert_eq!(last, 1.0, "delay {delay}: the step settles");
+        }
+        // Continuous at a whole sample: 3 − ε and 3 give nearly the same output.
+        let ramp = |delay: f32| {
+            let mut d = DelayLine::<8>::new(delay, 0.0).unwrap();
+            (0..12).map(|k| d.step(k as f32)).last().unwrap()
+        };
+        assert!((ramp(2.999) - ramp(3.0)).abs() < 2e-3 && ramp(3.0) == 8.0);
     }
 
     #[test]

@@ -25,7 +25,7 @@ fn the_displacement_is_the_magnetostrictive_part_plus_the_thermal_tail() {
         let mut p = ActuatorParams::TERFENOL_DEMO;
         p.thermal.thermal_resistance_c_per_w = 40.0; // a visible drift within the record
         p.thermal.tau_s = 0.05;
-        p.delay_samples = 3;
+        p.delay_samples = 3.0;
         let n = 4000;
         let (y1, currents) = run(spec, &p, n);
         let mut p2 = p;

@@ -93,17 +93,13 @@ fn range(p: &Param) -> String {
     // Plain numbers where they read well, exponents for the very small and large.
     let num =
         |v: f64| if v == 0.0 || (1e-3..1e5).contains(&v.abs()) { format!("{v}") } else { format!("{v:e}") };
-    match p.scale {
-        Scale::Integer => format!("integers {}–{}", p.lo, p.hi),
-        _ => format!("[{}, {}]", num(p.lo), num(p.hi)),
-    }
+    format!("[{}, {}]", num(p.lo), num(p.hi))
 }
 
 fn scale(p: &Param) -> &'static str {
     match p.scale {
         Scale::Linear => "linear",
         Scale::Log => "log",
-        Scale::Integer => "scan",
     }
 }
 

@@ -79,7 +79,8 @@ fn params(c: &Case) -> ActuatorParams {
         set(f, how);
     }
     p.amp_second_order = c.second_order_amp.then_some(so);
-    p.delay_samples = c.delay % 80;
+    // 0 to 80 samples in sixteenths: fractional delays, and some beyond the line (refused).
+    p.delay_samples = (c.delay % 1280) as f32 / 16.0;
     p
 }
 
