@@ -108,8 +108,11 @@ pub struct ActuatorParams {
 /// readers of their time) take `delay_samples` as one.
 #[cfg(feature = "serde")]
 fn whole_as_integer<S: serde::Serializer>(v: &f32, s: S) -> Result<S::Ok, S::Error> {
-    if v.fract() == 0.0 && (0.0..=f32::from(u16::MAX)).contains(v) {
-        s.serialize_u16(*v as u16)
+    // Only in text formats (TOML/JSON for people); binary wire formats (postcard) keep the f32
+    // their decoder expects.
+    let whole = *v as u16; // saturating; `f32::fract` is not in core
+    if s.is_human_readable() && f32::from(whole) == *v {
+        s.serialize_u16(whole)
     } else {
         s.serialize_f32(*v)
     }
