@@ -300,7 +300,8 @@ impl LoopModel {
             }
             LoopModel::Preisach => {
                 let q = p.preisach;
-                vec![q.ms_a_per_m, q.coercive_a_per_m, q.spread_a_per_m, q.h_max_a_per_m]
+                let su = q.interaction_spread_a_per_m.unwrap_or(q.spread_a_per_m);
+                vec![q.ms_a_per_m, q.coercive_a_per_m, q.spread_a_per_m, su, q.h_max_a_per_m]
             }
         };
         v.into_iter().map(f64::from).collect()
@@ -331,6 +332,7 @@ impl LoopModel {
                 ms,
                 field("coercive_a_per_m", 1e-3 * h_max, 0.8 * h_max),
                 field("spread_a_per_m", 1e-3 * h_max, 2.0 * h_max),
+                field("interaction_spread_a_per_m", 1e-3 * h_max, 2.0 * h_max),
                 // The relay plane's range is the field where the material saturates, which can lie
                 // well inside the measured range (hard magnets): fitted, since the fixed grid's
                 // resolution is 2·H_max/31 and a plane wider than needed blurs the switching.
@@ -384,7 +386,13 @@ impl LoopModel {
             LoopModel::Linear => &["offset_a_per_m", "susceptibility"],
             LoopModel::Anhysteretic => &["ms_a_per_m", "a_a_per_m"],
             LoopModel::JilesAtherton(_) => &["ms_a_per_m", "a_a_per_m", "alpha", "k_a_per_m", "c"],
-            LoopModel::Preisach => &["ms_a_per_m", "coercive_a_per_m", "spread_a_per_m", "h_max_a_per_m"],
+            LoopModel::Preisach => &[
+                "ms_a_per_m",
+                "coercive_a_per_m",
+                "spread_a_per_m",
+                "interaction_spread_a_per_m",
+                "h_max_a_per_m",
+            ],
         }
     }
 }
@@ -432,7 +440,8 @@ pub fn run(model: LoopModel, p: &[f64], h: &[f64], h_max: f64) -> Result<Vec<f64
                 ms_a_per_m: p[0] as f32,
                 coercive_a_per_m: p[1] as f32,
                 spread_a_per_m: p[2] as f32,
-                h_max_a_per_m: p[3] as f32,
+                interaction_spread_a_per_m: Some(p[3] as f32),
+                h_max_a_per_m: p[4] as f32,
             })
             .map_err(|e| RunError(e.to_string()))?;
             let mut s = pr.demagnetized();
@@ -507,7 +516,8 @@ impl LoopFit {
                 p.preisach.ms_a_per_m = v[0] as f32;
                 p.preisach.coercive_a_per_m = v[1] as f32;
                 p.preisach.spread_a_per_m = v[2] as f32;
-                p.preisach.h_max_a_per_m = v[3] as f32;
+                p.preisach.interaction_spread_a_per_m = Some(v[3] as f32);
+                p.preisach.h_max_a_per_m = v[4] as f32;
                 p.magnetostriction.ms_a_per_m = v[0] as f32;
             }
         }

@@ -8,7 +8,8 @@
 //! Run (reduced: law `ja-bulk`, seed 1, about a minute once the recordings are cached):
 //!   cargo test --release -p host-sim --test refrig_suite hidden_effects -- --ignored --nocapture
 //! Full grid (4 laws × 2 seeds, about 10 minutes on 2 cores): `GMA_REFRIG_SUITE=full` in front
-//! of the same command.
+//! of the same command; one law on both seeds: `GMA_REFRIG_SUITE=preisach` (or `ja-original`,
+//! `ja-bulk`, `ja-inverse`).
 //! `ja_forms` (`diagnose --ja-variants` per J–A rig law) and `error_budget` are separate tests.
 //! Generated CSVs are cached under `target/refrig-suite/` (the rig costs 1–2 s of CPU per
 //! simulated second); delete the folder after changing the rig.
@@ -163,8 +164,9 @@ fn complete(law: Effect) -> ModelSpec {
 }
 
 /// The structure without `hidden` (the law effects swap the magnetization law).
-fn without(hidden: Effect) -> ModelSpec {
-    let dynamics = complete(Effect::Hysteresis);
+/// The engineer's model with `hidden` left out, on a rig whose hysteresis the registry calls
+/// `law` (`hysteresis` for J–A, `preisach`).
+fn without(hidden: Effect, law: Effect) -> ModelSpec {
     match hidden {
         // Saturation hidden: linear law (the rig runs anhysteretic).
         Effect::Saturation => [
@@ -178,7 +180,8 @@ fn without(hidden: Effect) -> ModelSpec {
         .into_iter()
         .fold(ModelSpec::LINEAR, |s, e| s.with(e)),
         Effect::Hysteresis => complete(Effect::Saturation),
-        Effect::Preisach => dynamics,
+        // The engineer who does not know the rod is a Preisach material starts from J–A.
+        Effect::Preisach => complete(Effect::Hysteresis),
         e => {
             let others: Vec<Effect> = [
                 Effect::EddyCurrent,
@@ -191,7 +194,7 @@ fn without(hidden: Effect) -> ModelSpec {
             .into_iter()
             .filter(|&x| x != e)
             .collect();
-            others.into_iter().fold(ModelSpec::LINEAR.with(Effect::Hysteresis), |s, x| s.with(x))
+            others.into_iter().fold(ModelSpec::LINEAR.with(law), |s, x| s.with(x))
         }
     }
 }
@@ -218,16 +221,22 @@ struct Row {
 #[test]
 #[ignore = "minutes of CPU: run with --ignored (see the file's header)"]
 fn hidden_effects_on_the_independent_rig() {
-    let full = std::env::var("GMA_REFRIG_SUITE").is_ok_and(|v| v == "full");
-    let laws: Vec<(&'static str, Law)> = if full {
-        vec![
-            ("ja-original", Law::JilesAtherton(JaVariant::Original1986)),
-            ("ja-bulk", Law::JilesAtherton(JaVariant::BulkVenkataraman)),
-            ("ja-inverse", Law::JilesAtherton(JaVariant::InverseSadowski)),
-            ("preisach", Law::Preisach),
-        ]
-    } else {
-        vec![("ja-bulk", Law::JilesAtherton(JaVariant::BulkVenkataraman))]
+    let all_laws = [
+        ("ja-original", Law::JilesAtherton(JaVariant::Original1986)),
+        ("ja-bulk", Law::JilesAtherton(JaVariant::BulkVenkataraman)),
+        ("ja-inverse", Law::JilesAtherton(JaVariant::InverseSadowski)),
+        ("preisach", Law::Preisach),
+    ];
+    // `full`: every law; a law's name: that law; both with seeds 1 and 2.
+    let choice = std::env::var("GMA_REFRIG_SUITE").unwrap_or_default();
+    let full = !choice.is_empty();
+    let laws: Vec<(&'static str, Law)> = match choice.as_str() {
+        "" => vec![all_laws[1]],
+        "full" => all_laws.to_vec(),
+        name => {
+            let law = all_laws.iter().find(|(n, _)| *n == name);
+            vec![*law.unwrap_or_else(|| panic!("GMA_REFRIG_SUITE={name}: not `full` nor a law of the suite"))]
+        }
     };
     let seeds: &[u64] = if full { &[1, 2] } else { &[1] };
     let (fit_exc, val_exc) = excitations();
@@ -260,15 +269,17 @@ fn hidden_effects_on_the_independent_rig() {
                 Some(Effect::SensorDelay),
                 None,
             ];
-            // Preisach is hidden only where the rig's law is Preisach (the model keeps J–A).
-            if matches!(law, Law::Preisach) {
+            // On a Preisach rig the complete model has the Preisach law, and Preisach is hidden
+            // once: the engineer's model has J–A instead.
+            let law_effect = if matches!(law, Law::Preisach) { Effect::Preisach } else { Effect::Hysteresis };
+            if law_effect == Effect::Preisach {
                 cases.insert(2, Some(Effect::Preisach));
             }
             for hidden in cases {
                 let (model, data) = match hidden {
-                    Some(Effect::Saturation) => (without(Effect::Saturation), files(false)),
-                    Some(e) => (without(e), (full_rig.0.clone(), full_rig.1.clone())),
-                    None => (complete(Effect::Hysteresis), (full_rig.0.clone(), full_rig.1.clone())),
+                    Some(Effect::Saturation) => (without(Effect::Saturation, law_effect), files(false)),
+                    Some(e) => (without(e, law_effect), (full_rig.0.clone(), full_rig.1.clone())),
+                    None => (complete(law_effect), (full_rig.0.clone(), full_rig.1.clone())),
                 };
                 let started = std::time::Instant::now();
                 let d = diagnose(model, &init, &data.0, &data.1, FitOptions::default()).expect("diagnose");

@@ -79,6 +79,7 @@ fn bench(c: &mut Criterion) {
         ms_a_per_m: 6e5,
         coercive_a_per_m: 3000.0,
         spread_a_per_m: 10_000.0,
+        interaction_spread_a_per_m: Some(10_000.0),
         h_max_a_per_m: 80_000.0,
     })
     .unwrap();

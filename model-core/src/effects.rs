@@ -354,9 +354,19 @@ const JA_PARAMS: [Param; 4] = [
     param!("ja.alpha", "1", -0.1, 0.1, Linear, ja.alpha),
     param!("ja.c", "1", 0.0, 0.95, Linear, ja.c),
 ];
-const PREISACH_PARAMS: [Param; 2] = [
+const PREISACH_PARAMS: [Param; 3] = [
     param!("preisach.coercive_a_per_m", "A/m", 100.0, 3e4, Log, preisach.coercive_a_per_m),
     param!("preisach.spread_a_per_m", "A/m", 500.0, 6e4, Log, preisach.spread_a_per_m),
+    // Always identified: a set without it (the older tied density) starts from σ_u = σ.
+    Param {
+        key: "preisach.interaction_spread_a_per_m",
+        unit: "A/m",
+        lo: 500.0,
+        hi: 1e5,
+        scale: Scale::Log,
+        get: |p| p.preisach.interaction_spread_a_per_m.unwrap_or(p.preisach.spread_a_per_m) as f64,
+        set: |p, v| p.preisach.interaction_spread_a_per_m = Some(v as f32),
+    },
 ];
 
 impl MagnetizationLaw {

@@ -23,7 +23,9 @@ use crate::framing::{cobs_decode, cobs_encode, crc16};
 use crate::reference::Waveform;
 
 /// The protocol version this code speaks (byte 0 of every frame).
-pub const PROTOCOL_VERSION: u8 = 2; // 2: `delay_samples` in load-parameters is an f32 (was a u16)
+/// 2: in load-parameters `delay_samples` is an f32 (was a u16), and the Preisach parameters carry
+/// the optional interaction spread.
+pub const PROTOCOL_VERSION: u8 = 2;
 /// Longest spec text in a load command [bytes].
 pub const MAX_SPEC_BYTES: usize = 96;
 /// Longest raw frame (header, payload, CRC) [bytes]: room for a parameter set.

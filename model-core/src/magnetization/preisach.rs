@@ -30,8 +30,13 @@ pub const PREISACH_LEVELS: usize = 32;
 /// Stored turning points (alternating maxima and minima, the current input included).
 pub const PREISACH_MEMORY: usize = 16;
 
-/// A Preisach density as the workbench identifies it: factorised Lorentzian (coercive centre
-/// ±h_c, spread σ) on the relay plane, normalised so that saturation is ±M_s at ±H_max.
+/// A Preisach density as the workbench identifies it, normalised so that saturation is ±M_s at
+/// ±H_max. With an interaction spread σ_u it is a product of Lorentzians on the relays'
+/// coercivity h = (α − β)/2 (centre h_c, spread σ) and interaction field u = (α + β)/2 (centre
+/// 0, spread σ_u), the two widths of a measured FORC diagram (Mayergoyz 1991; Terfenol-D: a
+/// narrow coercivity, a wide interaction, slanted narrow loops). Without it, the factorised
+/// Lorentzian L((α − h_c)/σ) L((β + h_c)/σ) of parameter files before 2026-11-24, which ties the
+/// two widths together.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
@@ -40,8 +45,12 @@ pub struct PreisachParams {
     pub ms_a_per_m: f32,
     /// Coercive field h_c [A/m]: relays switch up around +h_c and down around −h_c.
     pub coercive_a_per_m: f32,
-    /// Spread σ [A/m] of the switching fields (larger: slanted, rounder loop).
+    /// Spread σ [A/m] of the relays' coercivity (with no interaction spread: of both switching
+    /// fields).
     pub spread_a_per_m: f32,
+    /// Spread σ_u [A/m] of the interaction field (larger: a more slanted loop of the same width).
+    #[cfg_attr(feature = "serde", serde(default, skip_serializing_if = "Option::is_none"))]
+    pub interaction_spread_a_per_m: Option<f32>,
     /// Field range ±H_max [A/m] the relay plane covers (beyond it the rod is saturated).
     pub h_max_a_per_m: f32,
 }
@@ -257,7 +266,7 @@ impl PreisachState {
 }
 
 impl Preisach {
-    /// From the parametric (factorised Lorentzian) density.
+    /// From the parametric (Lorentzian) density of [`PreisachParams`].
     pub fn new(p: PreisachParams) -> Result<Self, ParamError> {
         let ms = saturation("preisach.ms_a_per_m", p.ms_a_per_m)?;
         let hc = field_scale("preisach.coercive_a_per_m", p.coercive_a_per_m)?;
@@ -267,9 +276,17 @@ impl Preisach {
             return Err(ParamError::OutOfRange("preisach.coercive_a_per_m", "below preisach.h_max_a_per_m"));
         }
         let lorentz = |x: f32| 1.0 / (1.0 + x * x);
-        let table = EverettTable::from_density(h_max, ms, |a, b| {
-            lorentz((a - hc) / sigma) * lorentz((b + hc) / sigma)
-        })?;
+        let table = match p.interaction_spread_a_per_m {
+            Some(su) => {
+                let su = field_scale("preisach.interaction_spread_a_per_m", su)?;
+                EverettTable::from_density(h_max, ms, |a, b| {
+                    lorentz((0.5 * (a - b) - hc) / sigma) * lorentz(0.5 * (a + b) / su)
+                })?
+            }
+            None => EverettTable::from_density(h_max, ms, |a, b| {
+                lorentz((a - hc) / sigma) * lorentz((b + hc) / sigma)
+            })?,
+        };
         Ok(Self { table })
     }
 
@@ -353,6 +370,7 @@ mod tests {
         ms_a_per_m: 6.0e5,
         coercive_a_per_m: 5000.0,
         spread_a_per_m: 8000.0,
+        interaction_spread_a_per_m: None,
         h_max_a_per_m: 60_000.0,
     };
 
@@ -395,10 +413,19 @@ mod tests {
     /// M(h) = −M_s + 2 M_s · mass{β ≤ α ≤ h} / mass{β ≤ α} (the relays switched up so far).
     #[test]
     fn major_branch_matches_fine_integration_of_the_density() {
-        let p = model();
-        let (hc, sigma, h_max) = (P.coercive_a_per_m as f64, P.spread_a_per_m as f64, P.h_max_a_per_m as f64);
-        let mu =
-            |a: f64, b: f64| 1.0 / ((1.0 + ((a - hc) / sigma).powi(2)) * (1.0 + ((b + hc) / sigma).powi(2)));
+        let (hc, sigma) = (P.coercive_a_per_m as f64, P.spread_a_per_m as f64);
+        let lorentz = |x: f64| 1.0 / (1.0 + x * x);
+        major_branch_follows(P, |a, b| lorentz((a - hc) / sigma) * lorentz((b + hc) / sigma));
+        // Narrow coercivity, wide interaction (the Terfenol-D shape).
+        let (sigma, su) = (1500.0, 20_000.0);
+        let q =
+            PreisachParams { spread_a_per_m: sigma as f32, interaction_spread_a_per_m: Some(su as f32), ..P };
+        major_branch_follows(q, |a, b| lorentz((0.5 * (a - b) - hc) / sigma) * lorentz(0.5 * (a + b) / su));
+    }
+
+    fn major_branch_follows(params: PreisachParams, mu: impl Fn(f64, f64) -> f64) {
+        let p = Preisach::new(params).unwrap();
+        let h_max = params.h_max_a_per_m as f64;
         let n = 800;
         let d = 2.0 * h_max / n as f64;
         // Column masses: mass with α in column i, β ≤ α.
@@ -418,11 +445,43 @@ mod tests {
             let m = p.step(&mut s, h as f32) as f64;
             let upto = ((h + h_max) / d) as usize;
             let reference = -1.0 + 2.0 * col[..upto].iter().sum::<f64>() / total;
-            worst = worst.max((m / P.ms_a_per_m as f64 - reference).abs());
+            worst = worst.max((m / params.ms_a_per_m as f64 - reference).abs());
         }
-        // σ is two grid steps here; the interpolated table follows the continuous model to 3 %.
+        // The narrowest width is about two grid steps here (σ; 2σ along the coercivity axis of
+        // the α–β grid); the interpolated table follows the continuous model to 3 %.
         assert!(worst < 0.035, "branch error {worst:.4} of M_s");
         eprintln!("major branch vs f64 integration: {:.3} % of M_s", worst * 100.0);
+    }
+
+    /// The interaction spread slants the loop and leaves its width: the coercive field (M = 0 on
+    /// the ascending major branch) stays near h_c while the slope there falls.
+    #[test]
+    fn a_wider_interaction_spread_slants_the_loop_without_widening_it() {
+        let branch = |su: f32| {
+            let p = Preisach::new(PreisachParams {
+                spread_a_per_m: 1500.0,
+                interaction_spread_a_per_m: Some(su),
+                ..P
+            })
+            .unwrap();
+            let mut s = PreisachState::default();
+            (0..=600)
+                .map(|k| -30_000.0 + 100.0 * k as f32)
+                .map(|h| (h, p.step(&mut s, h)))
+                .collect::<Vec<_>>()
+        };
+        let crossing = |b: &[(f32, f32)]| {
+            let k = b.iter().position(|&(_, m)| m >= 0.0).unwrap();
+            let ((h0, m0), (h1, m1)) = (b[k - 1], b[k]);
+            let h = h0 + (h1 - h0) * (-m0) / (m1 - m0);
+            (h, (m1 - m0) / (h1 - h0))
+        };
+        let (hc_narrow, slope_narrow) = crossing(&branch(5000.0));
+        let (hc_wide, slope_wide) = crossing(&branch(30_000.0));
+        for hc in [hc_narrow, hc_wide] {
+            assert!((hc - P.coercive_a_per_m).abs() < 0.25 * P.coercive_a_per_m, "coercive field {hc}");
+        }
+        assert!(slope_narrow > 3.0 * slope_wide, "slopes {slope_narrow} vs {slope_wide}");
     }
 
     #[test]
