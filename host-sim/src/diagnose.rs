@@ -723,7 +723,12 @@ pub fn diagnose(
             let r = fit::fit(s2, init, fit_files, fresh_opts)
                 .and_then(|fresh| {
                     let warm = fit::refine(s2, &base.params, fit_files, refit_opts)?;
-                    Ok(if warm.fit.cost() < fresh.fit.cost() { warm } else { fresh })
+                    // The kept one reports the search as a whole: both runs' evaluations, and a
+                    // time limit that cut either short.
+                    let (evaluations, time_limited) =
+                        (warm.evaluations + fresh.evaluations, warm.time_limited || fresh.time_limited);
+                    let kept = if warm.fit.cost() < fresh.fit.cost() { warm } else { fresh };
+                    Ok(FitResult { evaluations, time_limited, ..kept })
                 })
                 .and_then(|f| Ok((evaluate(s2, &f.params, score_files)?.mean_nrmse(), f)))
                 .map(|(after, f)| (f, after));
