@@ -8,7 +8,7 @@ use anyhow::{bail, Result};
 use model_core::field::MU0;
 use model_core::magnetization::{
     Anhysteretic, AnhystereticParams, JaParams, JaState, JaVariant, JilesAtherton, LinearMagnetization,
-    Preisach, PreisachParams,
+    Preisach, PreisachParams, MAX_SUBSTEPS,
 };
 use model_core::{ActuatorParams, MagnetizationLaw, ModelSpec};
 
@@ -433,7 +433,20 @@ pub fn run(model: LoopModel, p: &[f64], h: &[f64], h_max: f64) -> Result<Vec<f64
             };
             let ja = JilesAtherton::new(jp).map_err(|e| RunError(e.to_string()))?;
             let mut s = JaState::default();
-            out.extend(path.map(|&x| ja.step(&mut s, x as f32) as f64));
+            // A loop file's points are far apart next to a small a or k: step the field between
+            // them in legs of at most a quarter of what one J–A call integrates to its accuracy
+            // (the mean field can lengthen the effective step), so the sub-step cap never cuts
+            // the integration short and no fit can profit from an unresolved loop.
+            let leg = 0.25 * MAX_SUBSTEPS as f64 * ja.max_substep_a_per_m() as f64;
+            let mut last = 0.0f64;
+            out.extend(path.map(|&x| {
+                let legs = ((x - last).abs() / leg).ceil().clamp(1.0, 1e6) as u32;
+                for j in 1..legs {
+                    ja.step(&mut s, (last + (x - last) * j as f64 / legs as f64) as f32);
+                }
+                last = x;
+                ja.step(&mut s, x as f32) as f64
+            }));
         }
         LoopModel::Preisach => {
             let pr = Preisach::new(PreisachParams {

@@ -349,8 +349,8 @@ impl Actuator {
         let excursion = if excursion_a_per_m.is_finite() { excursion_a_per_m } else { 0.0 };
         let mut m0 = 0.0;
         // `n` equal steps: the state then depends smoothly on the excursion (a fit
-        // differentiates through it), and J–A's sub-step cap (64 × min(a, k)/4 per step) covers
-        // legs of 64² · min(a, k)/4.
+        // differentiates through it), and J–A's sub-step cap (64 × min(a/4, k/2) per step) covers
+        // legs of 64² · min(a/4, k/2).
         let mut walk = |from: f32, to: f32, n: u32, m0: &mut f32| {
             for k in 1..=n {
                 let h = from + (to - from) * k as f32 / n as f32;

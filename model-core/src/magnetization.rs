@@ -6,6 +6,6 @@ mod linear;
 mod preisach;
 
 pub use anhysteretic::{Anhysteretic, AnhystereticParams};
-pub use jiles_atherton::{JaParams, JaState, JaVariant, JilesAtherton};
+pub use jiles_atherton::{JaParams, JaState, JaVariant, JilesAtherton, MAX_SUBSTEPS};
 pub use linear::{LinearFit, LinearMagnetization};
 pub use preisach::{EverettTable, Preisach, PreisachParams, PreisachState, PREISACH_LEVELS, PREISACH_MEMORY};
