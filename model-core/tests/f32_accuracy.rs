@@ -100,7 +100,7 @@ impl Reference {
         let (ms, a, alpha, k, c) =
             (j.ms_a_per_m as f64, j.a_a_per_m as f64, j.alpha as f64, j.k_a_per_m as f64, j.c as f64);
         let dh_total = h - self.h;
-        let n = ((dh_total.abs() / (0.25 * a.min(k))) as u32 + 1).min(64);
+        let n = ((dh_total.abs() / (0.25 * a.min(2.0 * k))) as u32 + 1).min(64); // model-core: min(a/4, k/2)
         let dh = dh_total / n as f64;
         let dir = if dh >= 0.0 { 1.0 } else { -1.0 };
         for _ in 0..n {
