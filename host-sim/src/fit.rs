@@ -764,6 +764,10 @@ impl Constraints {
     }
 }
 
+/// The mechanical mode's parameters, which a mode seen in the data starts (see `resonance`).
+const MODE_FREQUENCY: &str = "mech.natural_frequency_hz";
+const MODE_DAMPING: &str = "mech.damping_ratio";
+
 /// The displacement fit's search: one swarm on the first part of each file, then from the two
 /// best of the swarm's result and the start points a 5 % simplex on the first half of long
 /// files (the landscape's shape, cheaply) and Levenberg–Marquardt on everything (the cost is a
@@ -895,7 +899,15 @@ fn fit_planned(
             Local::LeastSquares(_) => least_squares,
         })
         .sum();
-    let seeds = plan.local_searches as u64;
+    // A lightly damped mechanical mode is a narrow valley the swarm can miss: each start also
+    // with the mode the data's frequency response shows, where it shows one (see `resonance`),
+    // the best of them refined by a local search of its own.
+    let seen_mode = free
+        .iter()
+        .any(|f| f.name() == MODE_FREQUENCY || f.name() == MODE_DAMPING)
+        .then(|| crate::resonance::seen_mode(files))
+        .flatten();
+    let seeds = plan.local_searches as u64 + u64::from(seen_mode.is_some());
     let planned = plan.swarms as u64 * (plan.particles.0 + plan.particles.1 * d) as u64 * (swarm_iters + 1)
         + seeds * per_seed
         + if memory { POLISH.local_searches as u64 * least_squares } else { 0 };
@@ -935,14 +947,31 @@ fn fit_planned(
         }
         projected_residuals(spec, &p, &starting_from(data(fidelity), &values[d..]), lambda_range)
     };
+    let starts: Vec<(ActuatorParams, bool)> = match &seen_mode {
+        Some(mode) => {
+            let at_mode = starts.iter().map(|st| {
+                let mut p = *st;
+                for f in &free {
+                    match f.name() {
+                        MODE_FREQUENCY => (f.set)(&mut p, mode.natural_frequency_hz),
+                        MODE_DAMPING => (f.set)(&mut p, mode.damping_ratio),
+                        _ => {}
+                    }
+                }
+                (p, true)
+            });
+            starts.iter().map(|&st| (st, false)).chain(at_mode).collect()
+        }
+        None => starts.iter().map(|&st| (st, false)).collect(),
+    };
     // Start points: the fixed parameters come from the first; each start's identified values
     // are clamped into the bounds.
     let bases: Vec<Start<ActuatorParams>> = starts
         .iter()
-        .map(|st| {
-            let mut b = starts[0];
+        .map(|&(st, always_refined)| {
+            let mut b = starts[0].0;
             for f in &free {
-                (f.set)(&mut b, f.from_unit(f.to_unit((f.get)(st))));
+                (f.set)(&mut b, f.from_unit(f.to_unit((f.get)(&st))));
             }
             let excursions: Vec<f64> = if memory {
                 full.iter()
@@ -954,7 +983,7 @@ fn fit_planned(
                 Vec::new()
             };
             let values = free.iter().map(|f| (f.get)(&b)).chain(excursions).collect();
-            Ok(Start { values, context: b })
+            Ok(Start { values, context: b, always_refined })
         })
         .collect::<Result<Vec<_>>>()?;
     // Each start also as the model's own rest state (every file demagnetised): an estimate made
@@ -963,6 +992,7 @@ fn fit_planned(
         let rest = bases.iter().map(|b| Start {
             values: b.values[..d].iter().copied().chain(std::iter::repeat_n(0.0, n_excursions)).collect(),
             context: b.context,
+            always_refined: b.always_refined,
         });
         bases.iter().cloned().chain(rest).collect()
     } else {
@@ -987,8 +1017,8 @@ fn fit_planned(
             values.push(estimate_excursion(spec, &at, prep)?);
         }
         let again = [
-            Start { values: found.best.clone(), context: found.context },
-            Start { values, context: found.context },
+            Start { values: found.best.clone(), context: found.context, always_refined: false },
+            Start { values, context: found.context, always_refined: false },
         ];
         let polished =
             minimize(&bounds, &cost, Some(&residuals), &found.context, &again, &POLISH, opts_search, &bar)?;
@@ -1056,8 +1086,10 @@ fn fit_planned(
         free,
         fixed,
         start: match start_score {
-            Ok((e, _)) => StartScore { nrmse: Some(e).filter(|e| e.is_finite()), kept, refused: None },
-            Err(why) => StartScore { nrmse: None, kept: false, refused: Some(why) },
+            Ok((e, _)) => {
+                StartScore { nrmse: Some(e).filter(|e| e.is_finite()), kept, refused: None, seen_mode }
+            }
+            Err(why) => StartScore { nrmse: None, kept: false, refused: Some(why), seen_mode },
         },
     })
 }

@@ -22,6 +22,7 @@ pub mod provenance;
 pub mod record;
 pub mod recording;
 pub mod report;
+pub mod resonance;
 pub mod results;
 pub mod rig;
 pub mod rod_diffusion;

@@ -602,10 +602,16 @@ pub fn fit(
         None => mean_nrmse(model, &start_values, files, h_max).map_err(|e| e.0),
     };
     let mut starts: Vec<Start<()>> = match &start_score {
-        Ok(_) => vec![Start { values: model.search_values(&start_values), context: () }],
+        Ok(_) => {
+            vec![Start { values: model.search_values(&start_values), context: (), always_refined: false }]
+        }
         Err(_) => Vec::new(),
     };
-    starts.extend(model.start_from_features(files).map(|values| Start { values, context: () }));
+    starts.extend(model.start_from_features(files).map(|values| Start {
+        values,
+        context: (),
+        always_refined: false,
+    }));
     let found = minimize(&bounds, &cost, None, &(), &starts, &PLAN, opts, &Progress::new("", 0, false))?;
     let mut best = model.model_values(&found.best);
     let mut warnings = Vec::new();
@@ -646,8 +652,8 @@ pub fn fit(
         warnings.push(Warning::Multivalued { ratio });
     }
     let start = match start_score {
-        Ok(e) => StartScore { nrmse: Some(mean(&e)), kept, refused: None },
-        Err(why) => StartScore { nrmse: None, kept: false, refused: Some(why) },
+        Ok(e) => StartScore { nrmse: Some(mean(&e)), kept, refused: None, seen_mode: None },
+        Err(why) => StartScore { nrmse: None, kept: false, refused: Some(why), seen_mode: None },
     };
     Ok(LoopFit {
         model,

@@ -116,6 +116,10 @@ pub struct StartScore {
     /// Why the start values cannot be used (e.g. α·M_s/(3a) ≥ 1), if so.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub refused: Option<String>,
+    /// A mechanical mode the recordings' frequency response shows (models with `mech`): the
+    /// search also starts from it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub seen_mode: Option<crate::resonance::SeenMode>,
 }
 
 /// One parameter's estimate in a fit's JSON.
@@ -267,6 +271,14 @@ impl fmt::Display for FitSummary {
                     if s.kept { " (returned: the search did not improve on them)" } else { "" }
                 )?,
                 (None, None) => {}
+            }
+            if let Some(m) = &s.seen_mode {
+                writeln!(
+                    f,
+                    "  mechanical mode seen in {}: {:.0} Hz, ζ ≈ {:.3} (gain peak {:.1}× the band's low-frequency \
+                     level); the search also started there",
+                    m.file, m.natural_frequency_hz, m.damping_ratio, m.magnification
+                )?;
             }
         }
         if let Some(u) = self.text.uncertainty.as_ref().filter(|u| u.params.len() > 1) {

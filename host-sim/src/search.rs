@@ -152,6 +152,11 @@ pub struct Start<C> {
     pub values: Vec<f64>,
     /// What the cost needs besides the values (the parameters held fixed).
     pub context: C,
+    /// Refined by a local search of its own, beside the plan's best other starts and swarm
+    /// results, whatever its cost ranks (the best such start only): a start the caller trusts
+    /// more than its first cost says, e.g. a narrow mode read off the data beside parameters
+    /// not yet fitted, whose shoulder costs more than a broad basin elsewhere.
+    pub always_refined: bool,
 }
 
 /// What a search found.
@@ -318,20 +323,28 @@ pub fn minimize<C: Clone + Send + Sync>(
 
     // Candidates: the starts and the swarms' bests, ranked on all data.
     let to_unit = |v: &[f64]| -> Vec<f64> { bounds.iter().zip(v).map(|(b, &x)| b.to_unit(x)).collect() };
-    let mut seeds: Vec<(C, Vec<f64>, f64)> = starts
+    let mut seeds: Vec<(C, Vec<f64>, f64, bool)> = starts
         .iter()
         .map(|s| {
             let u = to_unit(&s.values);
             let c = unit!(&s.context, Fidelity::Full).eval(&u);
-            (s.context.clone(), u, c)
+            (s.context.clone(), u, c, s.always_refined)
         })
         .collect();
     for u in swarm_bests {
         let c = unit!(swarm_context, Fidelity::Full).eval(&u);
-        seeds.push((swarm_context.clone(), u, c));
+        seeds.push((swarm_context.clone(), u, c, false));
     }
+    // The best always-refined start gets a local search of its own, to the end, beside the
+    // plan's best others (it never takes their places: the search finds all they would have).
+    let (mut pinned, mut seeds): (Vec<_>, Vec<_>) = seeds.into_iter().partition(|s| s.3);
     seeds.sort_by(|a, b| a.2.total_cmp(&b.2));
     seeds.truncate(plan.local_searches.max(1));
+    pinned.sort_by(|a, b| a.2.total_cmp(&b.2));
+    pinned.truncate(1);
+    let extra = pinned.len();
+    let seeds: Vec<(C, Vec<f64>, f64)> =
+        seeds.into_iter().chain(pinned).map(|(c, u, cost, _)| (c, u, cost)).collect();
 
     // Local: the plan's runs from each seed, in parallel; the last run only from the finalists.
     let nm_iters = ((plan.simplex_iters_per_dim * d as f64 * opts.effort).round() as u64).max(20);
@@ -384,7 +397,7 @@ pub fn minimize<C: Clone + Send + Sync>(
     let mut refined: Vec<(C, Vec<f64>, f64)> =
         seeds.par_iter().map(|s| local(s, early)).collect::<Result<_>>()?;
     refined.sort_by(|a, b| a.2.total_cmp(&b.2));
-    refined.truncate(plan.finalists.max(1));
+    refined.truncate(plan.finalists.max(1) + extra);
     let refined: Vec<(C, Vec<f64>, f64)> =
         refined.par_iter().map(|s| local(s, last)).collect::<Result<_>>()?;
     let (context, best, cost) =
@@ -632,5 +645,38 @@ mod tests {
         let err =
             minimize(&bounds, &cost, None, &(), &[], &plan, SearchOptions::default(), &progress).unwrap_err();
         assert!(err.to_string().contains("residuals"), "{err}");
+    }
+
+    /// A start marked `always_refined` is refined even when two others rank above it: here it
+    /// sits on the shoulder of a narrow, deep well (a lightly damped mode's valley) and the
+    /// others in a broad, shallow basin.
+    #[test]
+    fn an_always_refined_start_is_refined_though_it_ranks_last() {
+        let bounds = [Bound::lin("x", 0.0, 1.0)];
+        let cost = |_: &(), v: &[f64], _: Fidelity| {
+            let broad = 0.01 + (v[0] - 0.2).powi(2);
+            broad.min(100.0 * (v[0] - 0.8137).powi(2))
+        };
+        let plan = Plan {
+            particles: (1, 0),
+            swarm_iters: 2.0,
+            swarms: 0,
+            simplex_iters_per_dim: 40.0,
+            local_searches: 2,
+            finalists: 2,
+            local: &[Local::Simplex(0.02, Fidelity::Full)],
+            tolerance: (1e-9, 1e-15),
+        };
+        let progress = Progress::new("test", 0, false);
+        let run = |pinned: bool| {
+            let start = |x: f64, always_refined| Start { values: vec![x], context: (), always_refined };
+            let starts = [start(0.2, false), start(0.3, false), start(0.77, pinned)];
+            minimize(&bounds, &cost, None, &(), &starts, &plan, SearchOptions::default(), &progress).unwrap()
+        };
+        // The shoulder costs 0.19, more than the broad basin's 0.01 and 0.02.
+        let ranked_out = run(false);
+        assert!((ranked_out.cost - 0.01).abs() < 1e-6, "{ranked_out:?}");
+        let refined = run(true);
+        assert!(refined.cost < 1e-8 && (refined.best[0] - 0.8137).abs() < 1e-4, "{refined:?}");
     }
 }
