@@ -827,7 +827,9 @@ pub fn fit_from(
 
 /// The local search alone from `start` (no swarm, no simplex: Levenberg–Marquardt, then with a
 /// hysteretic law the initial states estimated again and the polish, as in [`fit`]): for a start
-/// already near an optimum of a nested structure, e.g. a baseline's with one effect added.
+/// already near an optimum of a nested structure, e.g. a baseline's with one effect added. With
+/// `mech` free and a mode in the data, a second Levenberg–Marquardt run starts from `start` with
+/// that mode (as in [`fit`]): a baseline without mechanics has no mode of its own to offer.
 pub fn refine(
     spec: ModelSpec,
     start: &ActuatorParams,
@@ -1097,6 +1099,18 @@ fn fit_planned(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The seen mode is written into the parameters by these names: a registry rename must not
+    /// switch it off unnoticed.
+    #[test]
+    fn the_mode_parameters_are_the_registrys() {
+        let names: Vec<&str> =
+            free_params(ModelSpec::LINEAR.with(model_core::Effect::MechanicalDynamics), false)
+                .iter()
+                .map(|f| f.name())
+                .collect();
+        assert!(names.contains(&MODE_FREQUENCY) && names.contains(&MODE_DAMPING), "{names:?}");
+    }
     use crate::excitation::Excitation;
     use crate::plant::Plant;
 

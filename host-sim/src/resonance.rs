@@ -15,8 +15,11 @@ use crate::spectral;
 
 /// Coherence floor of the bins a peak is read from: lower than the excited band's
 /// ([`spectral::EXCITED_COHERENCE`]), because a chirp sweeps through the mode in a fraction of
-/// one Welch segment, which costs coherence exactly at the peak.
-const PEAK_COHERENCE: f64 = 0.8;
+/// one Welch segment and a hysteretic rod responds with harmonics, both of which cost coherence
+/// exactly at the peak (0.76 there on the independent rig's Jiles 1986 law). At γ² = 0.7 and
+/// the 14 segments of a 4000-sample file a bin's gain is still within 12 % (1σ,
+/// √((1 − γ²)/(2 n_d γ²))): enough for a start.
+const PEAK_COHERENCE: f64 = 0.7;
 
 /// Input PSD floor of those bins, below the input's largest bin [dB]: wider than the excited
 /// band's ([`spectral::EXCITED_INPUT_DB`]) because the current a chirp drives through the
@@ -25,8 +28,8 @@ const PEAK_COHERENCE: f64 = 0.8;
 const INPUT_DB: f64 = 40.0;
 
 /// Least gain rise over the band's low-frequency level that counts as a mode: a unit-gain
-/// second-order mode peaks at 1/(2ζ), so 2× means ζ ≤ 0.25 (a better damped mode is a smooth
-/// roll-off the search finds on its own).
+/// second-order mode peaks at 1/(2ζ√(1 − ζ²)), so 2× means ζ ≤ 0.26 (a better damped mode is a
+/// smooth roll-off the search finds on its own).
 const MIN_MAGNIFICATION: f64 = 2.0;
 
 /// A mechanical mode seen in the data.
@@ -58,11 +61,19 @@ fn mode_of(rec: &Recording) -> Option<SeenMode> {
     let h = spectral::h1(u, y, fs_hz, segment).ok()?;
     let peak_input = h.spectra.suu.iter().skip(1).fold(0.0f64, |m, v| m.max(*v));
     let input_floor = peak_input * 10f64.powf(-INPUT_DB / 10.0);
-    let usable = |k: usize| h.spectra.suu[k] >= input_floor && h.coherence[k] >= PEAK_COHERENCE;
     let gain = |k: usize| h.h[k].norm();
+    let usable = |k: usize| {
+        h.spectra.suu[k] >= input_floor
+            && h.coherence[k] >= PEAK_COHERENCE
+            && gain(k).is_finite()
+            && gain(k) > 0.0
+    };
     let bins = h.h.len();
+    // A peak is a local maximum between usable bins (a gain still rising at the band's top
+    // edge is a mode above the band, not one to start from).
+    let resolved = |k: usize| gain(k) >= gain(k - 1) && gain(k) >= gain(k + 1);
     let peak = (2..bins - 1)
-        .filter(|&k| usable(k - 1) && usable(k) && usable(k + 1))
+        .filter(|&k| usable(k - 1) && usable(k) && usable(k + 1) && resolved(k))
         .max_by(|&a, &b| gain(a).total_cmp(&gain(b)))?;
     let df = h.spectra.freq_hz[1];
     let mut below: Vec<f64> = (1..bins)
@@ -130,7 +141,9 @@ mod tests {
     fn a_lightly_damped_mode_is_found_at_its_frequency() {
         for (fn_hz, zeta) in [(1000.0, 0.03), (640.0, 0.08), (1500.0, 0.15)] {
             let m = seen_mode(&[chirp_through_mode(fn_hz, zeta)]).expect("a mode");
-            assert!((m.natural_frequency_hz / fn_hz - 1.0).abs() < 0.02, "{m:?} for {fn_hz} Hz");
+            // Within a quarter of the half-power bandwidth 2ζf_n: well inside the mode's valley,
+            // which is what a start needs.
+            assert!((m.natural_frequency_hz - fn_hz).abs() < 0.5 * zeta * fn_hz, "{m:?} for {fn_hz} Hz");
             // The estimate is an upper one, within a factor of two of the truth.
             assert!(m.damping_ratio >= 0.9 * zeta && m.damping_ratio < 2.0 * zeta, "{m:?} for ζ {zeta}");
             assert_eq!(m.file, "chirp.csv");
@@ -138,10 +151,27 @@ mod tests {
     }
 
     #[test]
+    fn the_clearest_mode_over_several_files_is_taken_and_command_v_serves_without_a_current() {
+        let mut by_command = chirp_through_mode(900.0, 0.03);
+        by_command.command_v = by_command.current_a.take();
+        by_command.name = "command.csv".into();
+        let m = seen_mode(&[chirp_through_mode(1200.0, 0.12), by_command]).expect("a mode");
+        assert_eq!(m.file, "command.csv", "{m:?}");
+        assert!((m.natural_frequency_hz - 900.0).abs() < 5.0, "{m:?}");
+        // No drive column, or too few samples for the spectra: no mode, no panic.
+        let mut no_drive = chirp_through_mode(900.0, 0.03);
+        no_drive.current_a = None;
+        assert_eq!(seen_mode(&[no_drive]), None);
+        assert_eq!(seen_mode(&[chirp_through_mode(900.0, 0.03).head(100)]), None);
+    }
+
+    #[test]
     fn a_well_damped_or_unexcited_mode_is_not_claimed() {
         // ζ = 0.7: no peak to speak of.
         assert_eq!(seen_mode(&[chirp_through_mode(1000.0, 0.7)]), None);
-        // A mode above the excited band (the chirp ends at 2.5 kHz).
+        // Modes above the excited band (the chirp ends at 2.5 kHz): at 2.8 kHz the gain still
+        // rises 4.6× by the band's top edge, a slope and no peak.
+        assert_eq!(seen_mode(&[chirp_through_mode(2800.0, 0.03)]), None);
         assert_eq!(seen_mode(&[chirp_through_mode(4500.0, 0.03)]), None);
     }
 }

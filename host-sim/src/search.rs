@@ -336,13 +336,13 @@ pub fn minimize<C: Clone + Send + Sync>(
         seeds.push((swarm_context.clone(), u, c, false));
     }
     // The best always-refined start gets a local search of its own, to the end, beside the
-    // plan's best others (it never takes their places: the search finds all they would have).
+    // plan's best others (it never takes their places: they are refined as without it).
     let (mut pinned, mut seeds): (Vec<_>, Vec<_>) = seeds.into_iter().partition(|s| s.3);
     seeds.sort_by(|a, b| a.2.total_cmp(&b.2));
     seeds.truncate(plan.local_searches.max(1));
     pinned.sort_by(|a, b| a.2.total_cmp(&b.2));
     pinned.truncate(1);
-    let extra = pinned.len();
+    let regular = seeds.len();
     let seeds: Vec<(C, Vec<f64>, f64)> =
         seeds.into_iter().chain(pinned).map(|(c, u, cost, _)| (c, u, cost)).collect();
 
@@ -396,8 +396,11 @@ pub fn minimize<C: Clone + Send + Sync>(
     let (early, last) = plan.local.split_at(plan.local.len().saturating_sub(1));
     let mut refined: Vec<(C, Vec<f64>, f64)> =
         seeds.par_iter().map(|s| local(s, early)).collect::<Result<_>>()?;
+    // The finalists: the best of the plan's seeds, and the always-refined one whatever it ranks.
+    let pinned = refined.split_off(regular);
     refined.sort_by(|a, b| a.2.total_cmp(&b.2));
-    refined.truncate(plan.finalists.max(1) + extra);
+    refined.truncate(plan.finalists.max(1));
+    refined.extend(pinned);
     let refined: Vec<(C, Vec<f64>, f64)> =
         refined.par_iter().map(|s| local(s, last)).collect::<Result<_>>()?;
     let (context, best, cost) =
@@ -663,7 +666,9 @@ mod tests {
             swarms: 0,
             simplex_iters_per_dim: 40.0,
             local_searches: 2,
-            finalists: 2,
+            // Fewer finalists than seeds: the always-refined start must survive that cut too,
+            // where it ranks last again.
+            finalists: 1,
             local: &[Local::Simplex(0.02, Fidelity::Full)],
             tolerance: (1e-9, 1e-15),
         };
