@@ -1018,10 +1018,7 @@ fn fit_planned(
         for prep in &full {
             values.push(estimate_excursion(spec, &at, prep)?);
         }
-        let again = [
-            Start { values: found.best.clone(), context: found.context, always_refined: false },
-            Start { values, context: found.context, always_refined: false },
-        ];
+        let again = [Start::new(found.best.clone(), found.context), Start::new(values, found.context)];
         let polished =
             minimize(&bounds, &cost, Some(&residuals), &found.context, &again, &POLISH, opts_search, &bar)?;
         found = lower_of(found, polished);

@@ -602,16 +602,10 @@ pub fn fit(
         None => mean_nrmse(model, &start_values, files, h_max).map_err(|e| e.0),
     };
     let mut starts: Vec<Start<()>> = match &start_score {
-        Ok(_) => {
-            vec![Start { values: model.search_values(&start_values), context: (), always_refined: false }]
-        }
+        Ok(_) => vec![Start::new(model.search_values(&start_values), ())],
         Err(_) => Vec::new(),
     };
-    starts.extend(model.start_from_features(files).map(|values| Start {
-        values,
-        context: (),
-        always_refined: false,
-    }));
+    starts.extend(model.start_from_features(files).map(|values| Start::new(values, ())));
     let found = minimize(&bounds, &cost, None, &(), &starts, &PLAN, opts, &Progress::new("", 0, false))?;
     let mut best = model.model_values(&found.best);
     let mut warnings = Vec::new();

@@ -159,6 +159,13 @@ pub struct Start<C> {
     pub always_refined: bool,
 }
 
+impl<C> Start<C> {
+    /// A start that competes for the local search by its cost.
+    pub fn new(values: Vec<f64>, context: C) -> Self {
+        Self { values, context, always_refined: false }
+    }
+}
+
 /// What a search found.
 #[derive(Debug, Clone)]
 pub struct Found<C> {
