@@ -301,7 +301,15 @@ impl LoopModel {
             LoopModel::Preisach => {
                 let q = p.preisach;
                 let su = q.interaction_spread_a_per_m.unwrap_or(q.spread_a_per_m);
-                vec![q.ms_a_per_m, q.coercive_a_per_m, q.spread_a_per_m, su, q.h_max_a_per_m]
+                vec![
+                    q.ms_a_per_m,
+                    q.coercive_a_per_m,
+                    q.spread_a_per_m,
+                    su,
+                    q.h_max_a_per_m,
+                    q.reversible_fraction_or_default(),
+                    q.reversible_field_or_default(),
+                ]
             }
         };
         v.into_iter().map(f64::from).collect()
@@ -337,6 +345,9 @@ impl LoopModel {
                 // well inside the measured range (hard magnets): fitted, since the fixed grid's
                 // resolution is 2·H_max/31 and a plane wider than needed blurs the switching.
                 Bound::log("h_max_a_per_m", 0.2 * h_max, 1.05 * h_max),
+                // The reversible part: what moves at once after a reversal (ferrites, soft steel).
+                Bound::lin("reversible_fraction", 0.0, 0.9),
+                field("reversible_field_a_per_m", 1e-3 * h_max, 2.0 * h_max),
             ],
         }
     }
@@ -392,6 +403,8 @@ impl LoopModel {
                 "spread_a_per_m",
                 "interaction_spread_a_per_m",
                 "h_max_a_per_m",
+                "reversible_fraction",
+                "reversible_field_a_per_m",
             ],
         }
     }
@@ -454,6 +467,8 @@ pub fn run(model: LoopModel, p: &[f64], h: &[f64], h_max: f64) -> Result<Vec<f64
                 coercive_a_per_m: p[1] as f32,
                 spread_a_per_m: p[2] as f32,
                 interaction_spread_a_per_m: Some(p[3] as f32),
+                reversible_fraction: Some(p[5] as f32),
+                reversible_field_a_per_m: Some(p[6] as f32),
                 h_max_a_per_m: p[4] as f32,
             })
             .map_err(|e| RunError(e.to_string()))?;
@@ -531,6 +546,8 @@ impl LoopFit {
                 p.preisach.spread_a_per_m = v[2] as f32;
                 p.preisach.interaction_spread_a_per_m = Some(v[3] as f32);
                 p.preisach.h_max_a_per_m = v[4] as f32;
+                p.preisach.reversible_fraction = Some(v[5] as f32);
+                p.preisach.reversible_field_a_per_m = Some(v[6] as f32);
                 p.magnetostriction.ms_a_per_m = v[0] as f32;
             }
         }

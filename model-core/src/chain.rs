@@ -135,6 +135,8 @@ impl ActuatorParams {
             coercive_a_per_m: 3000.0,
             spread_a_per_m: 10_000.0,
             interaction_spread_a_per_m: Some(10_000.0),
+            reversible_fraction: None,
+            reversible_field_a_per_m: None,
             h_max_a_per_m: 80_000.0,
         },
         magnetostriction: QuadraticParams {

@@ -25,7 +25,8 @@ use crate::reference::Waveform;
 /// The protocol version this code speaks (byte 0 of every frame).
 /// 2: in load-parameters `delay_samples` is an f32 (was a u16), and the Preisach parameters carry
 /// the optional interaction spread.
-pub const PROTOCOL_VERSION: u8 = 2;
+/// 3: the Preisach parameters carry the optional reversible fraction and field.
+pub const PROTOCOL_VERSION: u8 = 3;
 /// Longest spec text in a load command [bytes].
 pub const MAX_SPEC_BYTES: usize = 96;
 /// Longest raw frame (header, payload, CRC) [bytes]: room for a parameter set.
@@ -435,6 +436,15 @@ mod tests {
         (got, d)
     }
 
+    /// The demo set with the Preisach optional fields all given (`Some`) or all absent.
+    fn preisach_set(rho: Option<f32>) -> ActuatorParams {
+        let mut p = ActuatorParams::TERFENOL_DEMO;
+        p.preisach.interaction_spread_a_per_m = rho.map(|_| 12_000.0);
+        p.preisach.reversible_fraction = rho;
+        p.preisach.reversible_field_a_per_m = rho.map(|_| 30_000.0);
+        p
+    }
+
     #[test]
     fn every_command_round_trips() {
         let cmds = [
@@ -451,6 +461,16 @@ mod tests {
             Command::LoadParameters {
                 spec: ModelSpec::parse("ja+eddy+mech").unwrap(),
                 params: ActuatorParams::TERFENOL_DEMO,
+            },
+            // Every optional field present, then every one absent (postcard has no field
+            // names: an absent field must still take its place).
+            Command::LoadParameters {
+                spec: ModelSpec::parse("preisach+mech").unwrap(),
+                params: preisach_set(Some(0.1)),
+            },
+            Command::LoadParameters {
+                spec: ModelSpec::parse("preisach+mech").unwrap(),
+                params: preisach_set(None),
             },
         ];
         for (tag, c) in cmds.iter().enumerate() {
