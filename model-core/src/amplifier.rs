@@ -58,6 +58,23 @@ impl SecondOrderAmpParams {
         let den = libm::hypot(1.0 - b * w * w, c * w);
         self.k_u as f64 * num / den
     }
+
+    /// The largest gain over frequency, max_ω |G(jω)| [A/V]: |G|²/k_U² = (1 + A²x)/((1 − Bx)² +
+    /// C²x) with x = ω², whose derivative vanishes at x* = K/(B (B + √(B² + A²K))), K = A² − C² +
+    /// 2B (the written form keeps its digits when A²K ≪ B²); no peak when K ≤ 0 (the DC gain is
+    /// the largest).
+    pub fn peak_gain(&self) -> f64 {
+        let (a, b, c) = (self.a_s as f64, self.b_s2 as f64, self.c_s as f64);
+        let k = a * a - c * c + 2.0 * b;
+        let ratio2 = if k > 0.0 && b > 0.0 {
+            let x = k / (b * (b + libm::sqrt(b * b + a * a * k)));
+            let d = (1.0 - b * x) * (1.0 - b * x) + c * c * x;
+            ((1.0 + a * a * x) / d).max(1.0)
+        } else {
+            1.0
+        };
+        self.k_u as f64 * libm::sqrt(ratio2)
+    }
 }
 
 /// Second-order amplifier, discretised: x'' B + C x' + x = u, i = k_U (x + A x').
@@ -74,6 +91,15 @@ impl SecondOrderAmp {
         non_negative("amp2.a_s", p.a_s)?;
         positive("amp2.b_s2", p.b_s2)?;
         non_negative("amp2.c_s", p.c_s)?;
+        // Bounded like the first-order amplifier's gain: a resonance too lightly damped for
+        // that is not an amplifier (and its current would overflow the chain downstream).
+        let peak = p.peak_gain();
+        if !(peak.is_finite() && peak <= 1e3) {
+            return Err(ParamError::OutOfRange(
+                "amp2",
+                "a peak gain max |G(jw)| <= 1e3 A/V (more damping C, a smaller zero A or gain k_u)",
+            ));
+        }
         let zoh = SecondOrderZoh::new(
             MassSpringDamper { mass_kg: p.b_s2, damping_n_s_per_m: p.c_s, stiffness_n_per_m: 1.0 },
             dt_s,
@@ -179,5 +205,29 @@ mod tests {
         }
         // ZOH adds half a sample of delay but no gain error beyond ~1 %.
         assert!((peak as f64 - SecondOrderAmpParams::TSMA_002.gain_at_hz(500.0)).abs() < 0.015, "{peak}");
+    }
+
+    /// The closed-form peak against a fine log sweep of |G(j 2π f)|, for an overdamped amplifier
+    /// (002's), a resonant one, one with a strong zero and one without; and the undamped
+    /// resonance the fuzzer found (B 1.5e-41 s², C 9e-41 s: 4e19 Hz, ζ 1e-20) is refused.
+    #[test]
+    fn peak_gain_is_the_largest_gain_over_frequency() {
+        let sets = [
+            SecondOrderAmpParams::TSMA_002,
+            SecondOrderAmpParams { k_u: 2.0, a_s: 0.0, b_s2: 1e-8, c_s: 2e-5 },
+            SecondOrderAmpParams { k_u: 1.0, a_s: 1e-3, b_s2: 1e-8, c_s: 1e-4 },
+            SecondOrderAmpParams { k_u: 1.0, a_s: 0.0, b_s2: 1e-8, c_s: 1e-3 },
+        ];
+        for p in sets {
+            let swept = (0..=60_000)
+                .map(|k| p.gain_at_hz(10f64.powf(-1.0 + 7.0 * k as f64 / 60_000.0)))
+                .fold(p.k_u as f64, f64::max);
+            let peak = p.peak_gain();
+            assert!(peak >= swept * (1.0 - 1e-9) && peak <= swept * 1.001, "{p:?}: {peak} vs swept {swept}");
+        }
+        let undamped = SecondOrderAmpParams { k_u: 2.0, a_s: 1e-8, b_s2: 1.5221e-41, c_s: 9.004e-41 };
+        assert!(undamped.peak_gain() > 1e20);
+        assert!(matches!(SecondOrderAmp::new(undamped, 1e-4), Err(ParamError::OutOfRange("amp2", _))));
+        assert!(SecondOrderAmp::new(SecondOrderAmpParams::TSMA_002, 1e-4).is_ok());
     }
 }
