@@ -348,16 +348,18 @@ fn hidden_effects_on_the_independent_rig() {
 /// Where the complete structure's error comes from on the independent rig: the rig with all
 /// effects on, then with one rig feature switched off at a time; the complete J–A structure
 /// (the rig's variant where we have it) fitted on the fit files, scored per validation file
-/// after the burn-in. Prints only.
+/// after the burn-in. Prints only. The Jiles 1986 rig by default; `GMA_BUDGET_LAW=preisach`
+/// takes the Preisach rig and the complete `preisach` structure.
 ///   cargo test --release -p host-sim --test refrig_suite error_budget -- --ignored --nocapture
 #[test]
 #[ignore = "minutes of CPU: run with --ignored"]
 fn error_budget_of_the_complete_structure() {
     let (fit_exc, val_exc) = excitations();
-    let law = Law::JilesAtherton(JaVariant::Original1986);
+    let preisach = std::env::var("GMA_BUDGET_LAW").is_ok_and(|v| v == "preisach");
+    let law = if preisach { Law::Preisach } else { Law::JilesAtherton(JaVariant::Original1986) };
     let mut init = engineer_init();
     init.ja.variant = model_core::magnetization::JaVariant::Original1986;
-    let model = complete(Effect::Hysteresis);
+    let model = complete(if preisach { Effect::Preisach } else { Effect::Hysteresis });
     type Switch = fn(&mut refrig::Effects);
     let switches: Vec<(&str, Switch)> = vec![
         ("nothing", |_| {}),
@@ -387,7 +389,8 @@ fn error_budget_of_the_complete_structure() {
             let rec = rig.simulate().expect("refrig simulation");
             let mut bytes = Vec::new();
             rec.write_csv(&mut bytes, false).expect("csv");
-            let path = cache_dir().join(format!("budget-{name}-{}.csv", exc.label));
+            let tag = if preisach { "preisach-" } else { "" };
+            let path = cache_dir().join(format!("budget-{tag}{name}-{}.csv", exc.label));
             std::fs::create_dir_all(cache_dir()).expect("cache folder");
             std::fs::write(&path, bytes).expect("write");
             Recording::read(&path).expect("read")

@@ -943,7 +943,11 @@ impl OdeSystem for RigSystem<'_> {
             }
         }
         for j in 0..self.n_shells {
-            changed |= self.law.commit(&mut self.shells[j], y[H0 + j], y[self.m_idx + j]);
+            // Preisach: M integrated on the accepted path, not the integrator's (see
+            // `Material::branch_m`); set to the Everett sum by `commit` at a reversal.
+            let m = self.law.branch_m(&self.shells[j], y[H0 + j]).unwrap_or(y[self.m_idx + j]);
+            changed |= self.law.commit(&mut self.shells[j], y[H0 + j], m) || m != y[self.m_idx + j];
+            y[self.m_idx + j] = self.shells[j].m;
         }
         changed
     }
