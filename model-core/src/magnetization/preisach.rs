@@ -14,7 +14,9 @@
 //! M = 2 Σ_k [E(M_k, m_{k−1}) − E(M_k, m_k)] − E(H_max, −H_max),  m_0 = −H_max,
 //!
 //! so minor loops between the same two extrema are congruent whatever came before. The memory
-//! holds [`PREISACH_MEMORY`] extrema; a deeper nesting merges the innermost minor loop.
+//! holds [`PREISACH_MEMORY`] extrema; a deeper nesting merges the two adjacent turning points
+//! whose removal changes the staircase least (in a decaying oscillation, two nearly equal loops
+//! deep in the memory).
 //!
 //! A reversible part adds what the relays cannot: a slope right after every reversal (small
 //! signals ride on it). With a reversible fraction ρ and field scale h_r,
@@ -258,13 +260,37 @@ impl PreisachState {
         &self.turning[..self.len as usize]
     }
 
-    fn push(&mut self, h: f32) {
+    fn push(&mut self, h: f32, h_max: f32) {
         if self.len as usize == PREISACH_MEMORY {
-            // Full: merge the innermost minor loop (drop its two extrema).
-            self.len -= 2;
+            self.merge_closest_pair(h_max);
         }
         self.turning[self.len as usize] = h;
         self.len += 1;
+    }
+
+    /// Full memory: drops the two adjacent turning points whose removal moves the staircase
+    /// least. Removing t[j], t[j+1] cuts off the rectangle |t[j] − t[j+2]| × |t[j+1] − t[j−1]|
+    /// of the relay plane (t[−1] = −H_max), the smallest is taken; the staircase stays
+    /// alternating and monotone. In a slowly decaying oscillation — a chirp whose current falls
+    /// with frequency, an AC demagnetisation — that is a pair of nearly equal loops deep in the
+    /// memory, a change of second order. Dropping the innermost loop instead (as before) made M
+    /// jump at every reversal once the memory was full: a forcing at twice the drive frequency
+    /// that rang a 1 kHz actuator mode during a 550 Hz chirp segment forty times above the
+    /// measured response.
+    fn merge_closest_pair(&mut self, h_max: f32) {
+        let n = self.len as usize;
+        let t = &self.turning;
+        let mut best = (f32::INFINITY, n - 3);
+        for j in 0..n - 2 {
+            let before = if j == 0 { -h_max } else { t[j - 1] };
+            let area = (t[j] - t[j + 2]).abs() * (t[j + 1] - before).abs();
+            if area < best.0 {
+                best = (area, j);
+            }
+        }
+        let j = best.1;
+        self.turning.copy_within(j + 2..n, j);
+        self.len -= 2;
     }
 
     /// Moves the input to `h` (already clamped to ±H_max), applying the wiping-out rule.
@@ -272,7 +298,7 @@ impl PreisachState {
         let n = self.len as usize;
         if n == 0 {
             if h > -h_max {
-                self.push(h);
+                self.push(h, h_max);
             }
             return;
         }
@@ -281,7 +307,7 @@ impl PreisachState {
         if (rising && h >= last) || (!rising && h <= last) {
             self.turning[n - 1] = h;
         } else {
-            self.push(h);
+            self.push(h, h_max);
         }
         loop {
             let n = self.len as usize;
@@ -588,6 +614,85 @@ mod tests {
             let db = p.step(&mut b, h) - b0;
             assert!((da - db).abs() < 1e-3 * P.ms_a_per_m, "descending at {h}: {da} vs {db}");
         }
+    }
+
+    /// The relay plane's output with an unbounded memory (the test's oracle): the same
+    /// wiping-out rule and Everett sum, on a `Vec`.
+    fn unbounded_relay_output(t: &EverettTable, path: &[f32]) -> std::vec::Vec<f32> {
+        let h_max = t.h_max_a_per_m();
+        let mut pts: std::vec::Vec<f32> = std::vec::Vec::new();
+        let mut out = std::vec::Vec::new();
+        for &h in path {
+            let n = pts.len();
+            let rising = n % 2 == 1;
+            if n > 0 && ((rising && h >= pts[n - 1]) || (!rising && h <= pts[n - 1])) {
+                pts[n - 1] = h;
+            } else {
+                pts.push(h);
+            }
+            while pts.len() >= 3 {
+                let n = pts.len();
+                let is_max = n % 2 == 1;
+                if (is_max && pts[n - 1] >= pts[n - 3]) || (!is_max && pts[n - 1] <= pts[n - 3]) {
+                    pts[n - 3] = pts[n - 1];
+                    pts.truncate(n - 2);
+                } else {
+                    break;
+                }
+            }
+            let (mut m_prev, mut up) = (-h_max, 0.0);
+            for pair in pts.chunks(2) {
+                let m_next = pair.get(1).copied().unwrap_or(pair[0]);
+                up += t.everett(pair[0], m_prev) - t.everett(pair[0], m_next);
+                m_prev = m_next;
+            }
+            out.push(2.0 * up - t.total());
+        }
+        out
+    }
+
+    #[test]
+    fn a_full_memory_merges_the_pair_that_changes_the_output_least() {
+        // A shrinking oscillation whose minima rise faster than its maxima fall (a voltage-driven
+        // chirp: the current's amplitude falls with frequency while its mean settles) nests a
+        // new minor loop inside the last at every reversal, so the memory fills after eight
+        // cycles and merges from then on. Against an unbounded memory the output stays within
+        // 0.5 % M_s (0.09 % measured). Dropping the innermost loop (the merge before) put M on
+        // the branch from an older minimum at every reversal: 0.8 % M_s off here, jumps of up to
+        // 28 kA/m on the independent rig's chirp.
+        // Narrow coercivities and a wide interaction field, as fitted to the rig: M moves
+        // little inside a small loop and much along an outer branch.
+        let p = Preisach::new(PreisachParams {
+            coercive_a_per_m: 2500.0,
+            spread_a_per_m: 800.0,
+            interaction_spread_a_per_m: Some(30_000.0),
+            h_max_a_per_m: 80_000.0,
+            ..P
+        })
+        .unwrap();
+        let mut path = std::vec![20_000.0_f32];
+        for cycle in 0..14 {
+            let shrink = 0.8_f32.powi(cycle);
+            for to in [20_000.0 + 4000.0 * shrink, 20_000.0 - 12_000.0 * shrink] {
+                let from = *path.last().unwrap();
+                path.extend((1..=50).map(|n| from + (to - from) * n as f32 / 50.0));
+            }
+        }
+        let exact = unbounded_relay_output(p.table(), &path);
+        let mut s = PreisachState::default();
+        let mut worst = 0.0_f32;
+        let mut filled = false;
+        for (&h, &m_exact) in path.iter().zip(&exact) {
+            let m = p.step(&mut s, h);
+            filled |= s.turning_points().len() == PREISACH_MEMORY;
+            worst = worst.max((m - m_exact).abs());
+        }
+        assert!(filled, "the memory should have filled");
+        assert!(
+            worst < 5e-3 * P.ms_a_per_m,
+            "{:.2} % M_s from the unbounded memory",
+            100.0 * worst / P.ms_a_per_m
+        );
     }
 
     #[test]
