@@ -526,20 +526,27 @@ impl Material {
         };
         let (a, b) = (state.h, h);
         let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-        let mut cuts: Vec<f64> = mem.ext.iter().copied().filter(|&e| e > lo && e < hi).collect();
-        cuts.push(lo);
-        cuts.push(hi);
-        cuts.sort_by(f64::total_cmp);
         // Gauss–Legendre nodes and weights on [−1, 1].
         const X: [f64; 3] = [-0.774_596_669_241_483_4, 0.0, 0.774_596_669_241_483_4];
         const W: [f64; 3] = [5.0 / 9.0, 8.0 / 9.0, 5.0 / 9.0];
-        let mut integral = 0.0;
-        for w in cuts.windows(2) {
-            let (mid, half) = (0.5 * (w[0] + w[1]), 0.5 * (w[1] - w[0]));
-            for (x, wt) in X.iter().zip(W) {
-                integral += wt * half * self.susceptibility(state, mid + half * x, state.m, state.up);
-            }
-        }
+        let piece = |from: f64, to: f64| {
+            let (mid, half) = (0.5 * (from + to), 0.5 * (to - from));
+            X.iter()
+                .zip(W)
+                .map(|(x, wt)| wt * half * self.susceptibility(state, mid + half * x, state.m, state.up))
+                .sum::<f64>()
+        };
+        // Called at every accepted step: the step rarely crosses a stored extremum, so the
+        // split (and its allocation) is only made when it does.
+        let integral = if mem.ext.iter().any(|&e| e > lo && e < hi) {
+            let mut cuts: Vec<f64> = mem.ext.iter().copied().filter(|&e| e > lo && e < hi).collect();
+            cuts.push(lo);
+            cuts.push(hi);
+            cuts.sort_by(f64::total_cmp);
+            cuts.windows(2).map(|w| piece(w[0], w[1])).sum()
+        } else {
+            piece(lo, hi)
+        };
         Some(state.m + if b >= a { integral } else { -integral })
     }
 
