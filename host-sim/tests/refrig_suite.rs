@@ -415,6 +415,89 @@ fn error_budget_of_the_complete_structure() {
     }
 }
 
+/// How much each rig effect shows in the suite's files, whatever a model does: the NRMSE (after
+/// the burn-in, mean removed, as the suite scores) between the noise-free rig and (first column)
+/// the rig with its sensor noise, quantisation and offset drift, then the noise-free rig with one
+/// effect switched off. An effect far below the first column cannot be seen in these files by any
+/// diagnosis, and the cut it allows is bounded by it. The `ja-bulk` rig by default;
+/// `GMA_VISIBILITY_LAW=preisach` (or `ja-original`, `ja-inverse`) for another. Prints only.
+///   cargo test --release -p host-sim --test refrig_suite effect_visibility -- --ignored --nocapture
+#[test]
+#[ignore = "minutes of CPU: run with --ignored"]
+fn effect_visibility_in_the_suite_files() {
+    let law = match std::env::var("GMA_VISIBILITY_LAW").as_deref() {
+        Ok("preisach") => Law::Preisach,
+        Ok("ja-original") => Law::JilesAtherton(JaVariant::Original1986),
+        Ok("ja-inverse") => Law::JilesAtherton(JaVariant::InverseSadowski),
+        Ok("ja-bulk") | Err(_) => Law::JilesAtherton(JaVariant::BulkVenkataraman),
+        Ok(other) => panic!("GMA_VISIBILITY_LAW={other}: not a law of the suite"),
+    };
+    type Switch = fn(&mut refrig::Effects);
+    let quiet: Switch = |e| {
+        e.sensor_noise = false;
+        e.sensor_quantisation = false;
+        e.sensor_offset_drift = false;
+    };
+    let effects: Vec<(&str, Switch)> = vec![
+        ("eddy currents", |e| e.eddy_currents = false),
+        ("aftereffect", |e| e.aftereffect = false),
+        ("coil heating", |e| {
+            e.coil_heating = false;
+            e.rod_thermal_expansion = false
+        }),
+        ("sensor delay", |e| e.sensor_delay = false),
+        ("amplifier lag", |e| e.amplifier_lag = false),
+        ("current limit", |e| e.current_limit = false),
+        ("second mode", |e| e.second_mode = false),
+        ("ΔE effect", |e| e.delta_e = false),
+    ];
+    let (fit_exc, val_exc) = excitations();
+    let displacement = |exc: &Excitation, salt: u64, switches: &[Switch]| {
+        let mut rig = Rig {
+            duration_s: exc.duration_s,
+            seed: 100 + salt,
+            drive: Drive { waveform: exc.waveform.clone(), offset_v: exc.offset_v },
+            ..Rig::default()
+        };
+        rig.material.law = law;
+        switches.iter().for_each(|s| s(&mut rig.effects));
+        let mut bytes = Vec::new();
+        rig.simulate().expect("refrig simulation").write_csv(&mut bytes, false).expect("csv");
+        let path = std::env::temp_dir().join(format!("gma-visibility-{}-{salt}.csv", std::process::id()));
+        std::fs::write(&path, bytes).expect("write");
+        let rec = Recording::read(&path).expect("read");
+        let _ = std::fs::remove_file(&path);
+        rec
+    };
+    println!(
+        "\n| file | sensor noise, quantisation, offset drift | {} |",
+        effects.iter().map(|e| e.0).collect::<Vec<_>>().join(" | ")
+    );
+    println!("|---|---|{}", "---|".repeat(effects.len()));
+    let files = fit_exc
+        .iter()
+        .enumerate()
+        .map(|(i, e)| (e, i as u64))
+        .chain(val_exc.iter().enumerate().map(|(i, e)| (e, 10 + i as u64)));
+    for (exc, salt) in files {
+        let truth = displacement(exc, salt, &[quiet]);
+        let k = host_sim::diagnose::burn_in(&truth);
+        let reference = &truth.displacement_um.as_deref().expect("displacement")[k..];
+        let off_by = |rec: &Recording| {
+            let y = &rec.displacement_um.as_deref().expect("displacement")[k..];
+            let mean = reference.iter().zip(y).map(|(a, b)| a - b).sum::<f64>() / y.len() as f64;
+            let shifted: Vec<f64> = y.iter().map(|v| v + mean).collect();
+            let nrmse = host_sim::fit::nrmse(reference, &shifted);
+            assert!(nrmse.is_finite(), "{}: non-finite NRMSE", exc.label);
+            format!("{:.3} %", 100.0 * nrmse)
+        };
+        let mut row = vec![off_by(&displacement(exc, salt, &[]))];
+        row.extend(effects.iter().map(|(_, off)| off_by(&displacement(exc, salt, &[quiet, *off]))));
+        let role = if salt < 10 { "fit" } else { "val" };
+        println!("| {role} {} | {} |", exc.label, row.join(" | "));
+    }
+}
+
 /// `diagnose --ja-variants` on the independent rig: the complete structure, given in the
 /// default `bulk` form, refitted in each J–A form and scored on the validation files, per rig
 /// law and seed. Asserted, because it could fail: no false claim — a form named as fitting
