@@ -370,6 +370,30 @@ fn signature_words(signature: Signature) -> &'static str {
     }
 }
 
+/// A refit that is lower on the fit files but higher on every one of at least two validation
+/// files (`(before, after)` NRMSE each): what the effect added was fitted to the fit files'
+/// model error, not determined by them. A sign pattern, no threshold: one validation file is
+/// no pattern.
+fn not_pinned_by_the_fit_files(fit_nrmse: (f64, f64), val_files: &[(f64, f64)]) -> bool {
+    fit_nrmse.1 < fit_nrmse.0
+        && val_files.len() >= 2
+        && val_files.iter().all(|(before, after)| after > before)
+}
+
+/// The recording in which an effect shows (what an engineer adds to the fit files to pin it).
+fn where_it_shows(e: Effect) -> &'static str {
+    match e {
+        Effect::Saturation => "slow loops that reach the knee of the magnetization curve",
+        Effect::Hysteresis | Effect::Preisach => "slow loops of several amplitudes, major and minor",
+        Effect::EddyCurrent => "broadband drive to kHz (a chirp or multisine), with `current_A` recorded",
+        Effect::MechanicalDynamics => "a chirp or multisine across the first resonance",
+        Effect::AmplifierDynamics => "`current_A` recorded with a broadband command",
+        Effect::MagneticAftereffect => "held steps, each several creep time constants long",
+        Effect::ThermalDrift => "minutes at high current, as long as the coil takes to warm",
+        Effect::SensorDelay => "broadband drive to kHz, where a delay's phase grows with frequency",
+    }
+}
+
 /// Dominant frequency of a drive (zero crossings of its AC part) [Hz] and its rms amplitude.
 fn drive_stats(rec: &Recording) -> (f64, f64) {
     let u = rec.current_a.as_deref().or(rec.command_v.as_deref()).unwrap_or_default();
@@ -757,6 +781,7 @@ pub fn diagnose(
     let mut candidates = Vec::new();
     let mut skipped = Vec::new();
     let mut failed_refits = Vec::new();
+    let mut unpinned = Vec::new();
     for (e, r) in results {
         let Some(r) = r else {
             skipped.push(e.name());
@@ -802,6 +827,23 @@ pub fn diagnose(
         let after_c = mean(after_score_s.iter().map(|s| s.nrmse));
         let files_improved =
             base_score_s.iter().zip(&after_score_s).filter(|(b, a)| a.nrmse < b.nrmse).count();
+        if let Some(f) = refit.as_ref().filter(|_| !val_files.is_empty() && !on_current) {
+            let fit_nrmse = (base.fit.mean_nrmse(), f.fit.mean_nrmse());
+            let scored: Vec<(f64, f64)> =
+                base_score_s.iter().zip(&after_score_s).map(|(b, a)| (b.nrmse, a.nrmse)).collect();
+            if not_pinned_by_the_fit_files(fit_nrmse, &scored) {
+                unpinned.push(format!(
+                    "`{e}` fits the fit files better ({:.2} % → {:.2} %) but every validation file worse ({:.2} % → \
+                     {:.2} %): what it adds is fitted to other model error, not determined by these fit files. It \
+                     shows in {}: without such a fit file, add one; with one, its form here is not the rig's",
+                    fit_nrmse.0 * 100.0,
+                    fit_nrmse.1 * 100.0,
+                    mean(scored.iter().map(|v| v.0)) * 100.0,
+                    mean(scored.iter().map(|v| v.1)) * 100.0,
+                    where_it_shows(e)
+                ));
+            }
+        }
         let added = refit.as_ref().map_or(0, |f| f.free.len().saturating_sub(base.free.len())).max(1);
         // Judged on the scored files: with validation files a gain there is one the added
         // parameters could not buy by fitting (the fit files reward any flexibility that absorbs
@@ -845,6 +887,7 @@ pub fn diagnose(
             refit,
         });
     }
+    findings.extend(unpinned);
     if !failed_refits.is_empty() {
         findings.push(format!(
             "refits that ended worse on the fit files than the structure they extend (rms of the fit cost): {}: the \
@@ -1130,6 +1173,18 @@ mod tests {
         assert_eq!(required_wins(6), 6);
         assert_eq!(required_wins(8), 7);
         assert_eq!(required_wins(10), 9);
+    }
+
+    #[test]
+    fn a_refit_is_unpinned_only_when_it_gains_on_the_fit_files_and_loses_on_every_validation_file() {
+        let worse_everywhere = [(0.014, 0.020), (0.010, 0.067)];
+        assert!(not_pinned_by_the_fit_files((0.012, 0.009), &worse_everywhere));
+        // No gain on the fit files: a failed or idle refit, not an unpinned one.
+        assert!(!not_pinned_by_the_fit_files((0.012, 0.012), &worse_everywhere));
+        // One validation file better: no pattern.
+        assert!(!not_pinned_by_the_fit_files((0.012, 0.009), &[(0.014, 0.020), (0.010, 0.009)]));
+        // One validation file alone is no pattern either.
+        assert!(!not_pinned_by_the_fit_files((0.012, 0.009), &[(0.014, 0.020)]));
     }
 
     fn ar1(n: usize, rho: f64, seed: u64) -> Vec<f64> {
