@@ -345,6 +345,29 @@ fn hidden_effects_on_the_independent_rig() {
     assert_eq!(rows.len(), laws.len() * seeds.len() * 9 + seeds.len() * usize::from(full));
 }
 
+/// The seed-1 rig (seed 100 + `salt`, as the suite's recordings) under `law` driven by `exc`
+/// with `switches` applied to its effects, written to `path` and read back as a user's file.
+fn seed_one_rig(
+    law: Law,
+    exc: &Excitation,
+    salt: u64,
+    switches: &[fn(&mut refrig::Effects)],
+    path: &Path,
+) -> Recording {
+    let mut rig = Rig {
+        duration_s: exc.duration_s,
+        seed: 100 + salt,
+        drive: Drive { waveform: exc.waveform.clone(), offset_v: exc.offset_v },
+        ..Rig::default()
+    };
+    rig.material.law = law;
+    switches.iter().for_each(|s| s(&mut rig.effects));
+    let mut bytes = Vec::new();
+    rig.simulate().expect("refrig simulation").write_csv(&mut bytes, false).expect("csv");
+    std::fs::write(path, bytes).expect("write");
+    Recording::read(path).expect("read")
+}
+
 /// Where the complete structure's error comes from on the independent rig: the rig with all
 /// effects on, then with one rig feature switched off at a time; the complete J–A structure
 /// (the rig's variant where we have it) fitted on the fit files, scored per validation file
@@ -378,22 +401,10 @@ fn error_budget_of_the_complete_structure() {
     ];
     for (name, switch) in switches {
         let run = |exc: &Excitation, salt: u64| {
-            let mut rig = Rig {
-                duration_s: exc.duration_s,
-                seed: 100 + salt,
-                drive: Drive { waveform: exc.waveform.clone(), offset_v: exc.offset_v },
-                ..Rig::default()
-            };
-            rig.material.law = law;
-            switch(&mut rig.effects);
-            let rec = rig.simulate().expect("refrig simulation");
-            let mut bytes = Vec::new();
-            rec.write_csv(&mut bytes, false).expect("csv");
             let tag = if preisach { "preisach-" } else { "" };
-            let path = cache_dir().join(format!("budget-{tag}{name}-{}.csv", exc.label));
             std::fs::create_dir_all(cache_dir()).expect("cache folder");
-            std::fs::write(&path, bytes).expect("write");
-            Recording::read(&path).expect("read")
+            let path = cache_dir().join(format!("budget-{tag}{name}-{}.csv", exc.label));
+            seed_one_rig(law, exc, salt, &[switch], &path)
         };
         let fit_files: Vec<Recording> = fit_exc.iter().enumerate().map(|(i, e)| run(e, i as u64)).collect();
         let val_files: Vec<Recording> =
@@ -453,19 +464,8 @@ fn effect_visibility_in_the_suite_files() {
     ];
     let (fit_exc, val_exc) = excitations();
     let displacement = |exc: &Excitation, salt: u64, switches: &[Switch]| {
-        let mut rig = Rig {
-            duration_s: exc.duration_s,
-            seed: 100 + salt,
-            drive: Drive { waveform: exc.waveform.clone(), offset_v: exc.offset_v },
-            ..Rig::default()
-        };
-        rig.material.law = law;
-        switches.iter().for_each(|s| s(&mut rig.effects));
-        let mut bytes = Vec::new();
-        rig.simulate().expect("refrig simulation").write_csv(&mut bytes, false).expect("csv");
         let path = std::env::temp_dir().join(format!("gma-visibility-{}-{salt}.csv", std::process::id()));
-        std::fs::write(&path, bytes).expect("write");
-        let rec = Recording::read(&path).expect("read");
+        let rec = seed_one_rig(law, exc, salt, switches, &path);
         let _ = std::fs::remove_file(&path);
         rec
     };
