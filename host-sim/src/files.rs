@@ -92,25 +92,34 @@ impl Input {
     }
 
     /// The whole input as UTF-8 text, at most `max_bytes` of it (parameter files, loop files).
+    /// Each line is checked as it arrives, so a binary stream is refused at its first bad line
+    /// rather than after `max_bytes` of it.
     pub fn into_text(self, max_bytes: u64) -> Result<String> {
         let name = self.name.clone();
-        let mut bytes = Vec::new();
-        self.into_reader().take(max_bytes + 1).read_to_end(&mut bytes).map_err(|e| read_error(&name, e))?;
-        if bytes.len() as u64 > max_bytes {
-            bail!("{name}: larger than {} MB; this is not a file of this kind", max_bytes >> 20);
+        let mut reader = self.into_reader();
+        let mut text = String::new();
+        let mut line = Vec::new();
+        for number in 1u64.. {
+            line.clear();
+            if reader.read_until(b'\n', &mut line).map_err(|e| read_error(&name, e))? == 0 {
+                break;
+            }
+            if (text.len() + line.len()) as u64 > max_bytes {
+                bail!("{name}: larger than {} MB; this is not a file of this kind", max_bytes >> 20);
+            }
+            let bytes = if number == 1 { line.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&line) } else { &line };
+            let Ok(s) = std::str::from_utf8(bytes) else {
+                return Err(Located::at(
+                    &name,
+                    number,
+                    None,
+                    "not UTF-8 text (a binary file, or a text encoding other than UTF-8?)",
+                )
+                .into());
+            };
+            text.push_str(s);
         }
-        let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").map(<[u8]>::to_vec).unwrap_or(bytes);
-        String::from_utf8(bytes).map_err(|e| {
-            let line =
-                e.as_bytes()[..e.utf8_error().valid_up_to()].iter().filter(|b| **b == b'\n').count() + 1;
-            Located::at(
-                &name,
-                line as u64,
-                None,
-                "not UTF-8 text (a binary file, or a text encoding other than UTF-8?)",
-            )
-            .into()
-        })
+        Ok(text)
     }
 }
 

@@ -273,6 +273,39 @@ fn inputs_without_line_breaks_are_refused_at_once_in_bounded_memory() {
         assert!(rss < 100_000, "{input}: peak RSS {rss} kB");
         assert!(o.stderr.len() < 2000, "{input}: the message echoes the input");
     }
+    // A first line that reads as a loop file's header, then an endless binary stream: refused at
+    // line 2, not after the loop reader's 256 MB cap (random bytes hold a line break every ~256
+    // bytes, so the line bound alone does not stop it).
+    let mut child = Command::new("/usr/bin/time")
+        .args(["-f", "maxrss_kb=%M", GMA, "fit", "--model", "ja", "-"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let feeder = std::thread::spawn(move || {
+        let mut block = vec![0u8; 1 << 16];
+        let mut x = 0x2545_f491_4f6c_dd1d_u64;
+        let _ = stdin.write_all(b"H [A/m],B [T]\n");
+        for _ in 0..(512 << 20) / block.len() {
+            for b in block.iter_mut() {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                *b = (x >> 56) as u8;
+            }
+            if stdin.write_all(&block).is_err() {
+                break; // refused: the reader went away
+            }
+        }
+    });
+    let o = child.wait_with_output().unwrap();
+    feeder.join().unwrap();
+    refused(&o, &["<stdin>:2:", "not UTF-8"], "binary after a loop header");
+    let e = err(&o);
+    let rss: u64 = e.rsplit("maxrss_kb=").next().unwrap().trim().parse().unwrap();
+    assert!(rss < 100_000, "binary after a loop header: peak RSS {rss} kB");
     // A one-row file of 10 MB.
     let dir = tempfile::tempdir().unwrap();
     let row = write(dir.path(), "row.csv", &vec![b'7'; 10 << 20]);
