@@ -372,7 +372,8 @@ fn seed_one_rig(
 /// effects on, then with one rig feature switched off at a time; the complete J–A structure
 /// (the rig's variant where we have it) fitted on the fit files, scored per validation file
 /// after the burn-in. Prints only. The Jiles 1986 rig by default; `GMA_BUDGET_LAW=preisach`
-/// takes the Preisach rig and the complete `preisach` structure.
+/// takes the Preisach rig and the complete `preisach` structure; `GMA_BUDGET_ONLY=nothing` (or
+/// another switch's name) runs that row alone.
 ///   cargo test --release -p host-sim --test refrig_suite error_budget -- --ignored --nocapture
 #[test]
 #[ignore = "minutes of CPU: run with --ignored"]
@@ -399,7 +400,8 @@ fn error_budget_of_the_complete_structure() {
         ("sensor_offset_drift", |e| e.sensor_offset_drift = false),
         ("coil_heating", |e| e.coil_heating = false),
     ];
-    for (name, switch) in switches {
+    let only = std::env::var("GMA_BUDGET_ONLY").ok();
+    for (name, switch) in switches.into_iter().filter(|(n, _)| only.as_deref().is_none_or(|o| o == *n)) {
         let run = |exc: &Excitation, salt: u64| {
             let tag = if preisach { "preisach-" } else { "" };
             std::fs::create_dir_all(cache_dir()).expect("cache folder");

@@ -354,7 +354,7 @@ const JA_PARAMS: [Param; 4] = [
     param!("ja.alpha", "1", -0.1, 0.1, Linear, ja.alpha),
     param!("ja.c", "1", 0.0, 0.95, Linear, ja.c),
 ];
-const PREISACH_PARAMS: [Param; 3] = [
+const PREISACH_PARAMS: [Param; 5] = [
     param!("preisach.coercive_a_per_m", "A/m", 100.0, 3e4, Log, preisach.coercive_a_per_m),
     param!("preisach.spread_a_per_m", "A/m", 500.0, 6e4, Log, preisach.spread_a_per_m),
     // Always identified: a set without it (the older tied density) starts from σ_u = σ.
@@ -367,10 +367,28 @@ const PREISACH_PARAMS: [Param; 3] = [
         get: |p| p.preisach.interaction_spread_a_per_m.unwrap_or(p.preisach.spread_a_per_m) as f64,
         set: |p, v| p.preisach.interaction_spread_a_per_m = Some(v as f32),
     },
-    // The reversible part (`preisach.reversible_*`) is not searched here: it is held at the
-    // parameter file's values (a loop fit identifies it). Searched with the dynamics, it let
-    // the held-out rig's Preisach law fit 2.8 -> 1.4 % but validate 2.5 -> 5.3 %
-    // (narrow relays plus the reversible part: a basin the fit files cannot rule out).
+    // The reversible part ρ M_s tanh(H/h_r): what carries a small signal about a bias (the
+    // relays' swing grows as ΔH², Rayleigh). Searched since the Everett table is interpolated in
+    // √E (before, the table's diagonal cells gave small loops a slope of their own and ρ was
+    // not identifiable: the held-out rig validated worse with it searched).
+    Param {
+        key: "preisach.reversible_fraction",
+        unit: "1",
+        lo: 0.0,
+        hi: 0.9,
+        scale: Scale::Linear,
+        get: |p| p.preisach.reversible_fraction_or_default() as f64,
+        set: |p, v| p.preisach.reversible_fraction = Some(v as f32),
+    },
+    Param {
+        key: "preisach.reversible_field_a_per_m",
+        unit: "A/m",
+        lo: 1e3,
+        hi: 2e5,
+        scale: Scale::Log,
+        get: |p| p.preisach.reversible_field_or_default() as f64,
+        set: |p, v| p.preisach.reversible_field_a_per_m = Some(v as f32),
+    },
 ];
 
 impl MagnetizationLaw {

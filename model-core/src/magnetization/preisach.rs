@@ -3,9 +3,16 @@
 //!
 //! The relay plane is discretised on a fixed grid of [`PREISACH_LEVELS`] field levels in
 //! ±H_max and parameterised by its **Everett table** E(α_i, β_j) (the integral of μ over the
-//! triangle β ≤ β' ≤ α' ≤ α, 003 §3). Between grid points E is interpolated (bilinear off the
-//! diagonal, linear on the diagonal cells so that E(h, h) = 0 exactly), which keeps the output
-//! continuous and monotone in the input.
+//! triangle β ≤ β' ≤ α' ≤ α, 003 §3). Between grid points √E is interpolated (bilinear off the
+//! diagonal, linear on the diagonal cells so that E(h, h) = 0 exactly) and squared, which keeps
+//! the output continuous and monotone in the input. Why √E: near the diagonal a smooth density
+//! gives E(α, β) ≈ ½ μ (α − β)², so a minor loop smaller than a grid cell follows Rayleigh's law
+//! (the relays' slope is zero at a reversal and grows with the excursion; the loop opens). E
+//! itself interpolated linearly made every such loop a closed straight line with the whole
+//! cell's slope, 8–16× the relays' swing at 1/16–1/8 of a cell, and the reversible part could
+//! not be told from it: on the held-out Lorentzian-Preisach rig (small-signal files about a bias)
+//! the complete `preisach` structure validated at 1.78 % with the reversible part searched and
+//! E linear, 0.76 % with √E.
 //!
 //! The state is the staircase memory: the alternating dominant extrema M_1 > M_2 > … and
 //! m_1 < m_2 < … since negative saturation, the current input last. An input beyond a stored
@@ -79,7 +86,11 @@ pub struct PreisachParams {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EverettTable {
     h_max: f32,
-    e: [[f32; PREISACH_LEVELS]; PREISACH_LEVELS],
+    /// √E at the grid points (row α index, column β index; zero for i ≤ j): what
+    /// [`EverettTable::everett`] interpolates.
+    root: [[f32; PREISACH_LEVELS]; PREISACH_LEVELS],
+    /// E(H_max, −H_max).
+    total: f32,
 }
 
 impl EverettTable {
@@ -88,35 +99,39 @@ impl EverettTable {
     /// with β).
     pub fn new(h_max_a_per_m: f32, e: [[f32; PREISACH_LEVELS]; PREISACH_LEVELS]) -> Result<Self, ParamError> {
         let h_max = positive("preisach.h_max_a_per_m", h_max_a_per_m)?;
-        let mut t = Self { h_max, e: [[0.0; PREISACH_LEVELS]; PREISACH_LEVELS] };
         for i in 0..PREISACH_LEVELS {
             for j in 0..=i {
                 if !e[i][j].is_finite() {
                     return Err(ParamError::NonFinite("preisach.everett"));
                 }
-                t.e[i][j] = e[i][j];
             }
         }
-        let total = t.total();
+        let total = e[PREISACH_LEVELS - 1][0];
         if total <= 0.0 {
             return Err(ParamError::OutOfRange("preisach.everett", "positive at (H_max, -H_max)"));
         }
         let tol = 1e-5 * total;
+        // E at (p, q), zero off the lower triangle.
+        let at = |p: usize, q: usize| if p > q { e[p][q] } else { 0.0 };
+        let mut root = [[0.0; PREISACH_LEVELS]; PREISACH_LEVELS];
         for i in 0..PREISACH_LEVELS {
-            if t.e[i][i].abs() > tol {
+            if e[i][i].abs() > tol {
                 return Err(ParamError::OutOfRange("preisach.everett", "zero on the diagonal E(h, h)"));
             }
-            t.e[i][i] = 0.0;
             for j in 0..i {
-                if t.relay_weight(i, j) < -tol {
+                // Weight of the relay cell α ∈ [h_{i−1}, h_i], β ∈ [h_j, h_{j+1}].
+                if at(i, j) - at(i - 1, j) - at(i, j + 1) + at(i - 1, j + 1) < -tol {
                     return Err(ParamError::OutOfRange(
                         "preisach.everett",
                         "a table with non-negative relay weights (E rising in alpha, falling in beta)",
                     ));
                 }
+                root[i][j] = crate::math::sqrt(e[i][j].max(0.0));
             }
         }
-        Ok(t)
+        // The total as the interpolation gives it at (H_max, −H_max): saturation is exactly ±M_s.
+        let total = root[PREISACH_LEVELS - 1][0] * root[PREISACH_LEVELS - 1][0];
+        Ok(Self { h_max, root, total })
     }
 
     /// Builds the table from a density μ(α, β) ≥ 0 (any scale) and normalises the total to
@@ -173,18 +188,12 @@ impl EverettTable {
 
     /// E(H_max, −H_max): the output swing from negative saturation to the middle.
     pub fn total(&self) -> f32 {
-        self.e[PREISACH_LEVELS - 1][0]
+        self.total
     }
 
-    /// The grid values (row α index, column β index).
-    pub fn values(&self) -> &[[f32; PREISACH_LEVELS]; PREISACH_LEVELS] {
-        &self.e
-    }
-
-    /// Weight of the relay cell α ∈ [h_{i−1}, h_i], β ∈ [h_j, h_{j+1}] (i > j).
-    fn relay_weight(&self, i: usize, j: usize) -> f32 {
-        let at = |p: usize, q: usize| if p >= q { self.e[p][q] } else { 0.0 };
-        at(i, j) - at(i - 1, j) - at(i, j + 1) + at(i - 1, j + 1)
+    /// The grid values E (row α index, column β index), as stored: the squares of √E.
+    pub fn values(&self) -> [[f32; PREISACH_LEVELS]; PREISACH_LEVELS] {
+        self.root.map(|row| row.map(|r| r * r))
     }
 
     /// E(α, β) for α ≥ β (clamped to the grid); 0 when α ≤ β.
@@ -201,14 +210,16 @@ impl EverettTable {
         let ia = (ua as usize).min(PREISACH_LEVELS - 2);
         let ib = (ub as usize).min(PREISACH_LEVELS - 2);
         let (fa, fb) = (ua - ia as f32, ub - ib as f32);
-        if ia == ib {
+        let r = &self.root;
+        let root_e = if ia == ib {
             // Diagonal cell: linear on the triangle (ib, ib)–(ib+1, ib)–(ib+1, ib+1).
-            return self.e[ia + 1][ib] * (fa - fb).max(0.0);
-        }
-        let e = &self.e;
-        let low = e[ia][ib] + (e[ia][ib + 1] - e[ia][ib]) * fb;
-        let high = e[ia + 1][ib] + (e[ia + 1][ib + 1] - e[ia + 1][ib]) * fb;
-        low + (high - low) * fa
+            r[ia + 1][ib] * (fa - fb).max(0.0)
+        } else {
+            let low = r[ia][ib] + (r[ia][ib + 1] - r[ia][ib]) * fb;
+            let high = r[ia + 1][ib] + (r[ia + 1][ib + 1] - r[ia + 1][ib]) * fb;
+            low + (high - low) * fa
+        };
+        root_e * root_e
     }
 }
 
@@ -547,6 +558,57 @@ mod tests {
         eprintln!("major branch vs f64 integration: {:.3} % of M_s", worst * 100.0);
     }
 
+    /// Loops smaller than a grid cell follow Rayleigh's law, as the continuous density gives
+    /// them: near the diagonal E(α, β) ≈ ½ μ (α − β)², so a symmetric minor loop of amplitude
+    /// ΔH swings the relays by 2 E(H + ΔH, H − ΔH) ∝ ΔH² (4× for twice the amplitude) and
+    /// opens. Interpolating E itself linearly there made every such loop a closed straight line
+    /// with the slope of the whole cell: 8–16× the swing at these amplitudes.
+    #[test]
+    fn loops_smaller_than_a_grid_cell_follow_rayleigh() {
+        let p = model();
+        let (hc, sigma, h_max) = (P.coercive_a_per_m as f64, P.spread_a_per_m as f64, P.h_max_a_per_m as f64);
+        let lorentz = |x: f64| 1.0 / (1.0 + x * x);
+        let mu = |a: f64, b: f64| lorentz((a - hc) / sigma) * lorentz((b + hc) / sigma);
+        // mass of the triangle lo ≤ β ≤ α ≤ hi (midpoint rule, n × n).
+        let mass = |lo: f64, hi: f64, n: usize| {
+            let d = (hi - lo) / n as f64;
+            let mut m = 0.0;
+            for i in 0..n {
+                for j in 0..=i {
+                    let w = if i == j { 0.5 } else { 1.0 };
+                    m += w * mu(lo + (i as f64 + 0.5) * d, lo + (j as f64 + 0.5) * d) * d * d;
+                }
+            }
+            m
+        };
+        let total = mass(-h_max, h_max, 1200);
+        let step = 2.0 * h_max / (PREISACH_LEVELS - 1) as f64;
+        // A bias at the centre of a cell, reached from positive saturation (descending branch).
+        let bias = -h_max + step * 18.5;
+        let swing = |dh: f64| {
+            let mut s = p.demagnetized();
+            drive(&p, &mut s, &[h_max as f32, bias as f32, (bias - dh) as f32], 40);
+            let low = p.output(&s) as f64;
+            let high = drive(&p, &mut s, &[(bias + dh) as f32], 40) as f64;
+            // Back down the descending branch: half-way, M lies above the ascending branch's.
+            let up_mid = {
+                let mut t = s;
+                drive(&p, &mut t, &[(bias - dh) as f32, bias as f32], 40) as f64
+            };
+            let down_mid = drive(&p, &mut s, &[bias as f32], 40) as f64;
+            (high - low, down_mid - up_mid)
+        };
+        for dh in [step / 16.0, step / 8.0] {
+            let (swing_model, opening) = swing(dh);
+            let swing_true = 2.0 * P.ms_a_per_m as f64 * mass(bias - dh, bias + dh, 200) / total;
+            let ratio = swing_model / swing_true;
+            assert!((0.6..1.6).contains(&ratio), "ΔH {dh:.0}: swing {swing_model:.1} vs {swing_true:.1} A/m");
+            assert!(opening > 0.0, "ΔH {dh:.0}: the loop does not open ({opening})");
+        }
+        let growth = swing(step / 8.0).0 / swing(step / 16.0).0;
+        assert!((growth - 4.0).abs() < 0.2, "swing grows {growth:.2}× for twice the amplitude, not ∝ ΔH²");
+    }
+
     /// The interaction spread slants the loop and leaves its width: the coercive field (M = 0 on
     /// the ascending major branch) stays near h_c while the slope there falls.
     #[test]
@@ -697,10 +759,10 @@ mod tests {
 
     #[test]
     fn bad_tables_are_named() {
-        let mut e = *model().table().values();
+        let mut e = model().table().values();
         e[10][3] = f32::NAN;
         assert_eq!(EverettTable::new(8e4, e), Err(ParamError::NonFinite("preisach.everett")));
-        let mut e = *model().table().values();
+        let mut e = model().table().values();
         e[10][3] = e[10][4] * 1.5 + 1.0; // E must fall with β
         assert!(matches!(EverettTable::new(8e4, e), Err(ParamError::OutOfRange("preisach.everett", _))));
         let bad = PreisachParams { coercive_a_per_m: 9e4, ..P };
