@@ -32,14 +32,16 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::{bail, Result};
 use model_core::effects::{Candidacy, Signature, Stage};
-use model_core::magnetization::JaVariant;
 use model_core::{Effect, ModelSpec};
 use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::fit::{self, evaluate, simulate, FitOptions, FitResult, Simulation};
+
+mod alternatives;
 use crate::progress;
 use crate::recording::Recording;
+pub use alternatives::{check_ja_variants, check_laws, LawScore, VariantScore};
 
 /// A candidate must cut the scored NRMSE at least this much to be the verdict (the issue's
 /// smallest useful cut: below it, adding the effect is not worth its parameters to a user).
@@ -168,23 +170,9 @@ pub struct Diagnosis {
     /// `--ja-variants`: the given structure refitted in every J–A form, the given one first.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ja_variants: Option<Vec<VariantScore>>,
-}
-
-/// One J–A form's score in [`Diagnosis::compare_ja_variants`].
-#[derive(Debug, Clone, Serialize)]
-pub struct VariantScore {
-    /// Its name, as `[ja] variant` takes it.
-    pub variant: &'static str,
-    /// The form the parameter file gave (its score is the baseline's).
-    pub given: bool,
-    /// Mean displacement NRMSE on the scored files (validation, else fit), after each burn-in.
-    pub nrmse: f64,
-    /// Scored files on which it is lower than the given form.
-    pub files_improved: usize,
-    /// Scored files.
-    pub files_scored: usize,
-    /// Named as fitting better than the given form (at most one: the lowest that passes).
-    pub fits_better: bool,
+    /// `--laws`: the given structure refitted with each other hysteresis law, the given first.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub laws: Option<Vec<LawScore>>,
 }
 
 /// The diagnosis in words (`--json` gives the same as one object).
@@ -1032,130 +1020,8 @@ pub fn diagnose(
         findings,
         baseline: Some(base),
         ja_variants: None,
+        laws: None,
     })
-}
-
-/// Refuses `--ja-variants` on a structure without a J–A law (the CLI asks before the diagnosis,
-/// so the mistake costs no fit).
-pub fn check_ja_variants(spec: ModelSpec) -> Result<()> {
-    if spec.law() != model_core::MagnetizationLaw::JilesAtherton {
-        bail!("--ja-variants compares the forms of Jiles–Atherton; `{spec}` has no J–A law (add `ja`)");
-    }
-    Ok(())
-}
-
-impl Diagnosis {
-    /// The given structure (a J–A law) refitted in each other J–A form ([`JaVariant`]), started
-    /// from the baseline's values and from `init` in that form, and scored like the candidates
-    /// (validation files, else fit files, after each burn-in). A form is named as fitting better
-    /// by the candidates' rule without the information criterion (the forms have the same
-    /// parameters): cut ≥ 1.5× and lower on at least `required_wins(n)` of the scored files.
-    /// The result goes to `ja_variants` and a finding.
-    pub fn compare_ja_variants(
-        &mut self,
-        spec: ModelSpec,
-        init: &model_core::ActuatorParams,
-        fit_files: &[Recording],
-        val_files: &[Recording],
-        opts: FitOptions,
-    ) -> Result<()> {
-        check_ja_variants(spec)?;
-        let Some(base) = self.baseline.as_ref() else {
-            bail!("this diagnosis carries no baseline fit to compare the J–A forms with");
-        };
-        let score_files = if val_files.is_empty() { fit_files } else { val_files };
-        let skip: Vec<usize> = score_files.iter().map(burn_in).collect();
-        let given = base.params.ja.variant;
-        let before = displacement_scores(spec, &base.params, score_files, &skip)?;
-        let phase = progress::Phase::start(
-            opts.progress,
-            &format!("diagnose: refitting `{spec}` in the other J–A forms"),
-            JaVariant::ALL.len() as u64 - 1,
-        );
-        // Per other form: its scores and whether the time limit cut its refit short.
-        type FormRefit = (JaVariant, Result<(Vec<Scored>, bool)>);
-        let others: Vec<FormRefit> = JaVariant::ALL
-            .into_par_iter()
-            .filter(|&v| v != given)
-            .map(|v| {
-                let (mut from_base, mut from_init) = (base.params, *init);
-                from_base.ja.variant = v;
-                from_init.ja.variant = v;
-                let refit = fit::fit_from(
-                    spec,
-                    &[from_base, from_init],
-                    fit_files,
-                    FitOptions { progress: false, ..opts },
-                );
-                let scores = refit.and_then(|f| {
-                    Ok((displacement_scores(spec, &f.params, score_files, &skip)?, f.time_limited))
-                });
-                phase.step(&format!("diagnose: `{}` refitted", v.name()));
-                (v, scores)
-            })
-            .collect();
-        phase.finish();
-        let mean_of = |s: &[Scored]| mean(s.iter().map(|x| x.nrmse));
-        let mut rows = vec![VariantScore {
-            variant: given.name(),
-            given: true,
-            nrmse: mean_of(&before),
-            files_improved: 0,
-            files_scored: before.len(),
-            fits_better: false,
-        }];
-        for (v, scores) in others {
-            let (after, time_limited) = scores?;
-            self.time_limited |= time_limited;
-            rows.push(VariantScore {
-                variant: v.name(),
-                given: false,
-                nrmse: mean_of(&after),
-                files_improved: before.iter().zip(&after).filter(|(b, a)| a.nrmse < b.nrmse).count(),
-                files_scored: after.len(),
-                fits_better: false,
-            });
-        }
-        let on = if val_files.is_empty() { "fit files" } else { "validation files" };
-        let listed =
-            rows.iter().map(|r| format!("`{}` {:.2} %", r.variant, r.nrmse * 100.0)).collect::<Vec<_>>();
-        let better = rows
-            .iter()
-            .filter(|r| {
-                !r.given
-                    && rows[0].nrmse >= MIN_CUT * r.nrmse
-                    && r.files_improved >= required_wins(r.files_scored)
-            })
-            .min_by(|a, b| a.nrmse.total_cmp(&b.nrmse))
-            .map(|b| b.variant);
-        if let Some(b) = better {
-            rows.iter_mut().filter(|r| r.variant == b).for_each(|r| r.fits_better = true);
-        }
-        let better = rows.iter().find(|r| r.fits_better);
-        self.findings.push(match better {
-            Some(b) => format!(
-                "J–A form: `{}` fits better than the given `{}` ({:.2} % against {:.2} % on the {on}, {:.2}× lower, on {} of {}; \
-                 all forms: {}): set `[ja] variant = \"{}\"`",
-                b.variant,
-                rows[0].variant,
-                b.nrmse * 100.0,
-                rows[0].nrmse * 100.0,
-                rows[0].nrmse / b.nrmse,
-                b.files_improved,
-                b.files_scored,
-                listed.join(", "),
-                b.variant
-            ),
-            None => format!(
-                "J–A form: no form fits clearly better than the given `{}` (cut ≥ {MIN_CUT}× on {} of the {on}): {}",
-                rows[0].variant,
-                required_wins(rows[0].files_scored),
-                listed.join(", ")
-            ),
-        });
-        self.ja_variants = Some(rows);
-        Ok(())
-    }
 }
 
 #[cfg(test)]

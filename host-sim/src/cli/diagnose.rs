@@ -4,7 +4,7 @@ use anyhow::{bail, Result};
 use clap::Args;
 
 use super::common::{Data, ModelFiles};
-use crate::diagnose::{check_ja_variants, diagnose};
+use crate::diagnose::{check_ja_variants, check_laws, diagnose};
 use crate::provenance::Provenance;
 
 /// Options of `gma diagnose`.
@@ -16,6 +16,10 @@ pub struct DiagnoseArgs {
     /// whether one fits clearly better (two more fits)
     #[arg(long)]
     pub ja_variants: bool,
+    /// Also refit the model with the other hysteresis law (`ja` ↔ `preisach`, the rest of the
+    /// structure kept) and say whether it fits clearly better (one more fit)
+    #[arg(long)]
+    pub laws: bool,
 }
 
 /// Runs `gma diagnose`.
@@ -27,9 +31,15 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
     if a.ja_variants {
         check_ja_variants(p.spec)?;
     }
+    if a.laws {
+        check_laws(p.spec)?;
+    }
     let mut d = diagnose(p.spec, &p.init, fit_files, val_files, p.opts)?;
     if a.ja_variants {
         d.compare_ja_variants(p.spec, &p.init, fit_files, val_files, p.opts)?;
+    }
+    if a.laws {
+        d.compare_laws(p.spec, &p.init, fit_files, val_files, p.opts)?;
     }
     say!(a.mf.json, "{d}");
     a.mf.warn_if_time_limited(d.time_limited);
