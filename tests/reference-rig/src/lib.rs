@@ -36,4 +36,4 @@ pub use rig::{
     Aftereffect, Amplifier, AmplifierMode, Coil, Effects, Law, Magnetostriction, MaterialConfig, PreHistory,
     Rig, RigError, Rod, Solver, Thermal,
 };
-pub use sensor::Sensor;
+pub use sensor::{SearchCoil, Sensor};

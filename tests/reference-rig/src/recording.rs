@@ -33,6 +33,10 @@ pub struct Recording {
     pub surface_field_a_per_m: Vec<f64>,
     /// Field in the innermost shell [A/m] (equal to the surface field without eddy currents).
     pub core_field_a_per_m: Vec<f64>,
+    /// Measured flux density of the search coil (T), when the rig has one.
+    pub flux_density_t: Option<Vec<f64>>,
+    /// True mean flux density over the search coil's area, divided by the rod's (T).
+    pub true_flux_density_t: Option<Vec<f64>>,
     /// Work of the adaptive integrator.
     pub stats: StepStats,
 }
@@ -48,19 +52,27 @@ impl Recording {
         self.time_s.is_empty()
     }
 
-    /// Write the recording as CSV: `time_s,command_V,current_A,displacement_um,temperature_C`
-    /// and, with `truth`, the true signals as extra columns. `time_s` gets
+    /// Write the recording as CSV: `time_s,command_V,current_A,displacement_um,temperature_C`,
+    /// then `flux_density_T` when the rig had a search coil, and, with `truth`, the true signals
+    /// as extra columns. `time_s` gets
     /// ceil(−log10 dt) + 3 decimals; every value is finite (the simulation refuses
     /// non-finite states).
     pub fn write_csv<W: Write>(&self, mut w: W, truth: bool) -> io::Result<()> {
         let decimals = ((-self.dt_s.log10()).ceil().max(0.0) as usize) + 3;
         write!(w, "time_s,command_V,current_A,displacement_um,temperature_C")?;
+        let flux = self.flux_density_t.as_deref().zip(self.true_flux_density_t.as_deref());
+        if flux.is_some() {
+            write!(w, ",flux_density_T")?;
+        }
         if truth {
             write!(
                 w,
                 ",true_current_A,true_displacement_um,coil_temperature_C,rod_temperature_C,\
                  mean_magnetization_A_per_m,surface_field_A_per_m,core_field_A_per_m"
             )?;
+            if flux.is_some() {
+                write!(w, ",true_flux_density_T")?;
+            }
         }
         writeln!(w)?;
         for k in 0..self.len() {
@@ -74,6 +86,9 @@ impl Recording {
                 self.displacement_um[k],
                 self.temperature_c[k]
             )?;
+            if let Some((b, _)) = flux {
+                write!(w, ",{:.6}", b[k])?;
+            }
             if truth {
                 write!(
                     w,
@@ -86,6 +101,9 @@ impl Recording {
                     self.surface_field_a_per_m[k],
                     self.core_field_a_per_m[k]
                 )?;
+                if let Some((_, b)) = flux {
+                    write!(w, ",{:.6}", b[k])?;
+                }
             }
             writeln!(w)?;
         }

@@ -9,7 +9,7 @@ use crate::magnetics::{
 };
 use crate::mechanics::Mechanics;
 use crate::recording::Recording;
-use crate::sensor::{Sensor, SensorChain, SensorSwitches};
+use crate::sensor::{FluxChain, SearchCoil, Sensor, SensorChain, SensorSwitches};
 use std::f64::consts::PI;
 
 /// How the amplifier drives the coil.
@@ -324,6 +324,8 @@ pub struct Rig {
     pub mechanics: Mechanics,
     /// Sensors.
     pub sensor: Sensor,
+    /// A search coil on the rod (`flux_density_T` in the recording), or none.
+    pub search_coil: Option<SearchCoil>,
     /// Pre-history of the rod.
     pub prehistory: PreHistory,
     /// Effect switches.
@@ -422,6 +424,7 @@ impl Default for Rig {
                 current_offset_a: 1e-3,
                 temperature_noise_c: 0.02,
             },
+            search_coil: None,
             prehistory: PreHistory { fields_rel_a_per_m: vec![50e3, -35e3, 15e3] },
             effects: Effects::ALL,
             solver: Solver {
@@ -639,6 +642,7 @@ impl Rig {
             delay: self.effects.sensor_delay,
         };
         let mut sensor = SensorChain::new(self.sensor, sw, self.seed, dt);
+        let mut flux = self.search_coil.map(|c| (c, FluxChain::new(c, sw, self.seed)));
         let mut rec = Recording { dt_s: dt, ..Recording::default() };
         for k in 0..n {
             let t = k as f64 * dt;
@@ -666,6 +670,16 @@ impl Rig {
             rec.mean_magnetization_a_per_m.push(o.mbar);
             rec.surface_field_a_per_m.push(o.hs);
             rec.core_field_a_per_m.push(o.h_core);
+            if let Some((coil, chain)) = flux.as_mut() {
+                // The coil links the rod's flux and, between rod and winding, μ0 H_s.
+                let b = MU0 * (o.h_mean + o.m_obs + (coil.area_ratio - 1.0) * o.hs);
+                let measured = chain.measure(t, b);
+                if !(b.is_finite() && measured.is_finite()) {
+                    return Err(RigError::NonFinite { t });
+                }
+                rec.flux_density_t.get_or_insert_with(Vec::new).push(measured);
+                rec.true_flux_density_t.get_or_insert_with(Vec::new).push(b);
+            }
         }
         rec.stats = dp.stats();
         Ok(rec)
@@ -684,7 +698,11 @@ struct Outputs {
     u: f64,
     x_out_m: f64,
     mbar: f64,
+    /// Magnetization after the aftereffect (what the strain and the flux see).
+    m_obs: f64,
     hs: f64,
+    /// Area-averaged field in the rod.
+    h_mean: f64,
     h_core: f64,
 }
 
@@ -826,7 +844,9 @@ impl<'a> RigSystem<'a> {
             u: rig.drive.value(t),
             x_out_m,
             mbar,
+            m_obs: self.observed_m(y, mbar),
             hs: self.n_per_m * y[I] + rig.coil.bias_field_a_per_m,
+            h_mean: (0..self.n_shells).map(|j| self.weights[j] * y[H0 + j]).sum(),
             h_core: y[H0],
         }
     }

@@ -3,20 +3,21 @@
 //! ```text
 //! refrig [--out FILE] [--duration S] [--rate HZ] [--seed N] [--law NAME]
 //!        [--wave sine|square|chirp|multisine|sweep|steps|dc] [--amp V] [--freq HZ]
-//!        [--f-end HZ] [--offset V] [--current-mode] [--shells N]
+//!        [--f-end HZ] [--offset V] [--current-mode] [--shells N] [--search-coil]
 //!        [--disable EFFECT[,EFFECT…]] [--truth] [--list-effects]
 //! ```
 
-use refrig::{AmplifierMode, Drive, Effects, Law, Rig, Waveform};
+use refrig::{AmplifierMode, Drive, Effects, Law, Rig, SearchCoil, Waveform};
 use std::io::Write;
 use std::process::ExitCode;
 
 const USAGE: &str = "usage: refrig [--out FILE] [--duration S] [--rate HZ] [--seed N]
               [--law ja-original|ja-bulk|ja-inverse|preisach]
               [--wave sine|square|chirp|multisine|sweep|steps|dc] [--amp V] [--freq HZ]
-              [--f-end HZ] [--offset V] [--current-mode] [--shells N]
+              [--f-end HZ] [--offset V] [--current-mode] [--shells N] [--search-coil]
               [--disable EFFECT[,EFFECT...]] [--truth] [--list-effects]
-Writes time_s,command_V,current_A,displacement_um,temperature_C (CSV) to FILE or stdout.
+Writes time_s,command_V,current_A,displacement_um,temperature_C (CSV) to FILE or stdout;
+--search-coil adds flux_density_T (a search coil on the rod, read through an integrator).
 Defaults: the Terfenol-D set of refrig::Rig::default(), 0.2 s at 10 kHz, 1 V 50 Hz sine.";
 
 struct Args {
@@ -72,6 +73,7 @@ fn parse() -> Result<Option<Args>, String> {
             "--current-mode" => rig.amplifier.mode = AmplifierMode::Current,
             "--shells" => rig.rod.shells = num(it.next(), "--shells")? as usize,
             "--truth" => truth = true,
+            "--search-coil" => rig.search_coil = Some(SearchCoil::LAB),
             "--disable" => {
                 let list = it.next().ok_or("--disable needs a list of effects")?;
                 for name in list.split(',').filter(|s| !s.is_empty()) {
