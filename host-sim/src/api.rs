@@ -81,7 +81,7 @@ pub fn recording_from_arrays(name: &str, arrays: Vec<(String, Vec<f64>)>) -> Res
         }
         cols[k] = Some(values);
     }
-    let [time, command_v, current_a, displacement_um, force_n, temperature_c] = cols;
+    let [time, command_v, current_a, displacement_um, force_n, temperature_c, flux_density_t] = cols;
     let Some(time_s) = time else {
         return Err(array_error(name, "time_s", None, "missing: a recording needs a time axis [s]".into()));
     };
@@ -107,6 +107,7 @@ pub fn recording_from_arrays(name: &str, arrays: Vec<(String, Vec<f64>)>) -> Res
         ("displacement_um", &displacement_um),
         ("force_N", &force_n),
         ("temperature_C", &temperature_c),
+        ("flux_density_T", &flux_density_t),
     ];
     for (array, v) in channels {
         if let Some(v) = v.as_ref().filter(|v| v.len() != time_s.len()) {
@@ -143,7 +144,16 @@ pub fn recording_from_arrays(name: &str, arrays: Vec<(String, Vec<f64>)>) -> Res
         let step = time_s[i + 1] - time_s[i];
         return Err(array_error(name, "time_s", Some(i + 1), format!("time step {step:.3e} s differs from the median step {dt:.3e} s by more than 1 % (samples must be uniform in time)")));
     }
-    Ok(Recording { name: name.into(), time_s, command_v, current_a, displacement_um, force_n, temperature_c })
+    Ok(Recording {
+        name: name.into(),
+        time_s,
+        command_v,
+        current_a,
+        displacement_um,
+        force_n,
+        temperature_c,
+        flux_density_t,
+    })
 }
 
 /// Where a recording comes from.
@@ -444,14 +454,7 @@ pub fn compare(
                 let sc = fit::score(spec, rec, &sim);
                 total += sc.nrmse;
                 sim.displacement_um.iter_mut().for_each(|y| *y += sc.offset_um);
-                rows.push(FileScoreRow {
-                    offset_um: Some(sc.offset_um),
-                    initial_excursion_a_per_m: sc.initial_excursion_a_per_m,
-                    ..FileScoreRow::new(&rec.name, None, "displacement", sc.nrmse)
-                });
-                if let Some(c) = sc.nrmse_current {
-                    rows.push(FileScoreRow::new(&rec.name, None, "current", c));
-                }
+                rows.extend(FileScoreRow::for_recording(&rec.name, None, &sc));
                 predictions.push(Prediction::Recording {
                     name: rec.name.clone(),
                     time_s: rec.time_s.clone(),

@@ -33,10 +33,11 @@ pub const UNITS: [&[Unit]; COLUMNS.len()] = [
     &[unit("um", 0), unit("µm", 0), unit("m", 6), unit("mm", 3), unit("nm", -3)],
     &[unit("N", 0), unit("kN", 3)],
     &[unit("°C", 0), unit("C", 0), Unit { name: "K", pow10: 0, offset: -273.15 }],
+    &[unit("T", 0), unit("mT", -3), unit("G", -4)],
 ];
 
 /// The canonical unit of each column, as messages print it.
-const CANONICAL_UNIT: [&str; COLUMNS.len()] = ["s", "V", "A", "µm", "N", "°C"];
+const CANONICAL_UNIT: [&str; COLUMNS.len()] = ["s", "V", "A", "µm", "N", "°C", "T"];
 
 impl Unit {
     /// Whether this unit is the column's canonical unit (no conversion).

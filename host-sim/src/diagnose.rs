@@ -21,9 +21,11 @@
 //!    buy a gain) by BIC with the *effective* sample size of the baseline residual
 //!    (N_eff = N(1 − ρ)/(1 + ρ): a residual full of model-form error is worth few
 //!    independent samples), and, scored on the fit files only, its signature is significant
-//!    (N_eff·R² > χ²₁(95 %)) or its cut decisive. With `current_A` and `command_V` measured,
-//!    amplifier dynamics is judged on the current (command → current: static gain against the
-//!    refit's amplifier). Passing candidates
+//!    (N_eff·R² > χ²₁(95 %)) or its cut decisive. Each
+//!    candidate is judged on the measured channel nearest where it acts: with `current_A` and
+//!    `command_V` measured, amplifier dynamics on the current (command → current: static gain
+//!    against the refit's amplifier); with a search coil's `flux_density_T`, the rod's field,
+//!    magnetization and creep on the flux density; the rest on the displacement. Passing candidates
 //!    on one channel that the best does not beat on every file are not told apart: the data choose
 //!    among them (signature R², then ΔBIC) and the diagnosis says which and why. A residual still
 //!    structured after the final structure is reported with its size.
@@ -60,7 +62,7 @@ const SIGN_TEST_ALPHA: f64 = 0.05;
 const BIC_STRONG: f64 = 6.0;
 
 /// Search effort of a candidate's fresh fit (from the engineer's start values), beside its
-/// refinement from the baseline: half of `gma fit`'s. On the independent rig's grid (README)
+/// refinement from the baseline: half of `gma fit`'s. On the independent rig's grid (docs/validation.md)
 /// it named one effect fewer than full effort (26 against 27 of 66), in 0.8× the time of the
 /// 8-file diagnosis bench.
 pub const FRESH_EFFORT: f64 = 0.5;
@@ -277,11 +279,20 @@ fn lowpass(x: &[f64], dt: f64, tau: f64) -> Vec<f64> {
         .collect()
 }
 
-fn signals(rec: &Recording, sim: &Simulation, offset: f64) -> Signals {
+/// The signatures on the displacement (`flux: false`: the baseline's residual with its offset) or
+/// on the search coil's flux density (the model's flux fitted to it, [`fit::flux_fit`]).
+fn signals(rec: &Recording, sim: &Simulation, offset: f64, flux: bool) -> Signals {
     let dt = rec.dt_s();
-    let meas = rec.displacement_um.as_deref().unwrap_or_default();
-    let residual: Vec<f64> = meas.iter().zip(&sim.displacement_um).map(|(m, y)| m - y - offset).collect();
-    let y = &sim.displacement_um;
+    // The model's output on the channel, and the measured one.
+    let (y, measured): (Vec<f64>, &[f64]) = if flux {
+        let b = rec.flux_density_t.as_deref().unwrap_or_default();
+        (fit::flux_fit(b, &sim.field_a_per_m, &sim.magnetization_a_per_m).1, b)
+    } else {
+        let y = sim.displacement_um.iter().map(|y| y + offset).collect();
+        (y, rec.displacement_um.as_deref().unwrap_or_default())
+    };
+    let residual: Vec<f64> = measured.iter().zip(&y).map(|(m, y)| m - y).collect();
+    let y = y.as_slice();
     let rate = derivative(y, dt);
     let accel = derivative(&rate, dt);
     let h = &sim.field_a_per_m;
@@ -343,6 +354,15 @@ fn evidence(effect: Effect, sigs: &[Signals]) -> f64 {
         num / den
     } else {
         0.0
+    }
+}
+
+/// [`signature_words`] for signatures taken on the flux density.
+fn flux_signature_words(signature: Signature) -> &'static str {
+    match signature {
+        Signature::Lag => "the lag signature −dB/dt of the flux density (shared by the rod's lags)",
+        Signature::Creep => "the creep signature lowpass(B) − B of the flux density",
+        _ => signature_words(signature),
     }
 }
 
@@ -456,10 +476,37 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
 }
 
 /// The channel a candidate is scored on.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, PartialEq, Eq)]
 enum Channel {
     Displacement,
     Current,
+    /// A search coil's flux density: what the field and magnetization stages act on, before the
+    /// mechanics, the thermal elongation and the displacement probe.
+    FluxDensity,
+}
+
+impl Channel {
+    /// The contract's name.
+    fn name(self) -> &'static str {
+        match self {
+            Channel::Displacement => "displacement",
+            Channel::Current => "current",
+            Channel::FluxDensity => "flux_density",
+        }
+    }
+
+    /// The measured channel nearest where `e` acts: the amplifier's on the current, the rod's
+    /// field, magnetization and creep on the flux density, the rest on the displacement — when
+    /// every file measured that channel (`current` and `flux`).
+    fn judging(e: Effect, current: bool, flux: bool) -> Channel {
+        match e.info().stage {
+            Stage::Amplifier if current => Channel::Current,
+            Stage::RodField | Stage::Magnetization | Stage::MagnetizationCreep if flux => {
+                Channel::FluxDensity
+            }
+            _ => Channel::Displacement,
+        }
+    }
 }
 
 /// Per file, the scored residual on `channel` after the file's burn-in `skip`.
@@ -475,11 +522,19 @@ fn channel_scores(
         .zip(skip)
         .map(|(rec, &k)| {
             let sim = simulate(spec, params, rec)?;
-            let (measured, model) = match channel {
-                Channel::Displacement => (rec.displacement_um.as_deref(), &sim.displacement_um),
-                Channel::Current => (rec.current_a.as_deref(), &sim.current_a),
-            };
-            Ok(scored(measured.unwrap_or_default(), model, k))
+            Ok(match channel {
+                Channel::Displacement => {
+                    scored(rec.displacement_um.as_deref().unwrap_or_default(), &sim.displacement_um, k)
+                }
+                Channel::Current => scored(rec.current_a.as_deref().unwrap_or_default(), &sim.current_a, k),
+                Channel::FluxDensity => {
+                    // Scale and zero fitted on the scored part, as the offset is.
+                    let b = &rec.flux_density_t.as_deref().unwrap_or_default()[k..];
+                    let (_, model) =
+                        fit::flux_fit(b, &sim.field_a_per_m[k..], &sim.magnetization_a_per_m[k..]);
+                    scored(b, &model, 0)
+                }
+            })
         })
         .collect()
 }
@@ -655,13 +710,19 @@ pub fn diagnose(
     // Evidence on the fit files' residuals.
     let evidence_phase =
         progress::Phase::start(opts.progress, "diagnose: residual evidence and trends across files", 0);
-    let sigs: Vec<Signals> = fit_files
-        .iter()
-        .zip(&base.fit.files)
-        .map(|(rec, sc)| {
-            Ok(signals(rec, &simulate(spec, &base.params, rec)?, sc.offset_um).skip(burn_in(rec)))
-        })
-        .collect::<Result<_>>()?;
+    // With a search coil on every file, the stages before the strain are judged on its flux.
+    let flux_measured = fit_files.iter().chain(score_files).all(|r| r.flux_density_t.is_some());
+    let signals_on = |flux: bool| -> Result<Vec<Signals>> {
+        fit_files
+            .iter()
+            .zip(&base.fit.files)
+            .map(|(rec, sc)| {
+                Ok(signals(rec, &simulate(spec, &base.params, rec)?, sc.offset_um, flux).skip(burn_in(rec)))
+            })
+            .collect()
+    };
+    let sigs = signals_on(false)?;
+    let flux_sigs = if flux_measured { signals_on(true)? } else { Vec::new() };
     let mut findings = Vec::new();
     let white = whiteness(&sigs.iter().map(|s| s.residual.as_slice()).collect::<Vec<_>>());
     let (not_white, white_limit) = structured_residual(white, sigs.len());
@@ -766,6 +827,14 @@ pub fn diagnose(
     let current_measured =
         fit_files.iter().chain(score_files).all(|r| r.current_a.is_some() && r.command_v.is_some());
     let static_amp = current_measured.then(|| StaticGain::fit(fit_files, &fit_skip));
+    let (base_fit_flux, base_score_flux) = if flux_measured {
+        (
+            channel_scores(spec, &base.params, fit_files, &fit_skip, Channel::FluxDensity)?,
+            channel_scores(spec, &base.params, score_files, &score_skip, Channel::FluxDensity)?,
+        )
+    } else {
+        (Vec::new(), Vec::new())
+    };
     let mut candidates = Vec::new();
     let mut skipped = Vec::new();
     let mut failed_refits = Vec::new();
@@ -779,13 +848,16 @@ pub fn diagnose(
             time_limited |= f.time_limited;
         }
         let s2 = spec.with(e);
-        let on_current = e == Effect::AmplifierDynamics && current_measured;
-        let (base_fit_s, base_score_s, r2) = match (&static_amp, on_current) {
-            (Some(amp), true) => (
+        let channel = Channel::judging(e, current_measured, flux_measured);
+        let (base_fit_s, base_score_s, r2) = match (&static_amp, channel) {
+            (Some(amp), Channel::Current) => (
                 amp.scores(fit_files, &fit_skip),
                 amp.scores(score_files, &score_skip),
                 amp.lag_evidence(fit_files, &fit_skip),
             ),
+            (_, Channel::FluxDensity) => {
+                (base_fit_flux.clone(), base_score_flux.clone(), evidence(e, &flux_sigs))
+            }
             _ => (base_fit_disp.clone(), base_score_disp.clone(), evidence(e, &sigs)),
         };
         let n_eff: f64 = base_fit_s.iter().map(|s| effective_samples(&s.residual)).sum();
@@ -801,11 +873,7 @@ pub fn diagnose(
         }
         let cand_scores = |files: &[Recording], skip: &[usize]| -> Result<Vec<Scored>> {
             let f = refit.as_ref().expect("checked");
-            if on_current {
-                channel_scores(s2, &f.params, files, skip, Channel::Current)
-            } else {
-                displacement_scores(s2, &f.params, files, skip)
-            }
+            channel_scores(s2, &f.params, files, skip, channel)
         };
         let after_score_s = match &refit {
             Some(_) => cand_scores(score_files, &score_skip)?,
@@ -815,7 +883,8 @@ pub fn diagnose(
         let after_c = mean(after_score_s.iter().map(|s| s.nrmse));
         let files_improved =
             base_score_s.iter().zip(&after_score_s).filter(|(b, a)| a.nrmse < b.nrmse).count();
-        if let Some(f) = refit.as_ref().filter(|_| !val_files.is_empty() && !on_current) {
+        if let Some(f) = refit.as_ref().filter(|_| !val_files.is_empty() && channel == Channel::Displacement)
+        {
             let fit_nrmse = (base.fit.mean_nrmse(), f.fit.mean_nrmse());
             let scored: Vec<(f64, f64)> =
                 base_score_s.iter().zip(&after_score_s).map(|(b, a)| (b.nrmse, a.nrmse)).collect();
@@ -840,12 +909,15 @@ pub fn diagnose(
         let delta_bic =
             information_gain(&base_score_s, &after_score_s) - added as f64 * n_eff_scored.max(2.0).ln();
         let cut = if before_c > 0.0 && after_c > 0.0 { before_c / after_c } else { 1.0 };
-        let channel = if on_current { "current" } else { "displacement" };
         let evidence = format!(
             "{} explains {:.0} % of the residual variance (significant above {:.1} % at N_eff = {:.0}); adding it and \
              refitting takes the {} {channel} NRMSE from {:.2} % to {:.2} % ({:.1}× {}), lower on {files_improved} of {} \
              files; ΔBIC {:+.1}",
-            if on_current { "the amplifier lag −di/dt of command → current" } else { signature_words(e.info().signature) },
+            match channel {
+                Channel::Current => "the amplifier lag −di/dt of command → current",
+                Channel::FluxDensity => flux_signature_words(e.info().signature),
+                Channel::Displacement => signature_words(e.info().signature),
+            },
             r2 * 100.0,
             100.0 * CHI2_1_95 / n_eff.max(1.0),
             n_eff,
@@ -856,11 +928,12 @@ pub fn diagnose(
             if cut >= 1.0 { "lower" } else { "higher" },
             after_score_s.len(),
             delta_bic,
+            channel = channel.name(),
         );
         let score = (0.5 * r2 + 0.5 * (1.0 - after_c / before_c).max(0.0)).clamp(0.0, 1.0);
         candidates.push(Candidate {
             effect: e,
-            channel,
+            channel: channel.name(),
             score,
             evidence,
             nrmse_before: before_c,
@@ -977,6 +1050,12 @@ pub fn diagnose(
     {
         Some(c) if c.channel == "displacement" => {
             (spec.with(c.effect), c.refit.as_ref().map_or(base.params, |f| f.params), c.nrmse_after)
+        }
+        // Judged on the flux density: what is left is reported on the displacement.
+        Some(c) if c.channel == "flux_density" => {
+            let p = c.refit.as_ref().map_or(base.params, |f| f.params);
+            let val = displacement_scores(spec.with(c.effect), &p, score_files, &score_skip)?;
+            (spec.with(c.effect), p, mean(val.iter().map(|s| s.nrmse)))
         }
         _ => (spec, base.params, before),
     };

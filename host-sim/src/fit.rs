@@ -1,7 +1,7 @@
 //! Identification: one parameter set for a model spec from one or more recordings jointly, a
 //! displacement offset per file (closed form: the mean residual), cost = mean over files of
 //! NRMSE² (plus the current channel's when the model has an amplifier and the file measured the
-//! current). With a hysteretic law each file also starts from its own initial magnetic state
+//! current, and the flux density's when a search coil measured it: [`flux_fit`]). With a hysteretic law each file also starts from its own initial magnetic state
 //! ([`InitialState`]), a nuisance parameter like the offset. The free parameters and their
 //! bounds come from the effect registry
 //! ([`crate::params`]); the search is the workbench's optimiser ([`crate::search`]): a particle
@@ -102,9 +102,10 @@ pub struct Simulation {
     pub displacement_um: Vec<f64>,
     /// Model coil current [A].
     pub current_a: Vec<f64>,
-    /// Field in the rod [A/m].
+    /// Field in the rod [A/m] (every run of a file with `flux_density_T`; otherwise only
+    /// [`simulate`]'s).
     pub field_a_per_m: Vec<f64>,
-    /// Model magnetization [A/m].
+    /// Model magnetization [A/m] (as the field).
     pub magnetization_a_per_m: Vec<f64>,
     /// The pre-history the run started from: the field excursion above the bias [A/m] (0:
     /// demagnetised, then the bias), estimated for the file unless given.
@@ -185,7 +186,8 @@ pub fn simulate_drive(
     Ok((run_model(spec, params, &prep, false)?, prep.drive))
 }
 
-/// [`simulate`]; `all_channels: false` keeps only displacement and current (the fit's inner loop).
+/// [`simulate`]; `all_channels: false` keeps only the channels the file measured (the fit's inner
+/// loop: displacement and current, and field and magnetization for a measured flux density).
 pub fn run_model(
     spec: ModelSpec,
     params: &ActuatorParams,
@@ -197,6 +199,7 @@ pub fn run_model(
     p.dt_s = prep.dt_s as f32;
     let model = Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
     let n = rec.len();
+    let all_channels = all_channels || rec.flux_density_t.is_some();
     // Borrowed from the recording (this runs at every fit evaluation); only the ideal amplifier's
     // scaled command is a new vector.
     let input: std::borrow::Cow<[f64]> = match drive {
@@ -241,6 +244,7 @@ pub fn run_model(
         h = o.field_a_per_m as f64;
         m = o.magnetization_a_per_m as f64;
     }
+    // Sample 0 is the rest state's: its magnetization is the first step's (the field is the bias).
     if let Some(first) = out.magnetization_a_per_m.get(1).copied() {
         out.magnetization_a_per_m[0] = first;
     }
@@ -332,6 +336,8 @@ pub struct FileScore {
     pub nrmse: f64,
     /// NRMSE of the current channel, when the model predicts a measured current.
     pub nrmse_current: Option<f64>,
+    /// The flux density's fit, when the file measured it.
+    pub flux: Option<FluxFit>,
     /// Fitted displacement offset [µm].
     pub offset_um: f64,
     /// The initial state's excursion [A/m] (`None`: a law without memory).
@@ -345,6 +351,53 @@ pub fn nrmse(measured: &[f64], model: &[f64]) -> f64 {
     mse.sqrt() / (hi - lo).max(1e-12)
 }
 
+/// Vacuum permeability μ0 [T m/A].
+pub const MU0: f64 = 1.256_637_062_12e-6;
+
+/// Widest ratio of a search coil's magnetization scale to the parameter set's M_s: beyond 10×
+/// either way the column is in the wrong unit or is not the rod's flux, not a calibration.
+pub const FLUX_SCALE_RANGE: (f64, f64) = (0.1, 10.0);
+
+/// How the model's magnetization matches a measured flux density.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FluxFit {
+    /// NRMSE of the flux density.
+    pub nrmse: f64,
+    /// The magnetization scale g of B = μ0 (H + g M) + c: how much larger the rod's
+    /// magnetization swing is than the model's (the M_s ratio where the law's normalised shape is
+    /// right; also the coil's area against the rod's).
+    pub scale: f64,
+    /// The integrator's zero c [T].
+    pub offset_t: f64,
+}
+
+/// The search coil's flux density as the model explains it: B = μ0 (H + g M) + c, the
+/// magnetization scale g and the integrator's zero c by linear least squares (variable
+/// projection, like the displacement's offset and λ_s). Displacement fits hold M_s as given
+/// (λ_s carries the strain's scale, and the strain only sees M/M_s), so the flux's magnitude is
+/// left to g and the channel judges the magnetization's shape and timing. Returns the fit and the
+/// model's flux density [T] sample by sample.
+pub fn flux_fit(measured: &[f64], field: &[f64], magnetization: &[f64]) -> (FluxFit, Vec<f64>) {
+    let n = measured.len().max(1) as f64;
+    // Regress y = B − μ0 H on x = μ0 M with an intercept.
+    let y = |k: usize| measured[k] - MU0 * field[k];
+    let x = |k: usize| MU0 * magnetization[k];
+    let (my, mx) = ((0..measured.len()).map(y).sum::<f64>() / n, (0..measured.len()).map(x).sum::<f64>() / n);
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for k in 0..measured.len() {
+        sxy += (x(k) - mx) * (y(k) - my);
+        sxx += (x(k) - mx) * (x(k) - mx);
+    }
+    let scale = if sxx > 0.0 && sxy.is_finite() {
+        (sxy / sxx).clamp(FLUX_SCALE_RANGE.0, FLUX_SCALE_RANGE.1)
+    } else {
+        1.0
+    };
+    let offset_t = my - scale * mx;
+    let model: Vec<f64> = (0..measured.len()).map(|k| MU0 * field[k] + scale * x(k) + offset_t).collect();
+    (FluxFit { nrmse: nrmse(measured, &model), scale, offset_t }, model)
+}
+
 /// Scores a simulation against its file.
 pub fn score(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> FileScore {
     let meas = rec.displacement_um.as_deref().unwrap_or_default();
@@ -354,10 +407,13 @@ pub fn score(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> FileScore {
         (Some(i), true) => Some(nrmse(i, &sim.current_a)),
         _ => None,
     };
+    let flux =
+        rec.flux_density_t.as_deref().map(|b| flux_fit(b, &sim.field_a_per_m, &sim.magnetization_a_per_m).0);
     let memory = has_memory(spec);
     FileScore {
         nrmse: nrmse(meas, &shifted),
         nrmse_current,
+        flux,
         offset_um: offset,
         initial_excursion_a_per_m: memory.then_some(sim.initial_excursion_a_per_m),
     }
@@ -381,10 +437,8 @@ impl Evaluation {
         let mut sum = 0.0;
         let mut n = 0.0f64;
         for f in &self.files {
-            sum += f.nrmse * f.nrmse;
-            n += 1.0;
-            if let Some(c) = f.nrmse_current {
-                sum += c * c;
+            for e in [Some(f.nrmse), f.nrmse_current, f.flux.map(|b| b.nrmse)].into_iter().flatten() {
+                sum += e * e;
                 n += 1.0;
             }
         }
@@ -554,15 +608,17 @@ fn evaluate_prepared(spec: ModelSpec, params: &ActuatorParams, files: &[Prepared
 }
 
 /// The residuals the fit's cost is made of, one block per file and channel (displacement with
-/// its offset re-solved, flagged `true`, then the current where [`score`] scores it), each
-/// scaled by 1/(range·√n) so that the sum of squares over a block is its NRMSE²: the cost
-/// ([`Evaluation::cost`]) is the mean of the blocks' sums of squares.
+/// its offset re-solved, then the current and the flux density where [`score`] scores them),
+/// each with the number of unknowns solved in closed form for it (displacement 1: the offset;
+/// flux density 2: scale and zero) and scaled by 1/(range·√n) so that the sum of squares over a
+/// block is its NRMSE²: the cost ([`Evaluation::cost`]) is the mean of the blocks' sums of
+/// squares.
 pub fn residual_blocks(
     spec: ModelSpec,
     params: &ActuatorParams,
     files: &[Prepared],
-) -> Result<Vec<(bool, Vec<f64>)>> {
-    let per_file: Vec<Vec<(bool, Vec<f64>)>> = files
+) -> Result<Vec<(usize, Vec<f64>)>> {
+    let per_file: Vec<Vec<(usize, Vec<f64>)>> = files
         .par_iter()
         .map(|prep| Ok(blocks_of(spec, prep.rec, &run_model(spec, params, prep, false)?)))
         .collect::<Result<Vec<_>>>()?;
@@ -570,7 +626,7 @@ pub fn residual_blocks(
 }
 
 /// [`residual_blocks`] of one file's run.
-fn blocks_of(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> Vec<(bool, Vec<f64>)> {
+fn blocks_of(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> Vec<(usize, Vec<f64>)> {
     fn scaled(measured: &[f64], model: impl Iterator<Item = f64>) -> Vec<f64> {
         let (lo, hi) = measured.iter().fold((f64::MAX, f64::MIN), |(l, h), &v| (l.min(v), h.max(v)));
         let w = 1.0 / ((hi - lo).max(1e-12) * (measured.len() as f64).sqrt());
@@ -578,10 +634,14 @@ fn blocks_of(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> Vec<(bool, V
     }
     let s = score(spec, rec, sim);
     let meas = rec.displacement_um.as_deref().unwrap_or_default();
-    let mut blocks = vec![(true, scaled(meas, sim.displacement_um.iter().map(|y| y + s.offset_um)))];
+    let mut blocks = vec![(1, scaled(meas, sim.displacement_um.iter().map(|y| y + s.offset_um)))];
     if s.nrmse_current.is_some() {
         let i = rec.current_a.as_deref().unwrap_or_default();
-        blocks.push((false, scaled(i, sim.current_a.iter().copied())));
+        blocks.push((0, scaled(i, sim.current_a.iter().copied())));
+    }
+    if let Some(b) = rec.flux_density_t.as_deref() {
+        let (_, model) = flux_fit(b, &sim.field_a_per_m, &sim.magnetization_a_per_m);
+        blocks.push((2, scaled(b, model.into_iter())));
     }
     blocks
 }
@@ -1132,6 +1192,16 @@ mod tests {
             })
             .collect();
         assert!(files.iter().all(|r| r.current_a.is_some()), "the rig logs the current");
+        // A search coil on the second file: its block enters the cost like the others.
+        let mut files = files;
+        let sim = simulate(spec, &truth, &files[1]).unwrap();
+        files[1].flux_density_t = Some(
+            sim.field_a_per_m
+                .iter()
+                .zip(&sim.magnetization_a_per_m)
+                .map(|(h, m)| MU0 * (h + 1.1 * m) - 0.4)
+                .collect(),
+        );
         let prepared = prepare(spec, &files).unwrap();
         let mut off = truth;
         off.ja.a_a_per_m *= 1.3;
@@ -1143,5 +1213,30 @@ mod tests {
             assert!(cost > 1e-6, "the point is off the truth (cost {cost})");
             assert!((squares - cost).abs() <= 1e-9 * cost, "λ_s {lambda:?}: Σr² = {squares}, cost = {cost}");
         }
+        let blocks = residual_blocks(spec, &off, &prepared).unwrap();
+        assert_eq!(
+            blocks.iter().map(|b| b.0).collect::<Vec<_>>(),
+            [1, 0, 1, 0, 2],
+            "blocks and their unknowns"
+        );
+    }
+
+    /// The flux density's scale and zero come out in closed form: exact for a flux the model
+    /// explains up to them, the NRMSE of what it does not explain otherwise.
+    #[test]
+    fn the_flux_fit_solves_the_magnetization_scale_and_the_integrators_zero() {
+        let h: Vec<f64> = (0..400).map(|k| 20e3 + 15e3 * (k as f64 * 0.05).sin()).collect();
+        let m: Vec<f64> = h.iter().map(|h| 7e5 * (h / 9e3).tanh()).collect();
+        let b: Vec<f64> = h.iter().zip(&m).map(|(h, m)| MU0 * (h + 0.85 * m) + 0.12).collect();
+        let (f, model) = flux_fit(&b, &h, &m);
+        assert!((f.scale - 0.85).abs() < 1e-9 && (f.offset_t - 0.12).abs() < 1e-9, "{f:?}");
+        assert!(f.nrmse < 1e-9 && model.iter().zip(&b).all(|(a, b)| (a - b).abs() < 1e-9));
+        // What the model lacks stays in the residual: M three samples late.
+        let late: Vec<f64> = (0..400usize).map(|k| m[k.saturating_sub(3)]).collect();
+        let (g, _) = flux_fit(&b, &h, &late);
+        assert!(g.nrmse > 1e-3, "{g:?}");
+        // A flux that does not follow M at all: the scale stops at its range, never negative.
+        let upside_down: Vec<f64> = b.iter().map(|v| -v).collect();
+        assert_eq!(flux_fit(&upside_down, &h, &m).0.scale, FLUX_SCALE_RANGE.0);
     }
 }

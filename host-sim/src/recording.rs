@@ -12,8 +12,8 @@ use crate::files::{echo, output_dir, partial_file, persist, Input};
 use crate::located;
 
 /// The recognised columns, in the order the workbench writes them.
-pub const COLUMNS: [&str; 6] =
-    ["time_s", "command_V", "current_A", "displacement_um", "force_N", "temperature_C"];
+pub const COLUMNS: [&str; 7] =
+    ["time_s", "command_V", "current_A", "displacement_um", "force_N", "temperature_C", "flux_density_T"];
 
 /// What [`Recording::from_reader_with`] read.
 #[derive(Debug, Clone)]
@@ -46,6 +46,9 @@ pub struct Recording {
     pub force_n: Option<Vec<f64>>,
     /// Coil or rod temperature [°C].
     pub temperature_c: Option<Vec<f64>>,
+    /// Mean flux density of the rod [T] from a search coil around it (arbitrary offset: an
+    /// integrator's zero).
+    pub flux_density_t: Option<Vec<f64>>,
 }
 
 impl Recording {
@@ -59,6 +62,7 @@ impl Recording {
             displacement_um: None,
             force_n: None,
             temperature_c: None,
+            flux_density_t: None,
         }
     }
 
@@ -84,6 +88,7 @@ impl Recording {
             displacement_um: cut(&self.displacement_um),
             force_n: cut(&self.force_n),
             temperature_c: cut(&self.temperature_c),
+            flux_density_t: cut(&self.flux_density_t),
         }
     }
 
@@ -106,6 +111,7 @@ impl Recording {
             "displacement_um" => self.displacement_um.as_ref(),
             "force_N" => self.force_n.as_ref(),
             "temperature_C" => self.temperature_c.as_ref(),
+            "flux_density_T" => self.flux_density_t.as_ref(),
             _ => None,
         }
     }
@@ -224,6 +230,7 @@ impl Recording {
             displacement_um: take(3, &mut cols),
             force_n: take(4, &mut cols),
             temperature_c: take(5, &mut cols),
+            flux_density_t: take(6, &mut cols),
             time_s: std::mem::take(&mut cols[0]),
         };
         if r.len() < 3 {
@@ -273,6 +280,7 @@ impl Recording {
             displacement_um: interp(&self.displacement_um),
             force_n: interp(&self.force_n),
             temperature_c: interp(&self.temperature_c),
+            flux_density_t: interp(&self.flux_density_t),
         })
     }
 
@@ -354,7 +362,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// Largest plausible magnitude per column (same order as [`COLUMNS`]); a value beyond is a unit
 /// or export mistake, not a measurement. Time allows Unix-epoch seconds.
 const PLAUSIBLE: [(f64, &str); COLUMNS.len()] =
-    [(1e10, "s"), (1e4, "V"), (1e3, "A"), (1e6, "µm"), (1e7, "N"), (1e4, "°C")];
+    [(1e10, "s"), (1e4, "V"), (1e3, "A"), (1e6, "µm"), (1e7, "N"), (1e4, "°C"), (1e2, "T")];
 
 /// One cell: a finite number within the column's plausible range (after conversion from a
 /// mapped column's unit).

@@ -95,28 +95,50 @@ fn esc(s: &str) -> String {
 
 /// Loop chart (drive → displacement) of one file: measured and each model's.
 pub fn loop_chart(rec: &Recording, models: &[(ModelSpec, ActuatorParams)]) -> Result<Chart> {
+    let meas = rec.displacement_um.as_deref().unwrap_or_default();
+    drive_loop(rec, models, meas, "loop", "displacement [µm]", |spec, sim| {
+        let off = crate::fit::score(spec, rec, sim).offset_um;
+        sim.displacement_um.iter().map(|y| y + off).collect()
+    })
+}
+
+/// The flux-density loop of a recording with a search coil: measured B and each model's
+/// μ0 (H + g M) + c ([`crate::fit::flux_fit`]) against the drive; `None` without the column.
+pub fn flux_loop_chart(rec: &Recording, models: &[(ModelSpec, ActuatorParams)]) -> Result<Option<Chart>> {
+    let Some(b) = rec.flux_density_t.as_deref() else { return Ok(None) };
+    let chart =
+        drive_loop(rec, models, b, "flux-density loop", "flux density (zero arbitrary) [T]", |_, sim| {
+            crate::fit::flux_fit(b, &sim.field_a_per_m, &sim.magnetization_a_per_m).1
+        })?;
+    Ok(Some(chart))
+}
+
+/// A channel against the drive (the current, else the command): the measured values and each
+/// model's (`model` maps a run of the model to the channel).
+fn drive_loop(
+    rec: &Recording,
+    models: &[(ModelSpec, ActuatorParams)],
+    measured: &[f64],
+    what: &str,
+    y_label: &str,
+    model: impl Fn(ModelSpec, &Simulation) -> Vec<f64>,
+) -> Result<Chart> {
     let (drive, unit) = match (&rec.current_a, &rec.command_v) {
         (Some(i), _) => (i.clone(), "coil current [A]"),
         (None, Some(u)) => (u.clone(), "command [V]"),
         _ => (vec![0.0; rec.len()], "drive"),
     };
-    let meas = rec.displacement_um.clone().unwrap_or_default();
-    let mut series = vec![Series {
-        label: "measured".into(),
-        points: plots::thin(&drive.iter().copied().zip(meas.iter().copied()).collect::<Vec<_>>(), 4000),
-        color: 0,
-    }];
+    let against_drive =
+        |y: &[f64]| plots::thin(&drive.iter().copied().zip(y.iter().copied()).collect::<Vec<_>>(), 4000);
+    let mut series = vec![Series { label: "measured".into(), points: against_drive(measured), color: 0 }];
     for (k, (spec, params)) in models.iter().enumerate() {
-        let sim = simulate(*spec, params, rec)?;
-        let off = crate::fit::score(*spec, rec, &sim).offset_um;
-        let pts: Vec<(f64, f64)> =
-            drive.iter().zip(&sim.displacement_um).map(|(x, y)| (*x, y + off)).collect();
-        series.push(Series { label: format!("model {spec}"), points: plots::thin(&pts, 4000), color: k + 1 });
+        let y = model(*spec, &simulate(*spec, params, rec)?);
+        series.push(Series { label: format!("model {spec}"), points: against_drive(&y), color: k + 1 });
     }
     Ok(Chart {
-        title: format!("{} — loop", rec.name),
+        title: format!("{} — {what}", rec.name),
         x_label: unit.into(),
-        y_label: "displacement [µm]".into(),
+        y_label: y_label.into(),
         series,
     })
 }

@@ -26,6 +26,10 @@ pub struct FileScoreRow {
     /// Fitted displacement offset [µm] (displacement rows).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub offset_um: Option<f64>,
+    /// Flux-density rows of recordings: the magnetization scale g of B = μ0 (H + g M) + c (how much
+    /// larger the rod's magnetization swing is than the model's).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub flux_scale: Option<f64>,
     /// The estimated initial magnetic state: the pre-history field excursion above the bias
     /// [A/m] (displacement rows of hysteretic models).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -53,12 +57,41 @@ impl FileScoreRow {
             channel,
             nrmse,
             offset_um: None,
+            flux_scale: None,
             initial_excursion_a_per_m: None,
             plots: None,
             measured: None,
             model: None,
             analysis: None,
         }
+    }
+}
+
+impl FileScoreRow {
+    /// Whether this row is its file's first (a recording's displacement row, a loop file's only
+    /// row): what counts files.
+    pub fn is_first_of_file(&self) -> bool {
+        self.channel != "current" && self.flux_scale.is_none()
+    }
+
+    /// A recording's rows: displacement (with its offset and initial state), then the current
+    /// and the flux density where the model is scored on them.
+    pub fn for_recording(file: &str, split: Option<&'static str>, s: &crate::fit::FileScore) -> Vec<Self> {
+        let mut rows = vec![FileScoreRow {
+            offset_um: Some(s.offset_um),
+            initial_excursion_a_per_m: s.initial_excursion_a_per_m,
+            ..FileScoreRow::new(file, split, "displacement", s.nrmse)
+        }];
+        if let Some(c) = s.nrmse_current {
+            rows.push(FileScoreRow::new(file, split, "current", c));
+        }
+        if let Some(b) = s.flux {
+            rows.push(FileScoreRow {
+                flux_scale: Some(b.scale),
+                ..FileScoreRow::new(file, split, "flux_density", b.nrmse)
+            });
+        }
+        rows
     }
 }
 
@@ -228,7 +261,7 @@ pub struct FitText {
 
 impl fmt::Display for FitSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let fitted = self.files.iter().filter(|r| r.split == Some("fit") && r.channel != "current").count();
+        let fitted = self.files.iter().filter(|r| r.split == Some("fit") && r.is_first_of_file()).count();
         let (what, width) = if self.text.loops { ("magnetization model", 20) } else { ("model", 40) };
         writeln!(
             f,
@@ -354,7 +387,7 @@ impl fmt::Display for CompareSummary {
                 }
             }
         }
-        let n = self.files.iter().filter(|r| r.channel != "current").count();
+        let n = self.files.iter().filter(|r| r.is_first_of_file()).count();
         write!(f, "mean NRMSE {:.3} % over {n} file(s), model `{}`", self.nrmse * 100.0, self.model)
     }
 }

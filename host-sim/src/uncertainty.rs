@@ -247,14 +247,15 @@ pub fn analyse(spec: ModelSpec, res: &FitResult, files: &[Recording]) -> Result<
     };
     let mut meat = DMatrix::<f64>::zeros(p, p);
     let (mut start, mut effective, mut num, mut den) = (0, 0.0, 0.0, 0.0);
-    for (has_offset, b) in &blocks {
+    for (solved, b) in &blocks {
         let nb = b.len();
         let (lag, ss) = lag1(b);
         num += lag;
         den += ss;
         let rho = if ss > 0.0 { lag / ss } else { 0.0 };
-        // Degrees of freedom: the displacement block's offset, and its share of the parameters.
-        let dof = if *has_offset { 1.0 } else { 0.0 } + p as f64 * nb as f64 / n as f64;
+        // Degrees of freedom: the block's closed-form unknowns (offset, flux scale and zero) and
+        // its share of the parameters.
+        let dof = *solved as f64 + p as f64 * nb as f64 / n as f64;
         let s2 = ss / (nb as f64 - dof).max(1.0);
         effective += nb as f64 / inflation(rho);
         let jb = js.rows(start, nb);

@@ -241,7 +241,7 @@ fn diagnose_compares_the_ja_forms_on_request() {
 /// `--laws` refits the given structure with the other hysteresis law (`ja` ↔ `preisach`, the
 /// rest kept) and says in a finding whether it fits clearly better; a structure without a
 /// hysteresis law is refused with the reason. Plumbing only: this rig is our own J–A plant, so
-/// Preisach must not be named here (the held-out rig's Preisach law is where it is, README).
+/// Preisach must not be named here (the held-out rig's Preisach law is where it is, docs/validation.md).
 #[test]
 fn diagnose_compares_the_hysteresis_laws_on_request() {
     let dir = tempfile::tempdir().unwrap();
@@ -396,4 +396,109 @@ fn loop_files_fit_the_magnetization_stage_and_compare_reads_coercivity() {
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("bad.csv:4:2") && err.contains("`x` is not a number"), "{err}");
+}
+
+/// A recording of the independent rig (SIMULATED, tests/reference-rig) with a search coil on the
+/// rod: `time_s, command_V, current_A, displacement_um, temperature_C, flux_density_T`.
+fn coil_recording(path: &std::path::Path, wave: refrig::Waveform, seed: u64) {
+    let rig = refrig::Rig {
+        duration_s: 0.12,
+        seed,
+        drive: refrig::Drive { waveform: wave, offset_v: 0.0 },
+        search_coil: Some(refrig::SearchCoil::LAB),
+        ..refrig::Rig::default()
+    };
+    let rec = rig.simulate().expect("rig");
+    rec.write_csv(std::fs::File::create(path).unwrap(), false).unwrap();
+}
+
+#[test]
+fn a_search_coils_flux_density_is_a_scored_channel_of_fit_compare_and_diagnose() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let sine = |f| refrig::Waveform::Sine { amplitude_v: 1.2, frequency_hz: f, phase_rad: 0.0 };
+    coil_recording(dir.path().join("a.csv").as_path(), sine(30.0), 1);
+    let chirp = refrig::Waveform::Chirp {
+        amplitude_v: 1.0,
+        f_start_hz: 30.0,
+        f_end_hz: 1500.0,
+        duration_s: 0.12,
+        logarithmic: true,
+    };
+    coil_recording(dir.path().join("b.csv").as_path(), chirp, 2);
+    coil_recording(dir.path().join("v.csv").as_path(), sine(60.0), 3);
+    let params = p("p.toml");
+    let f = json(&gma(&[
+        "fit",
+        "--model",
+        "ja+eddy+mech",
+        "--json",
+        "--val",
+        &p("v.csv"),
+        "--params-out",
+        &params,
+        &p("a.csv"),
+        &p("b.csv"),
+    ]));
+    let rows = f["files"].as_array().unwrap();
+    let flux: Vec<&serde_json::Value> = rows.iter().filter(|r| r["channel"] == "flux_density").collect();
+    assert_eq!(rows.len(), 6, "a displacement and a flux-density row per file: {f}");
+    assert_eq!(flux.len(), 3, "{f}");
+    for r in &flux {
+        // The model's magnetization and the rig's are of one order (rig M_s 760 kA/m, the
+        // built-in parameter file's 600 kA/m; the fitted law's swing sets the rest).
+        let g = r["flux_scale"].as_f64().unwrap();
+        assert!((0.5..2.0).contains(&g), "flux scale {g}: {r}");
+        assert!(r["nrmse"].as_f64().unwrap() < 0.05, "{r}");
+    }
+    // compare scores the same channel and writes it beside the displacement.
+    let table = p("ts.csv");
+    let c = json(&gma(&[
+        "compare",
+        "--model",
+        "ja+eddy+mech",
+        "--params",
+        &params,
+        "--json",
+        "--out-dir",
+        &p("plots"),
+        "--out-csv",
+        &table,
+        &p("v.csv"),
+    ]));
+    let val = flux.iter().find(|r| r["split"] == "val").unwrap();
+    let cmp =
+        c["files"].as_array().unwrap().iter().find(|r| r["channel"] == "flux_density").cloned().unwrap();
+    assert!((cmp["nrmse"].as_f64().unwrap() - val["nrmse"].as_f64().unwrap()).abs() < 1e-6, "{cmp} vs {val}");
+    let svg = std::fs::read_to_string(dir.path().join("plots").join("v-flux-loop.svg")).unwrap();
+    assert!(svg.starts_with("<svg") && svg.contains("polyline"), "the flux-density loop is drawn");
+    let text = std::fs::read_to_string(&table).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "file,time_s,measured_um,model_um,residual_um,measured_flux_T,model_flux_T,residual_flux_T"
+    );
+    for line in lines.take(200) {
+        let v: Vec<f64> = line.split(',').skip(5).map(|x| x.parse().unwrap()).collect();
+        assert!((v[0] - v[1] - v[2]).abs() < 1e-12, "{line}");
+    }
+    // diagnose judges the rod's effects on the flux density, the rest on the displacement.
+    let d = json(&gma(&[
+        "diagnose",
+        "--model",
+        "ja+mech",
+        "--json",
+        "--val",
+        &p("v.csv"),
+        &p("a.csv"),
+        &p("b.csv"),
+    ]));
+    for c in d["candidates"].as_array().unwrap() {
+        let expected = match c["effect"].as_str().unwrap() {
+            "eddy_current" | "magnetic_aftereffect" => "flux_density",
+            "amplifier_dynamics" => "current",
+            _ => "displacement",
+        };
+        assert_eq!(c["channel"], expected, "{c}");
+    }
 }

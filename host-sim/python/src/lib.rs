@@ -167,6 +167,7 @@ fn recording_dict<'py>(py: Python<'py>, r: &Recording) -> PyResult<Bound<'py, Py
         r.displacement_um.as_ref(),
         r.force_n.as_ref(),
         r.temperature_c.as_ref(),
+        r.flux_density_t.as_ref(),
     ];
     for (name, col) in COLUMNS.iter().zip(cols) {
         if let Some(c) = col {

@@ -102,7 +102,7 @@ pub fn run(a: &CompareArgs) -> Result<()> {
 }
 
 /// The plots of one recording, by file-name suffix.
-const PLOTS: [&str; 6] = ["loop", "time", "residual", "correlation", "spectrum", "bode"];
+const PLOTS: [&str; 7] = ["loop", "time", "residual", "correlation", "spectrum", "bode", "flux-loop"];
 
 fn plot_path(a: &CompareArgs, stem: &str, kind: &str) -> PathBuf {
     a.out_dir.join(format!("{stem}-{kind}.{}", a.format))
@@ -128,8 +128,14 @@ fn compare_recordings(
         Some(path) => Some(csv::Writer::from_writer(partial_file(output_dir(path))?)),
         None => None,
     };
+    // Recordings with a search coil add its flux density (cells empty for the others).
+    let any_flux = recs.iter().any(|r| r.flux_density_t.is_some());
     if let Some(w) = &mut csv {
-        w.write_record(["file", "time_s", "measured_um", "model_um", "residual_um"])?;
+        let mut header = vec!["file", "time_s", "measured_um", "model_um", "residual_um"];
+        if any_flux {
+            header.extend(["measured_flux_T", "model_flux_T", "residual_flux_T"]);
+        }
+        w.write_record(header)?;
     }
     for (rec, stem) in recs.iter().zip(stems) {
         let sim = fit::simulate(spec, p, rec)?;
@@ -137,11 +143,15 @@ fn compare_recordings(
         total += sc.nrmse;
         let time = report::time_chart(rec, &sim, sc.offset_um, &spec.to_string());
         let mut written = Vec::new();
+        let flux_loop = report::flux_loop_chart(rec, &model)?.map(|c| ("flux-loop", c));
         for (kind, chart) in [
             ("loop", report::loop_chart(rec, &model)?),
             ("time", time),
             ("residual", report::residual_chart(rec, &model)?),
-        ] {
+        ]
+        .into_iter()
+        .chain(flux_loop)
+        {
             let out = plot_path(a, stem, kind);
             written.push(display(&out));
             charts.push((out, vec![chart], XScale::Linear));
@@ -165,18 +175,12 @@ fn compare_recordings(
             }
         };
         if let Some(w) = &mut csv {
-            write_time_series(w, rec, &sim, sc.offset_um)?;
+            write_time_series(w, rec, &sim, sc.offset_um, any_flux)?;
         }
-        rows.push(FileScoreRow {
-            offset_um: Some(sc.offset_um),
-            initial_excursion_a_per_m: sc.initial_excursion_a_per_m,
-            plots: Some(written),
-            analysis: summary,
-            ..FileScoreRow::new(&rec.name, None, "displacement", sc.nrmse)
-        });
-        if let Some(c) = sc.nrmse_current {
-            rows.push(FileScoreRow::new(&rec.name, None, "current", c));
-        }
+        let mut channels = FileScoreRow::for_recording(&rec.name, None, &sc);
+        channels[0].plots = Some(written);
+        channels[0].analysis = summary;
+        rows.extend(channels);
     }
     let summary = CompareSummary { model: spec.to_string(), nrmse: total / recs.len() as f64, files: rows };
     let table = match (&a.out_csv, csv) {
@@ -196,21 +200,28 @@ fn write_time_series(
     rec: &Recording,
     sim: &Simulation,
     offset_um: f64,
+    flux_columns: bool,
 ) -> Result<()> {
     let measured = rec.displacement_um.as_deref().unwrap_or_default();
-    for ((t, m), y) in rec.time_s.iter().zip(measured).zip(&sim.displacement_um) {
+    let flux = rec
+        .flux_density_t
+        .as_deref()
+        .map(|b| (b, fit::flux_fit(b, &sim.field_a_per_m, &sim.magnetization_a_per_m).1));
+    for (k, ((t, m), y)) in rec.time_s.iter().zip(measured).zip(&sim.displacement_um).enumerate() {
         let model = y + offset_um;
         let residual = m - model;
         if !(model.is_finite() && residual.is_finite()) {
             anyhow::bail!("{}: the model output at t = {t} s is not a finite number", rec.name);
         }
-        w.write_record([
-            rec.name.clone(),
-            t.to_string(),
-            m.to_string(),
-            model.to_string(),
-            residual.to_string(),
-        ])?;
+        let mut row =
+            vec![rec.name.clone(), t.to_string(), m.to_string(), model.to_string(), residual.to_string()];
+        if flux_columns {
+            match &flux {
+                Some((b, model)) => row.extend([b[k], model[k], b[k] - model[k]].map(|v| v.to_string())),
+                None => row.extend([String::new(), String::new(), String::new()]),
+            }
+        }
+        w.write_record(row)?;
     }
     Ok(())
 }

@@ -165,20 +165,10 @@ pub(crate) fn fit_recordings(
     Ok((summary, res.params, warnings))
 }
 
-/// The contract's per-file rows: displacement, and current where the model predicts it.
+/// The contract's per-file rows: displacement, and current and flux density where the model
+/// is scored on them.
 fn rows(split: &'static str, recs: &[Recording], scores: &[fit::FileScore]) -> Vec<FileScoreRow> {
-    let mut v = Vec::new();
-    for (r, s) in recs.iter().zip(scores) {
-        v.push(FileScoreRow {
-            offset_um: Some(s.offset_um),
-            initial_excursion_a_per_m: s.initial_excursion_a_per_m,
-            ..FileScoreRow::new(&r.name, Some(split), "displacement", s.nrmse)
-        });
-        if let Some(c) = s.nrmse_current {
-            v.push(FileScoreRow::new(&r.name, Some(split), "current", c));
-        }
-    }
-    v
+    recs.iter().zip(scores).flat_map(|(r, s)| FileScoreRow::for_recording(&r.name, Some(split), s)).collect()
 }
 
 /// The magnetization stage alone, on loop files.

@@ -241,6 +241,7 @@ fn run_on_drive(
         displacement_um: Some(displacement),
         force_n: None,
         temperature_c: None,
+        flux_density_t: None,
     };
     Ok((rec, drive))
 }
