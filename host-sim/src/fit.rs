@@ -1026,6 +1026,12 @@ fn fit_planned(
         }
         None => starts.iter().map(|&st| (st, false)).collect(),
     };
+    let mode_indices: Vec<usize> = free
+        .iter()
+        .enumerate()
+        .filter(|(_, f)| f.name() == MODE_FREQUENCY || f.name() == MODE_DAMPING)
+        .map(|(k, _)| k)
+        .collect();
     // Start points: the fixed parameters come from the first; each start's identified values
     // are clamped into the bounds.
     let bases: Vec<Start<ActuatorParams>> = starts
@@ -1045,7 +1051,9 @@ fn fit_planned(
                 Vec::new()
             };
             let values = free.iter().map(|f| (f.get)(&b)).chain(excursions).collect();
-            Ok(Start { values, context: b, always_refined })
+            // At the seen mode the simplex leaves the mode where the data put it.
+            let simplex_holds = if always_refined { mode_indices.clone() } else { Vec::new() };
+            Ok(Start { values, context: b, always_refined, simplex_holds })
         })
         .collect::<Result<Vec<_>>>()?;
     // Each start also as the model's own rest state (every file demagnetised): an estimate made
@@ -1055,6 +1063,7 @@ fn fit_planned(
             values: b.values[..d].iter().copied().chain(std::iter::repeat_n(0.0, n_excursions)).collect(),
             context: b.context,
             always_refined: b.always_refined,
+            simplex_holds: b.simplex_holds.clone(),
         });
         bases.iter().cloned().chain(rest).collect()
     } else {

@@ -157,13 +157,27 @@ pub struct Start<C> {
     /// more than its first cost says, e.g. a narrow mode read off the data beside parameters
     /// not yet fitted, whose shoulder costs more than a broad basin elsewhere.
     pub always_refined: bool,
+    /// Coordinates the simplex runs from this start leave where they are: a narrow valley's, e.g.
+    /// a lightly damped mode read off the data, which the simplex's first steps (a twentieth of
+    /// the unit cube: ×1.35 in a log-scaled frequency) would leave; least squares move them.
+    pub simplex_holds: Vec<usize>,
 }
 
 impl<C> Start<C> {
     /// A start that competes for the local search by its cost.
     pub fn new(values: Vec<f64>, context: C) -> Self {
-        Self { values, context, always_refined: false }
+        Self { values, context, always_refined: false, simplex_holds: Vec::new() }
     }
+}
+
+/// A point a local search runs from: its context, unit-cube coordinates, cost on all data, and
+/// the coordinates its simplex runs hold ([`Start::simplex_holds`]).
+#[derive(Clone)]
+struct Seed<C> {
+    context: C,
+    unit: Vec<f64>,
+    cost: f64,
+    simplex_holds: Vec<usize>,
 }
 
 /// What a search found.
@@ -330,38 +344,42 @@ pub fn minimize<C: Clone + Send + Sync>(
 
     // Candidates: the starts and the swarms' bests, ranked on all data.
     let to_unit = |v: &[f64]| -> Vec<f64> { bounds.iter().zip(v).map(|(b, &x)| b.to_unit(x)).collect() };
-    let mut seeds: Vec<(C, Vec<f64>, f64, bool)> = starts
+    let mut seeds: Vec<(Seed<C>, bool)> = starts
         .iter()
         .map(|s| {
-            let u = to_unit(&s.values);
-            let c = unit!(&s.context, Fidelity::Full).eval(&u);
-            (s.context.clone(), u, c, s.always_refined)
+            let unit = to_unit(&s.values);
+            let cost = unit!(&s.context, Fidelity::Full).eval(&unit);
+            let seed =
+                Seed { context: s.context.clone(), unit, cost, simplex_holds: s.simplex_holds.clone() };
+            (seed, s.always_refined)
         })
         .collect();
-    for u in swarm_bests {
-        let c = unit!(swarm_context, Fidelity::Full).eval(&u);
-        seeds.push((swarm_context.clone(), u, c, false));
+    for unit in swarm_bests {
+        let cost = unit!(swarm_context, Fidelity::Full).eval(&unit);
+        seeds.push((Seed { context: swarm_context.clone(), unit, cost, simplex_holds: Vec::new() }, false));
     }
     // The best always-refined start gets a local search of its own, to the end, beside the
     // plan's best others (it never takes their places: they are refined as without it).
-    let (mut pinned, mut seeds): (Vec<_>, Vec<_>) = seeds.into_iter().partition(|s| s.3);
-    seeds.sort_by(|a, b| a.2.total_cmp(&b.2));
-    seeds.truncate(plan.local_searches.max(1));
-    pinned.sort_by(|a, b| a.2.total_cmp(&b.2));
-    pinned.truncate(1);
+    let (pinned, seeds): (Vec<_>, Vec<_>) = seeds.into_iter().partition(|s| s.1);
+    let by_cost = |mut v: Vec<Seed<C>>, keep: usize| {
+        v.sort_by(|a, b| a.cost.total_cmp(&b.cost));
+        v.truncate(keep);
+        v
+    };
+    let seeds = by_cost(seeds.into_iter().map(|s| s.0).collect(), plan.local_searches.max(1));
     let regular = seeds.len();
-    let seeds: Vec<(C, Vec<f64>, f64)> =
-        seeds.into_iter().chain(pinned).map(|(c, u, cost, _)| (c, u, cost)).collect();
+    let seeds: Vec<Seed<C>> =
+        seeds.into_iter().chain(by_cost(pinned.into_iter().map(|s| s.0).collect(), 1)).collect();
 
     // Local: the plan's runs from each seed, in parallel; the last run only from the finalists.
     let nm_iters = ((plan.simplex_iters_per_dim * d as f64 * opts.effort).round() as u64).max(20);
     let max_jacobians = lm_jacobians(opts.effort);
-    let local = |seed: &(C, Vec<f64>, f64), runs: &[Local]| -> Result<(C, Vec<f64>, f64)> {
-        let (context, start, _) = seed;
+    let local = |seed: &Seed<C>, runs: &[Local]| -> Result<Seed<C>> {
+        let context = &seed.context;
         if runs.is_empty() {
             return Ok(seed.clone()); // its cost on all data is known
         }
-        let mut best = start.clone();
+        let mut best = seed.unit.clone();
         for &run in runs {
             if passed(opts.deadline) {
                 timed_out.store(true, Ordering::Relaxed);
@@ -383,10 +401,13 @@ pub fn minimize<C: Clone + Send + Sync>(
             };
             let problem = || unit!(context, fidelity);
             let mut simplex = vec![best.clone()];
-            for i in 0..d {
+            for i in (0..d).filter(|i| !seed.simplex_holds.contains(i)) {
                 let mut v = best.clone();
                 v[i] = if v[i] > 0.5 { v[i] - step } else { v[i] + step };
                 simplex.push(v);
+            }
+            if simplex.len() < 2 {
+                continue; // every coordinate held
             }
             let tol = (plan.tolerance.0 * problem().eval(&best)).max(plan.tolerance.1);
             let nm = NelderMead::new(simplex).with_sd_tolerance(tol).map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -397,26 +418,22 @@ pub fn minimize<C: Clone + Send + Sync>(
             note_time(res.state().get_termination_reason());
             best = res.state().get_best_param().cloned().unwrap_or(best);
         }
-        let c = unit!(context, Fidelity::Full).eval(&best);
-        Ok((context.clone(), best, c))
+        let cost = unit!(context, Fidelity::Full).eval(&best);
+        Ok(Seed { unit: best, cost, ..seed.clone() })
     };
     let (early, last) = plan.local.split_at(plan.local.len().saturating_sub(1));
-    let mut refined: Vec<(C, Vec<f64>, f64)> =
-        seeds.par_iter().map(|s| local(s, early)).collect::<Result<_>>()?;
+    let mut refined: Vec<Seed<C>> = seeds.par_iter().map(|s| local(s, early)).collect::<Result<_>>()?;
     // The finalists: the best of the plan's seeds, and the always-refined one whatever it ranks.
     let pinned = refined.split_off(regular);
-    refined.sort_by(|a, b| a.2.total_cmp(&b.2));
-    refined.truncate(plan.finalists.max(1));
+    let mut refined = by_cost(refined, plan.finalists.max(1));
     refined.extend(pinned);
-    let refined: Vec<(C, Vec<f64>, f64)> =
-        refined.par_iter().map(|s| local(s, last)).collect::<Result<_>>()?;
-    let (context, best, cost) =
-        refined.into_iter().min_by(|a, b| a.2.total_cmp(&b.2)).expect("at least one seed");
-    let values = bounds.iter().zip(&best).map(|(b, &x)| b.from_unit(x)).collect();
+    let refined: Vec<Seed<C>> = refined.par_iter().map(|s| local(s, last)).collect::<Result<_>>()?;
+    let found = refined.into_iter().min_by(|a, b| a.cost.total_cmp(&b.cost)).expect("at least one seed");
+    let values = bounds.iter().zip(&found.unit).map(|(b, &x)| b.from_unit(x)).collect();
     Ok(Found {
         best: values,
-        context,
-        cost,
+        context: found.context,
+        cost: found.cost,
         evaluations: evals.load(Ordering::Relaxed),
         time_limited: timed_out.load(Ordering::Relaxed),
     })
@@ -681,7 +698,12 @@ mod tests {
         };
         let progress = Progress::new("test", 0, false);
         let run = |pinned: bool| {
-            let start = |x: f64, always_refined| Start { values: vec![x], context: (), always_refined };
+            let start = |x: f64, always_refined| Start {
+                values: vec![x],
+                context: (),
+                always_refined,
+                simplex_holds: vec![],
+            };
             let starts = [start(0.2, false), start(0.3, false), start(0.77, pinned)];
             minimize(&bounds, &cost, None, &(), &starts, &plan, SearchOptions::default(), &progress).unwrap()
         };
@@ -690,5 +712,42 @@ mod tests {
         assert!((ranked_out.cost - 0.01).abs() < 1e-6, "{ranked_out:?}");
         let refined = run(true);
         assert!(refined.cost < 1e-8 && (refined.best[0] - 0.8137).abs() < 1e-4, "{refined:?}");
+    }
+
+    /// A start's held coordinate (a mode's frequency) is not moved by the simplex runs, while the
+    /// other coordinate travels to its optimum; least squares then polish both.
+    #[test]
+    fn a_starts_simplex_holds_keep_its_narrow_coordinate() {
+        let bounds = [Bound::lin("x", 0.0, 1.0), Bound::lin("f", 0.0, 1.0)];
+        let strayed = AtomicBool::new(false);
+        // Context `true`: the always-refined start's runs.
+        let res = |pinned: &bool, v: &[f64], _: Fidelity| {
+            if *pinned && (v[1] - 0.8137).abs() > 0.02 {
+                strayed.store(true, Ordering::Relaxed);
+            }
+            Some(vec![v[0] - 0.3, 100.0 * (v[1] - 0.8137)])
+        };
+        let cost =
+            |c: &bool, v: &[f64], f: Fidelity| res(c, v, f).map_or(1e9, |r| r.iter().map(|x| x * x).sum());
+        let plan = Plan {
+            particles: (1, 0),
+            swarm_iters: 2.0,
+            swarms: 0,
+            simplex_iters_per_dim: 40.0,
+            local_searches: 1,
+            finalists: 1,
+            local: &[Local::Simplex(0.05, Fidelity::Full), Local::LeastSquares(Fidelity::Full)],
+            tolerance: (1e-9, 1e-15),
+        };
+        let starts = [
+            Start::new(vec![0.5, 0.5], false),
+            Start { values: vec![0.8, 0.8137], context: true, always_refined: true, simplex_holds: vec![1] },
+        ];
+        let progress = Progress::new("test", 0, false);
+        let found =
+            minimize(&bounds, &cost, Some(&res), &false, &starts, &plan, SearchOptions::default(), &progress)
+                .unwrap();
+        assert!(found.cost < 1e-12, "{found:?}");
+        assert!(!strayed.load(Ordering::Relaxed), "a simplex step moved the start's held coordinate");
     }
 }
