@@ -271,6 +271,9 @@ pub fn html(
     h.push_str("<h2>Loops and residuals</h2>");
     for rec in val_files.iter().chain(fit_files) {
         let _ = write!(h, "<div class=fig>{}</div>", plots::svg(&loop_chart(rec, &models)?, (900, 420))?);
+        if let Some(flux) = flux_loop_chart(rec, &models)? {
+            let _ = write!(h, "<div class=fig>{}</div>", plots::svg(&flux, (900, 420))?);
+        }
         let _ = write!(h, "<div class=fig>{}</div>", plots::svg(&residual_chart(rec, &models)?, (900, 300))?);
     }
     if let Some(last) = models.last() {
