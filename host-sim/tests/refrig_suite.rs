@@ -3,11 +3,15 @@
 //! in turn: the rig has it (with every other effect on), the engineer's model lacks it, and
 //! `diagnose` must name it; the complete model must raise no alarm. Prints one table with the
 //! issue-13 targets beside the measured figures; it asserts only that the machinery runs
-//! (finite figures, one row per case), because the targets are not met yet (see the README).
+//! (finite figures, one row per case), because the targets are not met yet (docs/validation.md).
 //!
-//! Run (reduced: law `ja-bulk`, seed 1, about a minute once the recordings are cached):
+//! Every case is diagnosed twice, on the same recordings: with the command, current and
+//! displacement only, and with the rig's search coil as well (`flux_density_T`, on which the rod's
+//! effects are judged); `GMA_REFRIG_FLUX=off` or `only` runs one of the two.
+//!
+//! Run (reduced: law `ja-bulk`, seed 1, about two minutes once the recordings are cached):
 //!   cargo test --release -p host-sim --test refrig_suite hidden_effects -- --ignored --nocapture
-//! Full grid (4 laws × 2 seeds, about 10 minutes on 2 cores): `GMA_REFRIG_SUITE=full` in front
+//! Full grid (4 laws × 2 seeds, about 20 minutes on 2 cores): `GMA_REFRIG_SUITE=full` in front
 //! of the same command; one law on both seeds: `GMA_REFRIG_SUITE=preisach` (or `ja-original`,
 //! `ja-bulk`, `ja-inverse`).
 //! `ja_forms` (`diagnose --ja-variants` per J–A rig law) and `error_budget` are separate tests.
@@ -20,7 +24,7 @@ use host_sim::diagnose::diagnose;
 use host_sim::fit::FitOptions;
 use host_sim::recording::Recording;
 use model_core::{ActuatorParams, Effect, ModelSpec};
-use refrig::{Drive, JaVariant, Law, Rig, Waveform};
+use refrig::{Drive, JaVariant, Law, Rig, SearchCoil, Waveform};
 
 /// One excitation of the suite: waveform, offset [V], duration [s].
 struct Excitation {
@@ -127,7 +131,7 @@ fn recording(
     let dir = cache_dir();
     std::fs::create_dir_all(&dir).expect("cache folder");
     let file = dir.join(format!(
-        "{law_name}-{}-s{seed}-{}.csv",
+        "{law_name}-{}-s{seed}-{}-coil.csv",
         if hysteresis { "full" } else { "anhysteretic" },
         exc.label
     ));
@@ -140,6 +144,7 @@ fn recording(
         };
         rig.material.law = law;
         rig.effects.hysteresis = hysteresis;
+        rig.search_coil = Some(SearchCoil::LAB);
         let rec = rig.simulate().expect("refrig simulation");
         let tmp = file.with_extension("tmp");
         rec.write_csv(std::io::BufWriter::new(std::fs::File::create(&tmp).expect("cache file")), false)
@@ -147,6 +152,46 @@ fn recording(
         std::fs::rename(&tmp, &file).expect("cache rename");
     }
     Recording::read(&file).expect("read cached recording")
+}
+
+/// What the engineer recorded: the rig's files with or without the search coil's column.
+#[derive(Clone, Copy, PartialEq)]
+enum Channels {
+    /// Command, current and displacement (what most rigs record).
+    DisplacementOnly,
+    /// And the search coil's flux density.
+    WithSearchCoil,
+}
+
+impl Channels {
+    fn label(self) -> &'static str {
+        match self {
+            Channels::DisplacementOnly => "displacement only",
+            Channels::WithSearchCoil => "with a search coil",
+        }
+    }
+
+    fn apply(self, files: &[Recording]) -> Vec<Recording> {
+        files
+            .iter()
+            .cloned()
+            .map(|mut r| {
+                if self == Channels::DisplacementOnly {
+                    r.flux_density_t = None;
+                }
+                r
+            })
+            .collect()
+    }
+
+    /// Both, or the one `GMA_REFRIG_FLUX` names (`off`: displacement only; `only`: with the coil).
+    fn chosen() -> Vec<Channels> {
+        match std::env::var("GMA_REFRIG_FLUX").as_deref() {
+            Ok("off") => vec![Channels::DisplacementOnly],
+            Ok("only") => vec![Channels::WithSearchCoil],
+            _ => vec![Channels::DisplacementOnly, Channels::WithSearchCoil],
+        }
+    }
 }
 
 /// The engineer's complete structure for a law: every registry effect the rig has.
@@ -209,6 +254,7 @@ fn engineer_init() -> ActuatorParams {
 }
 
 struct Row {
+    channels: Channels,
     law: &'static str,
     seed: u64,
     hidden: &'static str,
@@ -275,12 +321,15 @@ fn hidden_effects_on_the_independent_rig() {
             if law_effect == Effect::Preisach {
                 cases.insert(2, Some(Effect::Preisach));
             }
-            for hidden in cases {
+            for (channels, hidden) in
+                Channels::chosen().into_iter().flat_map(|c| cases.iter().map(move |&h| (c, h)))
+            {
                 let (model, data) = match hidden {
                     Some(Effect::Saturation) => (without(Effect::Saturation, law_effect), files(false)),
                     Some(e) => (without(e, law_effect), (full_rig.0.clone(), full_rig.1.clone())),
                     None => (complete(law_effect), (full_rig.0.clone(), full_rig.1.clone())),
                 };
+                let data = (channels.apply(&data.0), channels.apply(&data.1));
                 let started = std::time::Instant::now();
                 let d = diagnose(model, &init, &data.0, &data.1, FitOptions::default()).expect("diagnose");
                 let before = d.nrmse_val.expect("validation files given");
@@ -291,12 +340,14 @@ fn hidden_effects_on_the_independent_rig() {
                     None => (before, "displacement", before),
                 };
                 eprintln!(
-                    "{law_name} s{seed} hidden {:?}: {named} ({:.0} s)\n{d}",
+                    "{law_name} s{seed} ({}) hidden {:?}: {named} ({:.0} s)\n{d}",
+                    channels.label(),
                     hidden.map(|e| e.name()),
                     started.elapsed().as_secs_f64()
                 );
                 assert!(before.is_finite() && after.is_finite(), "non-finite NRMSE");
                 rows.push(Row {
+                    channels,
                     law: law_name,
                     seed,
                     hidden: hidden.map_or("complete", |e| e.name()),
@@ -308,11 +359,14 @@ fn hidden_effects_on_the_independent_rig() {
             }
         }
     }
-    println!("\n| law | seed | hidden effect | named | baseline val NRMSE | with the hidden effect | cut × | channel |");
-    println!("|---|---|---|---|---|---|---|---|");
+    println!(
+        "\n| recorded | law | seed | hidden effect | named | baseline val NRMSE | with the hidden effect | cut × | channel |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
     for r in &rows {
         println!(
-            "| {} | {} | {} | {} | {:.2} % | {:.2} % | {:.2} | {} |",
+            "| {} | {} | {} | {} | {} | {:.2} % | {:.2} % | {:.2} | {} |",
+            r.channels.label(),
             r.law,
             r.seed,
             r.hidden,
@@ -323,26 +377,30 @@ fn hidden_effects_on_the_independent_rig() {
             r.channel
         );
     }
-    for &(law_name, _) in &laws {
-        let hidden: Vec<&Row> = rows.iter().filter(|r| r.law == law_name && r.hidden != "complete").collect();
+    for (channels, &(law_name, _)) in
+        Channels::chosen().into_iter().flat_map(|c| laws.iter().map(move |l| (c, l)))
+    {
+        let of_law = |r: &&Row| r.channels == channels && r.law == law_name;
+        let hidden: Vec<&Row> = rows.iter().filter(of_law).filter(|r| r.hidden != "complete").collect();
         let named = hidden.iter().filter(|r| r.named == r.hidden).count();
         let mut cuts: Vec<f64> = hidden.iter().map(|r| r.before / r.after.max(1e-12)).collect();
         cuts.sort_by(f64::total_cmp);
         let median = cuts.get(cuts.len() / 2).copied().unwrap_or(f64::NAN);
-        let complete: Vec<&Row> =
-            rows.iter().filter(|r| r.law == law_name && r.hidden == "complete").collect();
+        let complete: Vec<&Row> = rows.iter().filter(of_law).filter(|r| r.hidden == "complete").collect();
         let alarms = complete.iter().filter(|r| r.named != "none").count();
         println!(
-            "{law_name}: named {named} of {} (target ≥ 8 of 9 per seed), median cut {median:.2}× (target ≥ 3×), \
+            "{law_name}, {}: named {named} of {} (target ≥ 8 of 9 per seed), median cut {median:.2}× (target ≥ 3×), \
              smallest {:.2}× (target ≥ 1.5×), false alarms on the complete case {alarms} of {}, complete val NRMSE {} \
              (target ≤ 2 %)",
+            channels.label(),
             hidden.len(),
             cuts.first().copied().unwrap_or(f64::NAN),
             complete.len(),
             complete.iter().map(|r| format!("{:.2} %", r.before * 100.0)).collect::<Vec<_>>().join(", ")
         );
     }
-    assert_eq!(rows.len(), laws.len() * seeds.len() * 9 + seeds.len() * usize::from(full));
+    let per_channels = laws.len() * seeds.len() * 9 + seeds.len() * usize::from(full);
+    assert_eq!(rows.len(), Channels::chosen().len() * per_channels);
 }
 
 /// The seed-1 rig (seed 100 + `salt`, as the suite's recordings) under `law` driven by `exc`
@@ -532,7 +590,9 @@ fn ja_forms_on_the_independent_rig() {
                     .map(|(i, e)| recording(law, law_name, true, seed, e, salt + i as u64))
                     .collect()
             };
-            let (fit, val) = (files(&fit_exc, 0), files(&val_exc, 10));
+            // As documented (docs/cli.md, `--ja-variants`): the displacement-only recordings.
+            let only = Channels::DisplacementOnly;
+            let (fit, val) = (only.apply(&files(&fit_exc, 0)), only.apply(&files(&val_exc, 10)));
             let mut d = diagnose(model, &init, &fit, &val, FitOptions::default()).expect("diagnose");
             d.compare_ja_variants(model, &init, &fit, &val, FitOptions::default()).expect("variants");
             let rows = d.ja_variants.clone().expect("variant scores");
