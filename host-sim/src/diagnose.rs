@@ -712,17 +712,18 @@ pub fn diagnose(
         progress::Phase::start(opts.progress, "diagnose: residual evidence and trends across files", 0);
     // With a search coil on every file, the stages before the strain are judged on its flux.
     let flux_measured = fit_files.iter().chain(score_files).all(|r| r.flux_density_t.is_some());
-    let signals_on = |flux: bool| -> Result<Vec<Signals>> {
+    let base_sims: Vec<Simulation> =
+        fit_files.iter().map(|rec| simulate(spec, &base.params, rec)).collect::<Result<_>>()?;
+    let signals_on = |flux: bool| -> Vec<Signals> {
         fit_files
             .iter()
             .zip(&base.fit.files)
-            .map(|(rec, sc)| {
-                Ok(signals(rec, &simulate(spec, &base.params, rec)?, sc.offset_um, flux).skip(burn_in(rec)))
-            })
+            .zip(&base_sims)
+            .map(|((rec, sc), sim)| signals(rec, sim, sc.offset_um, flux).skip(burn_in(rec)))
             .collect()
     };
-    let sigs = signals_on(false)?;
-    let flux_sigs = if flux_measured { signals_on(true)? } else { Vec::new() };
+    let sigs = signals_on(false);
+    let flux_sigs = if flux_measured { signals_on(true) } else { Vec::new() };
     let mut findings = Vec::new();
     let white = whiteness(&sigs.iter().map(|s| s.residual.as_slice()).collect::<Vec<_>>());
     let (not_white, white_limit) = structured_residual(white, sigs.len());

@@ -1,7 +1,8 @@
 //! Identification: one parameter set for a model spec from one or more recordings jointly, a
 //! displacement offset per file (closed form: the mean residual), cost = mean over files of
 //! NRMSE² (plus the current channel's when the model has an amplifier and the file measured the
-//! current, and the flux density's when a search coil measured it: [`flux_fit`]). With a hysteretic law each file also starts from its own initial magnetic state
+//! current, and the flux density's when a search coil measured it: [`flux_fit`]). With a
+//! hysteretic law each file also starts from its own initial magnetic state
 //! ([`InitialState`]), a nuisance parameter like the offset. The free parameters and their
 //! bounds come from the effect registry
 //! ([`crate::params`]); the search is the workbench's optimiser ([`crate::search`]): a particle
@@ -400,6 +401,12 @@ pub fn flux_fit(measured: &[f64], field: &[f64], magnetization: &[f64]) -> (Flux
 
 /// Scores a simulation against its file.
 pub fn score(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> FileScore {
+    score_with_flux(spec, rec, sim).0
+}
+
+/// [`score`], and the model's flux density when the file measured one (what the flux's residual
+/// block needs: fitted once).
+fn score_with_flux(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> (FileScore, Option<Vec<f64>>) {
     let meas = rec.displacement_um.as_deref().unwrap_or_default();
     let offset = meas.iter().zip(&sim.displacement_um).map(|(a, b)| a - b).sum::<f64>() / meas.len() as f64;
     let shifted: Vec<f64> = sim.displacement_um.iter().map(|y| y + offset).collect();
@@ -407,16 +414,22 @@ pub fn score(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> FileScore {
         (Some(i), true) => Some(nrmse(i, &sim.current_a)),
         _ => None,
     };
-    let flux =
-        rec.flux_density_t.as_deref().map(|b| flux_fit(b, &sim.field_a_per_m, &sim.magnetization_a_per_m).0);
+    let (flux, flux_model) = match rec.flux_density_t.as_deref() {
+        Some(b) => {
+            let (f, model) = flux_fit(b, &sim.field_a_per_m, &sim.magnetization_a_per_m);
+            (Some(f), Some(model))
+        }
+        None => (None, None),
+    };
     let memory = has_memory(spec);
-    FileScore {
+    let score = FileScore {
         nrmse: nrmse(meas, &shifted),
         nrmse_current,
         flux,
         offset_um: offset,
         initial_excursion_a_per_m: memory.then_some(sim.initial_excursion_a_per_m),
-    }
+    };
+    (score, flux_model)
 }
 
 /// Scores of a parameter set on a set of files, and the cost the fit minimises.
@@ -632,15 +645,14 @@ fn blocks_of(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> Vec<(usize, 
         let w = 1.0 / ((hi - lo).max(1e-12) * (measured.len() as f64).sqrt());
         measured.iter().zip(model).map(|(a, b)| w * (a - b)).collect()
     }
-    let s = score(spec, rec, sim);
+    let (s, flux_model) = score_with_flux(spec, rec, sim);
     let meas = rec.displacement_um.as_deref().unwrap_or_default();
     let mut blocks = vec![(1, scaled(meas, sim.displacement_um.iter().map(|y| y + s.offset_um)))];
     if s.nrmse_current.is_some() {
         let i = rec.current_a.as_deref().unwrap_or_default();
         blocks.push((0, scaled(i, sim.current_a.iter().copied())));
     }
-    if let Some(b) = rec.flux_density_t.as_deref() {
-        let (_, model) = flux_fit(b, &sim.field_a_per_m, &sim.magnetization_a_per_m);
+    if let (Some(b), Some(model)) = (rec.flux_density_t.as_deref(), flux_model) {
         blocks.push((2, scaled(b, model.into_iter())));
     }
     blocks
