@@ -184,7 +184,8 @@ pub fn simulate_drive(
         drive: model_input(spec, rec)?,
         initial: InitialState::Demagnetized,
     };
-    Ok((run_model(spec, params, &prep, false)?, prep.drive))
+    // Every channel: `gma simulate` writes the field and magnetization as a search coil's flux.
+    Ok((run_model(spec, params, &prep, true)?, prep.drive))
 }
 
 /// [`simulate`]; `all_channels: false` keeps only the channels the file measured (the fit's inner

@@ -502,3 +502,49 @@ fn a_search_coils_flux_density_is_a_scored_channel_of_fit_compare_and_diagnose()
         assert_eq!(c["channel"], expected, "{c}");
     }
 }
+
+/// `gma simulate --search-coil` writes the simulated rod's flux density B = μ0 (H + M) beside the
+/// other columns, which stay byte for byte what they are without it (the coil's noise has its
+/// own random stream), on a waveform and on a measured drive. SIMULATED by our own plant: this
+/// checks the plumbing (the fit reads the column and finds the plant's B with scale g = 1), not
+/// the physics (the refrig test above does that).
+#[test]
+fn simulate_with_a_search_coil_writes_the_rods_flux_density() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let sim = |out: &str, extra: &[&str]| {
+        let mut args = vec!["simulate", "--model", "ja+mech", "--noise-um", "0.02"];
+        args.extend(extra);
+        args.extend(["--out", out]);
+        let o = gma(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::read_to_string(out).unwrap()
+    };
+    let plain = sim(&p("plain.csv"), &["--duration-s", "0.1"]);
+    let coil = sim(&p("coil.csv"), &["--duration-s", "0.1", "--search-coil", "--flux-noise-mt", "0.5"]);
+    assert_eq!(coil.lines().next(), Some("time_s,current_A,displacement_um,flux_density_T"));
+    for (a, b) in plain.lines().zip(coil.lines()).skip(1) {
+        assert_eq!(Some(a), b.rsplit_once(',').map(|(head, _)| head), "the other columns changed");
+    }
+    let b: Vec<f64> = coil.lines().skip(1).map(|l| l.rsplit(',').next().unwrap().parse().unwrap()).collect();
+    // Terfenol-D about a 20 kA/m bias under ±1 A: a few tenths of a tesla, and it moves.
+    let (lo, hi) = b.iter().fold((f64::MAX, f64::MIN), |(l, h), v| (l.min(*v), h.max(*v)));
+    assert!(lo > 0.0 && hi < 1.5 && hi - lo > 0.1, "B in [{lo}, {hi}] T");
+    let f = json(&gma(&["fit", "--model", "ja+mech", "--json", &p("coil.csv")]));
+    let row = f["files"].as_array().unwrap().iter().find(|r| r["channel"] == "flux_density").cloned();
+    let row = row.expect("a flux-density row");
+    let g = row["flux_scale"].as_f64().unwrap();
+    assert!((g - 1.0).abs() < 0.05, "the plant writes B = μ0 (H + M): scale {g}");
+    // 0.7 %: the model holds the mean drive over a sample where the plant integrates it (a
+    // half-sample lag at 50 Hz); logged a step late, the column scored 1.8 %.
+    assert!(row["nrmse"].as_f64().unwrap() < 0.012, "{row}");
+    // The same on a measured drive; and the noise without the coil is refused.
+    let driven = sim(&p("driven.csv"), &["--drive", &p("coil.csv"), "--search-coil"]);
+    assert!(
+        driven.lines().next().unwrap().ends_with(",flux_density_T"),
+        "{}",
+        driven.lines().next().unwrap()
+    );
+    let o = gma(&["simulate", "--model", "ja", "--flux-noise-mt", "1", "--out", &p("x.csv")]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--search-coil"));
+}

@@ -52,13 +52,14 @@ proptest! {
         quantum_um in prop_oneof![Just(0.0), wide()],
         offset_um in wide(),
         oversample in prop_oneof![1u32..5, Just(0), Just(1000)],
+        search_coil in any::<bool>(),
     ) {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("sim.csv");
         let args = SimulateArgs {
             model: model.into(), params: None, waveform, freq_hz, amplitude, bias, duration_s, noise_um,
-            quantum_um, offset_um, oversample, eddy_model: EddyModel::Distributed, no_current: false, seed: 7,
-            out: out.clone(), drive: None, json: false, read: ReadArgs::default(),
+            quantum_um, offset_um, oversample, eddy_model: EddyModel::Distributed, no_current: false,
+            search_coil, flux_noise_mt: 0.5, seed: 7, out: out.clone(), drive: None, json: false, read: ReadArgs::default(),
         };
         match run(&args) {
             Err(e) => {
@@ -70,6 +71,7 @@ proptest! {
             Ok(()) => {
                 let r = Recording::read(&out).map_err(|e| TestCaseError::fail(format!("{e:#}")))?;
                 prop_assert!(r.len() >= 3);
+                prop_assert_eq!(r.flux_density_t.is_some(), search_coil);
                 // The demo parameter set samples at 10 kHz.
                 prop_assert_eq!(r.len() as f64, (duration_s / 1e-4).round());
             }

@@ -378,7 +378,7 @@ fn diagnose<'py>(
 #[pyfunction]
 #[pyo3(signature = (model=None, *, params=None, waveform=None, freq_hz=None, amplitude=None, bias=None,
     duration_s=None, noise_um=None, quantum_um=None, offset_um=None, oversample=None, eddy_model=None,
-    no_current=false, seed=None, name="simulated"))]
+    no_current=false, search_coil=false, flux_noise_mt=None, seed=None, name="simulated"))]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
     py: Python<'py>,
@@ -395,6 +395,8 @@ fn simulate<'py>(
     oversample: Option<u32>,
     eddy_model: Option<&str>,
     no_current: bool,
+    search_coil: bool,
+    flux_noise_mt: Option<f64>,
     seed: Option<u64>,
     name: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -407,6 +409,7 @@ fn simulate<'py>(
         ("--noise-um", noise_um),
         ("--quantum-um", quantum_um),
         ("--offset-um", offset_um),
+        ("--flux-noise-mt", flux_noise_mt),
     ];
     let mut options: Vec<(String, Option<String>)> =
         numbers.iter().filter_map(|(o, v)| v.map(|v| (o.to_string(), Some(v.to_string())))).collect();
@@ -417,6 +420,9 @@ fn simulate<'py>(
     options.extend(seed.map(|v| ("--seed".to_string(), Some(v.to_string()))));
     if no_current {
         options.push(("--no-current".into(), None));
+    }
+    if search_coil {
+        options.push(("--search-coil".into(), None));
     }
     let r = run(py, || api::simulate_rig(model, &ps, &options, name))?;
     recording_dict(py, &r)

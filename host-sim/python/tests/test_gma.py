@@ -181,6 +181,9 @@ def test_simulate_writes_what_read_recording_reads():
     np.testing.assert_array_equal(a["displacement_um"], b["displacement_um"])
     assert not np.array_equal(a["displacement_um"], c["displacement_um"])
     assert a["current_A"].max() == pytest.approx(2.0, abs=1e-3)  # bias 1 A + amplitude 1 A
+    coil = gma.simulate("ja+mech", duration_s=0.05, noise_um=0.01, seed=5, search_coil=True, flux_noise_mt=0.5)
+    np.testing.assert_array_equal(a["displacement_um"], coil["displacement_um"])
+    assert "flux_density_T" not in a and np.ptp(coil["flux_density_T"]) > 0.1  # tesla, it moves
 
 
 def test_diagnose_returns_the_clis_diagnosis_object():

@@ -29,6 +29,8 @@ const MAX_DRIVE: f64 = 1e3;
 pub const MAX_OVERSAMPLE: u32 = 64;
 /// Largest displacement sensor offset, noise or quantum [µm] (the reader's plausible range is ±1e6 µm).
 const MAX_SENSOR_UM: f64 = 1e5;
+/// Largest search-coil noise [mT] (a rod's flux density swings by about a tesla).
+const MAX_FLUX_NOISE_MT: f64 = 1e3;
 
 /// Excitation waveforms.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -96,6 +98,13 @@ pub struct SimulateArgs {
     /// Leave out the `current_A` column (a rig that logs the command only; needs `amp`).
     #[arg(long)]
     pub no_current: bool,
+    /// Add a search coil's `flux_density_T` column: the rod's mean flux density
+    /// B = μ0 (H + M) of the simulated rod (the channel `fit`, `compare` and `diagnose` score).
+    #[arg(long)]
+    pub search_coil: bool,
+    /// The search coil's noise, standard deviation [mT] (with `--search-coil`).
+    #[arg(long, default_value_t = 0.0, requires = "search_coil")]
+    pub flux_noise_mt: f64,
     /// Seed of the noise generator.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -135,6 +144,9 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     }
     if !(a.offset_um.is_finite() && a.offset_um.abs() <= MAX_SENSOR_UM) {
         bail!("--offset-um must be within ±{MAX_SENSOR_UM:e} µm, got {}", a.offset_um);
+    }
+    if !(a.flux_noise_mt.is_finite() && (0.0..=MAX_FLUX_NOISE_MT).contains(&a.flux_noise_mt)) {
+        bail!("--flux-noise-mt must be in [0, {MAX_FLUX_NOISE_MT}] mT, got {}", a.flux_noise_mt);
     }
     if a.no_current && !spec.has(model_core::Effect::AmplifierDynamics) {
         bail!("--no-current needs a model with `amp` (without it the current is the drive)");
@@ -233,6 +245,18 @@ fn run_on_drive(
             y
         })
         .collect();
+    // The search coil's noise has its own stream: the other columns are the same with it or without.
+    let mut flux_rng = rand::rngs::StdRng::seed_from_u64(a.seed ^ 0x5EA2_C011);
+    let b_noise = Normal::new(0.0, a.flux_noise_mt * 1e-3).context("--flux-noise-mt")?;
+    let flux = a.search_coil.then(|| {
+        sim.field_a_per_m
+            .iter()
+            .zip(&sim.magnetization_a_per_m)
+            .map(|(h, m)| {
+                fit::MU0 * (h + m) + if a.flux_noise_mt > 0.0 { b_noise.sample(&mut flux_rng) } else { 0.0 }
+            })
+            .collect()
+    });
     let rec = Recording {
         name: name.into(),
         time_s: measured.time_s.clone(),
@@ -241,7 +265,7 @@ fn run_on_drive(
         displacement_um: Some(displacement),
         force_n: None,
         temperature_c: None,
-        flux_density_t: None,
+        flux_density_t: flux,
     };
     Ok((rec, drive))
 }
@@ -310,6 +334,7 @@ fn run_waveform(
     plant.oversample = a.oversample;
     plant.log_current = !a.no_current;
     plant.eddy = a.eddy_model;
+    plant.flux_noise_t = a.search_coil.then_some(a.flux_noise_mt * 1e-3);
     let rec = plant.record(name, &exc, a.duration_s, a.seed)?;
     Ok((rec, format!("plant {}, {}", plant.describe(), exc.describe())))
 }
