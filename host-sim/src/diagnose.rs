@@ -16,8 +16,9 @@
 //!    the first drive cycle, because the rig's initial magnetic state is unknown).
 //! 4. **Decision** (evidence that holds when no model is exact; see [`Candidate::passes`]): a
 //!    candidate passes when its refit cuts the scored error ≥ [`MIN_CUT`]×, is lower on enough
-//!    scored files for a one-sided sign test at 5 % ([`required_wins`]: all of them below five
-//!    files), gains on the scored files (validation when given: there extra parameters cannot
+//!    of the scored files it shows in for a one-sided sign test at 5 % ([`required_wins`]: all of
+//!    them below five files; a file it does not show in, where switching it off moves the refit's
+//!    prediction less than the measurement noise, does not vote), gains on the scored files (validation when given: there extra parameters cannot
 //!    buy a gain) by BIC with the *effective* sample size of the baseline residual
 //!    (N_eff = N(1 − ρ)/(1 + ρ): a residual full of model-form error is worth few
 //!    independent samples), and, scored on the fit files only, its signature is significant
@@ -92,6 +93,14 @@ pub struct Candidate {
     pub files_improved: usize,
     /// Scored files.
     pub files_scored: usize,
+    /// Scored files on which the effect shows: switching it off in the refit changes the
+    /// prediction there by more than the measurement noise (rms, estimated from the refit's
+    /// residual). Only these vote in the sign test: on the others a change of error comes from
+    /// the other parameters moving, not from the effect. Every scored file for a law refinement
+    /// and on the current channel.
+    pub files_showing: usize,
+    /// Of [`Candidate::files_showing`], those on which the refit is lower than the baseline.
+    pub files_improved_showing: usize,
     /// The scored files are validation files (held out from every fit).
     pub held_out: bool,
     /// BIC gain of the refit on the scored (validation, else fit) files with the effective
@@ -127,7 +136,8 @@ impl Candidate {
         let indicated =
             self.held_out || self.n_eff * self.evidence_r2 > CHI2_1_95 || self.cut() >= DECISIVE_CUT;
         self.cut() >= MIN_CUT
-            && self.files_improved >= required_wins(self.files_scored)
+            && self.files_showing > 0
+            && self.files_improved_showing >= required_wins(self.files_showing)
             && self.delta_bic > 0.0
             && indicated
     }
@@ -548,6 +558,22 @@ fn displacement_scores(
     channel_scores(spec, params, files, skip, Channel::Displacement)
 }
 
+/// Whether an effect shows in a file: the refit's prediction with the effect switched off
+/// (residual `off`) differs from the refit's (residual `on`; both measured − model, offsets
+/// removed) by more, in rms, than the file's measurement noise. The noise is estimated from the
+/// refit's residual by its successive differences (von Neumann; Rice 1984): σ² ≈ Σ (r_k −
+/// r_{k−1})² / 2(N − 1), which white noise passes whole and a slow model error hardly at all (a
+/// fast one raises the estimate: the test then errs towards not counting the file).
+fn effect_shows(off: &[f64], on: &[f64]) -> bool {
+    let n = on.len().max(1) as f64;
+    let d: Vec<f64> = off.iter().zip(on).map(|(a, b)| a - b).collect();
+    let mean_d = d.iter().sum::<f64>() / n;
+    let change = d.iter().map(|v| (v - mean_d) * (v - mean_d)).sum::<f64>() / n;
+    let noise =
+        on.windows(2).map(|w| (w[1] - w[0]) * (w[1] - w[0])).sum::<f64>() / (2.0 * (n - 1.0).max(1.0));
+    change > noise
+}
+
 /// Effective number of independent samples of a residual: N (1 − ρ)/(1 + ρ) with ρ its lag-1
 /// autocorrelation (an AR(1) approximation; ρ ≤ 0 counts every sample).
 fn effective_samples(r: &[f64]) -> f64 {
@@ -884,6 +910,25 @@ pub fn diagnose(
         let after_c = mean(after_score_s.iter().map(|s| s.nrmse));
         let files_improved =
             base_score_s.iter().zip(&after_score_s).filter(|(b, a)| a.nrmse < b.nrmse).count();
+        // Where the effect shows: the refit's own parameters with the effect switched off (the
+        // given structure) against the refit, file by file, measured against the noise. A law refinement cannot be switched
+        // off that way (the coarser law's parameters were not fitted), nor can the amplifier on
+        // the current (judged against a static gain): there every file votes.
+        let law_refinement = e.info().candidacy == Candidacy::RefinesLaw;
+        let showing: Vec<bool> = match &refit {
+            Some(f) if !law_refinement && channel != Channel::Current => {
+                let off = channel_scores(spec, &f.params, score_files, &score_skip, channel)?;
+                off.iter().zip(&after_score_s).map(|(o, a)| effect_shows(&o.residual, &a.residual)).collect()
+            }
+            _ => vec![true; after_score_s.len()],
+        };
+        let files_showing = showing.iter().filter(|&&v| v).count();
+        let files_improved_showing = base_score_s
+            .iter()
+            .zip(&after_score_s)
+            .zip(&showing)
+            .filter(|((b, a), &shows)| shows && a.nrmse < b.nrmse)
+            .count();
         if let Some(f) = refit.as_ref().filter(|_| !val_files.is_empty() && channel == Channel::Displacement)
         {
             let fit_nrmse = (base.fit.mean_nrmse(), f.fit.mean_nrmse());
@@ -913,7 +958,7 @@ pub fn diagnose(
         let evidence = format!(
             "{} explains {:.0} % of the residual variance (significant above {:.1} % at N_eff = {:.0}); adding it and \
              refitting takes the {} {channel} NRMSE from {:.2} % to {:.2} % ({:.1}× {}), lower on {files_improved} of {} \
-             files; ΔBIC {:+.1}",
+             files ({files_improved_showing} of the {files_showing} it shows in); ΔBIC {:+.1}",
             match channel {
                 Channel::Current => "the amplifier lag −di/dt of command → current",
                 Channel::FluxDensity => flux_signature_words(e.info().signature),
@@ -942,6 +987,8 @@ pub fn diagnose(
             evidence_r2: r2,
             files_improved,
             files_scored: after_score_s.len(),
+            files_showing,
+            files_improved_showing,
             held_out: !val_files.is_empty(),
             delta_bic,
             n_eff,
@@ -1032,8 +1079,7 @@ pub fn diagnose(
         }
     } else if let Some(best) = candidates.iter().max_by(|a, b| a.cut().total_cmp(&b.cut())) {
         findings.push(format!(
-            "no candidate passes (cut ≥ {MIN_CUT}×, lower on {} of the scored files, ΔBIC > 0{}); the best, `{}`, takes {:.2} % to {:.2} % on {} (lower on {} of {}, ΔBIC {:+.1}, R² {:.1} %)",
-            required_wins(best.files_scored),
+            "no candidate passes (cut ≥ {MIN_CUT}×, lower on enough scored files it shows in (all of up to six: a one-sided sign test at 5 %), ΔBIC > 0{}); the best, `{}`, takes {:.2} % to {:.2} % on {} (lower on {} of {}, on {} of the {} it shows in, ΔBIC {:+.1}, R² {:.1} %)",
             if best.held_out { String::new() } else { format!(", signature significant or cut ≥ {DECISIVE_CUT}×") },
             best.effect,
             best.nrmse_before * 100.0,
@@ -1041,6 +1087,8 @@ pub fn diagnose(
             best.channel,
             best.files_improved,
             best.files_scored,
+            best.files_improved_showing,
+            best.files_showing,
             best.delta_bic,
             best.evidence_r2 * 100.0
         ));
@@ -1119,6 +1167,26 @@ mod tests {
         assert_eq!(required_wins(6), 6);
         assert_eq!(required_wins(8), 7);
         assert_eq!(required_wins(10), 9);
+    }
+
+    /// A file counts for an effect when switching it off moves the prediction by more than the
+    /// noise, whatever slow model error the refit leaves there: the successive-difference noise
+    /// estimate sees the white part of the residual, not a slow error ten times its size.
+    #[test]
+    fn an_effect_shows_where_it_moves_the_prediction_above_the_noise() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let n = 4000;
+        let slow = |k: usize| (2.0 * std::f64::consts::PI * k as f64 / n as f64).sin();
+        let noise: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0) * 0.01 * 3f64.sqrt()).collect();
+        // The refit misses a slow error of 10 noise rms and the sensor's noise (rms 0.01).
+        let on: Vec<f64> = (0..n).map(|k| 0.1 * slow(k) + noise[k]).collect();
+        // Switched off, the effect moves the prediction by 2 or by 0.5 noise rms (plus an offset,
+        // which does not count).
+        let moved = |size: f64| -> Vec<f64> {
+            on.iter().enumerate().map(|(k, r)| r + 0.3 + size * 0.01 * 2f64.sqrt() * slow(3 * k)).collect()
+        };
+        assert!(effect_shows(&moved(2.0), &on));
+        assert!(!effect_shows(&moved(0.5), &on));
     }
 
     #[test]
