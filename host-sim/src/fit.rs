@@ -188,6 +188,35 @@ pub fn simulate_drive(
     Ok((run_model(spec, params, &prep, true)?, prep.drive))
 }
 
+/// `params` stepped at `prep`'s sample period. Every stage is stated in seconds or hertz except
+/// the sensor delay, which `delay_samples` counts in periods of the parameter set's own `dt_s`:
+/// a recording at another rate gets the same delay in seconds, in its own samples (a probe's
+/// delay is a time, whatever rate the file was logged at). Periods equal to f32 precision leave
+/// the parameter as it is.
+fn at_rate_of(spec: ModelSpec, params: &ActuatorParams, prep: &Prepared) -> Result<ActuatorParams> {
+    let mut p = *params;
+    p.dt_s = prep.dt_s as f32;
+    let ratio = params.dt_s as f64 / prep.dt_s;
+    if spec.has(Effect::SensorDelay) && (ratio - 1.0).abs() > 1e-5 {
+        let samples = params.delay_samples as f64 * ratio;
+        let line = model_core::chain::MAX_DELAY_SAMPLES as f64;
+        if samples >= line {
+            bail!(
+                "{}: the sensor delay, delay_samples = {} at the parameters' dt_s ({:.4} ms), is {:.3} ms: \
+                 {samples:.1} samples of this recording ({:.4} ms per sample); the delay line holds fewer \
+                 than {line}",
+                prep.rec.name,
+                params.delay_samples,
+                params.dt_s as f64 * 1e3,
+                params.delay_samples as f64 * params.dt_s as f64 * 1e3,
+                prep.dt_s * 1e3
+            );
+        }
+        p.delay_samples = samples as f32;
+    }
+    Ok(p)
+}
+
 /// [`simulate`]; `all_channels: false` keeps only the channels the file measured (the fit's inner
 /// loop: displacement and current, and field and magnetization for a measured flux density).
 pub fn run_model(
@@ -197,8 +226,7 @@ pub fn run_model(
     all_channels: bool,
 ) -> Result<Simulation> {
     let (rec, drive) = (prep.rec, prep.drive);
-    let mut p = *params;
-    p.dt_s = prep.dt_s as f32;
+    let p = at_rate_of(spec, params, prep)?;
     let model = Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
     let n = rec.len();
     let all_channels = all_channels || rec.flux_density_t.is_some();
@@ -602,8 +630,7 @@ fn thermal_share(
     prep: &Prepared,
     sim: &Simulation,
 ) -> Result<Vec<f64>> {
-    let mut p = *params;
-    p.dt_s = prep.dt_s as f32;
+    let p = at_rate_of(spec, params, prep)?;
     let model = Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
     let mut s = model.thermal_tail_rest();
     let mut t = Vec::with_capacity(sim.current_a.len());
@@ -1241,6 +1268,42 @@ mod tests {
             [1, 0, 1, 0, 2],
             "blocks and their unknowns"
         );
+    }
+
+    /// The sensor delay is a time: a parameter set counts it in periods of its own `dt_s`, and a
+    /// recording logged at another rate gets the same delay in seconds. Two recordings of one
+    /// rig (0.4 ms delay) at 10 kHz and 4 kHz are both explained by the 10 kHz set; read as
+    /// samples of each file (0.4 ms at 10 kHz, 1 ms at 4 kHz) the slower one is not.
+    #[test]
+    fn a_delay_counted_at_the_parameters_rate_holds_at_another_rate() {
+        let spec = ModelSpec::parse("ja+delay").unwrap();
+        let at = |dt_s: f32, delay_samples: f32| ActuatorParams {
+            dt_s,
+            delay_samples,
+            ..ActuatorParams::TERFENOL_DEMO
+        };
+        let record = |p: ActuatorParams| {
+            let mut rig = Plant::new(spec, p);
+            rig.noise_um = 0.0;
+            rig.record("d", &Excitation::Sine { freq_hz: 60.0, amplitude: 1.0, bias: 0.2 }, 0.1, 0).unwrap()
+        };
+        let fast = record(at(1e-4, 4.0));
+        let slow = record(at(2.5e-4, 1.6));
+        let nrmse = |p: ActuatorParams, rec: &Recording| {
+            evaluate(spec, &p, std::slice::from_ref(rec)).unwrap().mean_nrmse()
+        };
+        let (on_fast, on_slow) = (nrmse(at(1e-4, 4.0), &fast), nrmse(at(1e-4, 4.0), &slow));
+        let as_file_samples = nrmse(at(2.5e-4, 4.0), &slow);
+        // The 4 kHz file against its own rig's parameters: the model's discretisation error there.
+        let own = nrmse(at(2.5e-4, 1.6), &slow);
+        assert!(
+            on_fast < 2e-3 && (on_slow - own).abs() < 1e-5,
+            "one set for both rates: {on_fast}, {on_slow} ({own})"
+        );
+        assert!(as_file_samples > 5.0 * on_slow.max(1e-3), "4 samples of the 4 kHz file: {as_file_samples}");
+        // A delay the faster recording's line cannot hold is refused, naming the file and the times.
+        let e = evaluate(spec, &at(2.5e-4, 40.0), std::slice::from_ref(&fast)).unwrap_err().to_string();
+        assert!(e.contains("sensor delay") && e.contains("10.000 ms") && e.contains("100.0 samples"), "{e}");
     }
 
     /// The flux density's scale and zero come out in closed form: exact for a flux the model

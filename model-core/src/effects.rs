@@ -315,7 +315,7 @@ pub const EFFECTS: [EffectInfo; 9] = [
         effect: Effect::SensorDelay,
         name: "sensor_delay",
         alias: Some("delay"),
-        adds: "transport delay of the displacement measurement, in samples (a fraction interpolates between samples)",
+        adds: "transport delay of the displacement measurement, in samples of the parameters' `dt_s` (a fraction interpolates between samples; a file at another rate gets the same time)",
         stage: Stage::Sensor,
         law: None,
         implies: None,
