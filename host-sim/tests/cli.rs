@@ -548,3 +548,49 @@ fn simulate_with_a_search_coil_writes_the_rods_flux_density() {
     let o = gma(&["simulate", "--model", "ja", "--flux-noise-mt", "1", "--out", &p("x.csv")]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--search-coil"));
 }
+
+/// A user's rig logged at two rates: a 40 kHz and a 10 kHz recording of one probe with a
+/// 0.3 ms delay (12 and 3 samples). One parameter set at the 10 kHz `dt_s` fits both at the
+/// noise floor with `delay_samples` = 3 — the delay is a time, not a sample count of each file
+/// (read per file the 40 kHz one had a 0.075 ms delay and the pair fitted at 1.4 %).
+#[test]
+fn one_delay_in_seconds_fits_recordings_at_two_rates() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let write = |name: &str, dt_s: f32, delay_samples: f32| {
+        let params =
+            model_core::ActuatorParams { dt_s, delay_samples, ..model_core::ActuatorParams::TERFENOL_DEMO };
+        std::fs::write(p(name), toml::to_string(&params).unwrap()).unwrap();
+    };
+    write("fast.toml", 2.5e-5, 12.0);
+    write("slow.toml", 1e-4, 3.0);
+    for rate in ["fast", "slow"] {
+        let o = gma(&[
+            "simulate",
+            "--model",
+            "ja+delay",
+            "--params",
+            &p(&format!("{rate}.toml")),
+            "--freq-hz",
+            "50",
+            "--duration-s",
+            "0.2",
+            "--out",
+            &p(&format!("{rate}.csv")),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let f = json(&gma(&[
+        "fit",
+        "--model",
+        "ja+delay",
+        "--params",
+        &p("slow.toml"),
+        "--json",
+        &p("fast.csv"),
+        &p("slow.csv"),
+    ]));
+    let delay = f["params"]["delay_samples"].as_f64().unwrap();
+    let nrmse = f["nrmse_fit"].as_f64().unwrap();
+    assert!((delay - 3.0).abs() < 0.1 && nrmse < 1e-3, "delay_samples {delay}, fit NRMSE {nrmse}");
+}
