@@ -522,6 +522,7 @@ pub fn model_response(
             Some(x) => bail!("initial_excursion_A_per_m must be finite, got {x}"),
             None => fit::InitialState::Demagnetized,
         },
+        memo: None,
     };
     fit::run_model(spec, &p, &prep, true)
 }

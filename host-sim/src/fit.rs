@@ -23,6 +23,9 @@ use crate::recording::Recording;
 use crate::results::StartScore;
 use crate::search::{minimize, Bound, Fidelity, Found, Local, Plan, SearchOptions, Start};
 
+mod magnetic_memo;
+pub use magnetic_memo::MagneticMemo;
+
 /// How a file drives the model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Drive {
@@ -138,18 +141,27 @@ pub struct Prepared<'a> {
     pub drive: Drive,
     /// The magnetic state it starts from.
     pub initial: InitialState,
+    /// Where the magnetic stages' recent runs on it are kept (within one fit), if anywhere.
+    pub memo: Option<&'a MagneticMemo>,
 }
 
 impl<'a> Prepared<'a> {
     /// Checks that `spec` can be simulated on `rec` and works out its period and drive.
     /// The initial state is estimated from the displacement.
     pub fn new(spec: ModelSpec, rec: &'a Recording) -> Result<Self> {
-        Ok(Self { rec, dt_s: rec.dt_s(), drive: drive_for(spec, rec)?, initial: InitialState::Estimated })
+        Ok(Self {
+            rec,
+            dt_s: rec.dt_s(),
+            drive: drive_for(spec, rec)?,
+            initial: InitialState::Estimated,
+            memo: None,
+        })
     }
 
-    /// `head` (the first samples of this recording), with this one's drive.
+    /// `head` (the first samples of this recording), with this one's drive (and no memo: the
+    /// runs on the whole recording are not the head's).
     fn head_of<'b>(&self, head: &'b Recording) -> Prepared<'b> {
-        Prepared { rec: head, dt_s: head.dt_s(), drive: self.drive, initial: self.initial }
+        Prepared { rec: head, dt_s: head.dt_s(), drive: self.drive, initial: self.initial, memo: None }
     }
 
     /// This recording started from `initial`.
@@ -183,6 +195,7 @@ pub fn simulate_drive(
         dt_s: rec.dt_s(),
         drive: model_input(spec, rec)?,
         initial: InitialState::Demagnetized,
+        memo: None,
     };
     // Every channel: `gma simulate` writes the field and magnetization as a search coil's flux.
     Ok((run_model(spec, params, &prep, true)?, prep.drive))
@@ -247,6 +260,11 @@ pub fn run_model(
         InitialState::Estimated => estimate_excursion(spec, params, prep)?,
     };
     let mut s = model.rest_state_after(excursion as f32);
+    // The magnetic stages' run kept in the memo (parameters that differ only downstream), or
+    // none: then they run here, interleaved with the mechanical ones, and are kept.
+    let keyed = prep.memo.map(|memo| (memo, magnetic_key(spec, &p, excursion, drive)));
+    let kept = keyed.as_ref().and_then(|(memo, key)| memo.get(key));
+    let mut to_keep = (keyed.is_some() && kept.is_none()).then(|| Vec::with_capacity(n));
     let mut out = Simulation {
         displacement_um: Vec::with_capacity(n),
         current_a: Vec::with_capacity(n),
@@ -265,20 +283,53 @@ pub fn run_model(
             out.field_a_per_m.push(h);
             out.magnetization_a_per_m.push(m);
         }
-        // The drive between samples k and k+1 is known only at its ends: hold their mean (an
-        // O(dt²) hold, where a plain zero-order hold of u_k would lag by half a sample).
-        let u = 0.5 * (input[k] + input[(k + 1).min(n - 1)]);
-        let o = model.step(&mut s, u as f32).map_err(|e| anyhow::anyhow!("{}: sample {k}: {e}", rec.name))?;
+        let magnetic = match &kept {
+            Some(run) => run[k],
+            None => {
+                // The drive between samples k and k+1 is known only at its ends: hold their
+                // mean (an O(dt²) hold, where a plain zero-order hold of u_k would lag by half a
+                // sample).
+                let u = 0.5 * (input[k] + input[(k + 1).min(n - 1)]);
+                let o = model
+                    .step_magnetic(&mut s, u as f32, |h| h)
+                    .map_err(|e| anyhow::anyhow!("{}: sample {k}: {e}", rec.name))?;
+                if let Some(run) = &mut to_keep {
+                    run.push(o);
+                }
+                o
+            }
+        };
+        let o = model.step_mechanical(&mut s, magnetic);
         y = o.displacement_m as f64;
         i = o.current_a as f64;
         h = o.field_a_per_m as f64;
         m = o.magnetization_a_per_m as f64;
+    }
+    if let (Some((memo, key)), Some(run)) = (keyed, to_keep) {
+        memo.keep(key, run);
     }
     // Sample 0 is the rest state's: its magnetization is the first step's (the field is the bias).
     if let Some(first) = out.magnetization_a_per_m.get(1).copied() {
         out.magnetization_a_per_m[0] = first;
     }
     Ok(out)
+}
+
+/// What decides a run's magnetic stages on one file ([`MagneticMemo`]'s key): the spec, the
+/// parameters at the file's rate with the mechanical stages' (magnetostriction, rod length,
+/// mechanics, thermal drift, sensor delay) set aside, the initial excursion and the drive. Debug
+/// text prints every float exactly (shortest round trip, −0 kept).
+fn magnetic_key(spec: ModelSpec, p: &ActuatorParams, excursion: f64, drive: Drive) -> String {
+    let reference = ActuatorParams::TERFENOL_DEMO;
+    let magnetic = ActuatorParams {
+        magnetostriction: reference.magnetostriction,
+        rod_length_m: reference.rod_length_m,
+        mech: reference.mech,
+        thermal: reference.thermal,
+        delay_samples: reference.delay_samples,
+        ..*p
+    };
+    format!("{spec:?} {magnetic:?} {excursion:?} {drive:?}")
 }
 
 /// Whether `spec`'s magnetization law carries a history (J–A, Preisach), so that each file
@@ -966,7 +1017,15 @@ fn fit_planned(
     if starts.is_empty() {
         bail!("no start parameters");
     }
-    let full = prepare(spec, files)?;
+    // The whole files, each with a memo of its recent magnetic-stage runs (the least-squares
+    // Jacobians' mechanical columns reuse them; the swarm's and simplex's heads move every
+    // parameter at once and go without).
+    let memos: Vec<MagneticMemo> = files.iter().map(|_| MagneticMemo::default()).collect();
+    let full: Vec<Prepared> = prepare(spec, files)?
+        .into_iter()
+        .zip(&memos)
+        .map(|(p, memo)| Prepared { memo: Some(memo), ..p })
+        .collect();
     // With a hysteretic law each file's pre-history excursion is a parameter too: held at 0
     // (demagnetised) by the swarm, which then explores the physics alone (searching the states
     // there too made it lose the physics), refined by the local search; estimated anew, per file,
@@ -1268,6 +1327,55 @@ mod tests {
             [1, 0, 1, 0, 2],
             "blocks and their unknowns"
         );
+    }
+
+    /// A run through the memo is the run without it, bit for bit: after a change of the
+    /// mechanical stages only (kept magnetic run reused) and after a change of each magnetic
+    /// stage (a new run; reusing the kept one would leave the displacement as it was).
+    #[test]
+    fn runs_through_the_magnetic_memo_are_the_runs_without_it() {
+        let spec = ModelSpec::parse("amp+eddy+ja+mech+thermal+delay+aftereffect").unwrap();
+        let truth = ActuatorParams::TERFENOL_DEMO;
+        let rec = Plant::new(spec, truth)
+            .record("f", &Excitation::Sine { freq_hz: 150.0, amplitude: 1.0, bias: 0.2 }, 0.05, 3)
+            .unwrap();
+        let memo = MagneticMemo::default();
+        let bare = Prepared::new(spec, &rec).unwrap().starting(InitialState::Excursion(4000.0));
+        let kept = Prepared { memo: Some(&memo), ..bare };
+        let mut mechanical = truth;
+        mechanical.mech.natural_frequency_hz *= 0.9;
+        mechanical.mech.damping_ratio *= 1.2;
+        mechanical.magnetostriction.lambda_s *= 1.1;
+        mechanical.thermal.tau_s *= 0.5;
+        mechanical.delay_samples = 1.5;
+        let magnetic: [fn(&mut ActuatorParams); 5] = [
+            |p| p.ja.k_a_per_m *= 1.05,
+            |p| p.ja.alpha *= 0.9,
+            |p| p.eddy_tau_s *= 2.0,
+            |p| p.amp.tau_s *= 2.0,
+            |p| p.aftereffect.fraction *= 2.0,
+        ];
+        let bits = |sim: &Simulation| -> Vec<u64> {
+            [&sim.displacement_um, &sim.current_a, &sim.field_a_per_m, &sim.magnetization_a_per_m]
+                .iter()
+                .flat_map(|v| v.iter().map(|x| x.to_bits()))
+                .collect()
+        };
+        let mut sets = vec![truth, mechanical];
+        for change in magnetic {
+            let mut p = mechanical;
+            change(&mut p);
+            sets.push(p);
+        }
+        let first = bits(&run_model(spec, &truth, &kept, true).unwrap());
+        for p in &sets {
+            let through = bits(&run_model(spec, p, &kept, true).unwrap());
+            let without = bits(&run_model(spec, p, &bare, true).unwrap());
+            assert!(through == without, "{p:?}: the memo changed the run");
+            assert!(p == &truth || through != first, "{p:?}: the change did not show in the run");
+        }
+        // The mechanical change reused the kept run; each magnetic one kept a run of its own.
+        assert_eq!(memo.kept(), 1 + magnetic.len());
     }
 
     /// The sensor delay is a time: a parameter set counts it in periods of its own `dt_s`, and a

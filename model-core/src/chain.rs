@@ -220,6 +220,17 @@ pub struct ThermalTailState {
     delay: DelayLine<MAX_DELAY_SAMPLES>,
 }
 
+/// What the magnetic stages of one step produce ([`Actuator::step_magnetic`], SI units).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct MagneticOutput {
+    /// Coil current [A].
+    pub current_a: f32,
+    /// Field in the rod [A/m].
+    pub field_a_per_m: f32,
+    /// Observed magnetization [A/m].
+    pub magnetization_a_per_m: f32,
+}
+
 /// What one step produces (SI units).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ActuatorOutput {
@@ -429,6 +440,22 @@ impl Actuator {
         input: f32,
         rod_field: impl FnOnce(f32) -> f32,
     ) -> Result<ActuatorOutput, StepError> {
+        let magnetic = self.step_magnetic(s, input, rod_field)?;
+        Ok(self.step_mechanical(s, magnetic))
+    }
+
+    /// The magnetic stages of one step: drive → coil current → field in the rod (through
+    /// `rod_field`, as in [`Actuator::step_with_field_stage`]) → observed magnetization. They
+    /// touch only the amplifier, eddy, magnetization and aftereffect parts of `s`, and nothing
+    /// downstream feeds back into them: the workbench runs them once for parameter sets that
+    /// differ only in the mechanical stages.
+    #[inline]
+    pub fn step_magnetic(
+        &self,
+        s: &mut ActuatorState,
+        input: f32,
+        rod_field: impl FnOnce(f32) -> f32,
+    ) -> Result<MagneticOutput, StepError> {
         if !input.is_finite() || input.abs() > MAX_INPUT {
             return Err(StepError::InputOutOfRange);
         }
@@ -457,6 +484,15 @@ impl Actuator {
             Some(ae) => ae.step(&mut s.m_slow_a_per_m, m),
             None => m,
         };
+        Ok(MagneticOutput { current_a: current, field_a_per_m: h, magnetization_a_per_m: m_obs })
+    }
+
+    /// The mechanical stages of one step, from what [`Actuator::step_magnetic`] produced:
+    /// magnetostriction, coil heating, mechanics and sensor delay. They touch only the
+    /// temperature, mechanics and delay-line parts of `s`.
+    #[inline]
+    pub fn step_mechanical(&self, s: &mut ActuatorState, magnetic: MagneticOutput) -> ActuatorOutput {
+        let MagneticOutput { current_a: current, field_a_per_m: h, magnetization_a_per_m: m_obs } = magnetic;
         let strain = self.magnetostriction.strain(m_obs);
         let thermal = match &self.thermal {
             Some(th) => th.step(&mut s.temperature_rise_c, current),
@@ -471,12 +507,12 @@ impl Actuator {
             }
         };
         let y_meas = s.delay.step(y);
-        Ok(ActuatorOutput {
+        ActuatorOutput {
             current_a: current,
             field_a_per_m: h,
             magnetization_a_per_m: m_obs,
             strain,
             displacement_m: y_meas,
-        })
+        }
     }
 }
