@@ -26,7 +26,8 @@
 //!    candidate is judged on the measured channel nearest where it acts: with `current_A` and
 //!    `command_V` measured, amplifier dynamics on the current (command → current: static gain
 //!    against the refit's amplifier); with a search coil's `flux_density_T`, the rod's field,
-//!    magnetization and creep on the flux density; the rest on the displacement. Passing candidates
+//!    magnetization and creep on the flux density; with `temperature_C`, coil heating on the
+//!    temperature; the rest on the displacement. Passing candidates
 //!    on one channel that the best does not beat on every file are not told apart: the data choose
 //!    among them (signature R², then ΔBIC) and the diagnosis says which and why. A residual still
 //!    structured after the final structure is reported with its size.
@@ -367,6 +368,34 @@ fn evidence(effect: Effect, sigs: &[Signals]) -> f64 {
     }
 }
 
+/// Pooled R² of the coil-heating signature on the logged temperature: the baseline has no
+/// heating, so its temperature is a constant and the residual is the temperature's own
+/// variation, regressed on the accumulated Joule heat ∫i² dt of the baseline's current.
+fn heating_evidence(files: &[Recording], sims: &[Simulation], skip: &[usize]) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for ((rec, sim), &k) in files.iter().zip(sims).zip(skip) {
+        let t = &rec.temperature_c.as_deref().unwrap_or_default()[k..];
+        let dt = rec.dt_s();
+        let mut acc = 0.0;
+        let heat: Vec<f64> = sim.current_a[k..]
+            .iter()
+            .map(|i| {
+                acc += i * i * dt;
+                acc
+            })
+            .collect();
+        let m = mean(t.iter().copied());
+        let var = t.iter().map(|v| (v - m) * (v - m)).sum::<f64>();
+        num += r2(t, &heat) * var;
+        den += var;
+    }
+    if den > 0.0 {
+        num / den
+    } else {
+        0.0
+    }
+}
+
 /// [`signature_words`] for signatures taken on the flux density.
 fn flux_signature_words(signature: Signature) -> &'static str {
     match signature {
@@ -493,6 +522,8 @@ enum Channel {
     /// A search coil's flux density: what the field and magnetization stages act on, before the
     /// mechanics, the thermal elongation and the displacement probe.
     FluxDensity,
+    /// A logged `temperature_C`: what coil heating acts on before the rod expands.
+    Temperature,
 }
 
 impl Channel {
@@ -502,21 +533,31 @@ impl Channel {
             Channel::Displacement => "displacement",
             Channel::Current => "current",
             Channel::FluxDensity => "flux_density",
+            Channel::Temperature => "temperature",
         }
     }
 
     /// The measured channel nearest where `e` acts: the amplifier's on the current, the rod's
-    /// field, magnetization and creep on the flux density, the rest on the displacement — when
-    /// every file measured that channel (`current` and `flux`).
-    fn judging(e: Effect, current: bool, flux: bool) -> Channel {
+    /// field, magnetization and creep on the flux density, coil heating on the temperature, the
+    /// rest on the displacement — when every file measured that channel.
+    fn judging(e: Effect, measured: Measured) -> Channel {
         match e.info().stage {
-            Stage::Amplifier if current => Channel::Current,
-            Stage::RodField | Stage::Magnetization | Stage::MagnetizationCreep if flux => {
+            Stage::Amplifier if measured.current => Channel::Current,
+            Stage::Thermal if measured.temperature => Channel::Temperature,
+            Stage::RodField | Stage::Magnetization | Stage::MagnetizationCreep if measured.flux => {
                 Channel::FluxDensity
             }
             _ => Channel::Displacement,
         }
     }
+}
+
+/// The channels besides the displacement that every file measured.
+#[derive(Clone, Copy)]
+struct Measured {
+    current: bool,
+    flux: bool,
+    temperature: bool,
 }
 
 /// Per file, the scored residual on `channel` after the file's burn-in `skip`.
@@ -543,6 +584,12 @@ fn channel_scores(
                     let (_, model) =
                         fit::flux_fit(b, &sim.field_a_per_m[k..], &sim.magnetization_a_per_m[k..]);
                     scored(b, &model, 0)
+                }
+                Channel::Temperature => {
+                    // The ambient fitted on the scored part, as the offset is.
+                    let t = &rec.temperature_c.as_deref().unwrap_or_default()[k..];
+                    let rise = sim.temperature_rise_c.get(k..).unwrap_or_default();
+                    scored(t, &fit::temperature_fit(t, rise).1, 0)
                 }
             })
         })
@@ -854,6 +901,12 @@ pub fn diagnose(
     let current_measured =
         fit_files.iter().chain(score_files).all(|r| r.current_a.is_some() && r.command_v.is_some());
     let static_amp = current_measured.then(|| StaticGain::fit(fit_files, &fit_skip));
+    // With `temperature_C` in every file, coil heating is judged on the temperature.
+    let measured = Measured {
+        current: current_measured,
+        flux: flux_measured,
+        temperature: fit_files.iter().chain(score_files).all(|r| r.temperature_c.is_some()),
+    };
     let (base_fit_flux, base_score_flux) = if flux_measured {
         (
             channel_scores(spec, &base.params, fit_files, &fit_skip, Channel::FluxDensity)?,
@@ -875,7 +928,7 @@ pub fn diagnose(
             time_limited |= f.time_limited;
         }
         let s2 = spec.with(e);
-        let channel = Channel::judging(e, current_measured, flux_measured);
+        let channel = Channel::judging(e, measured);
         let (base_fit_s, base_score_s, r2) = match (&static_amp, channel) {
             (Some(amp), Channel::Current) => (
                 amp.scores(fit_files, &fit_skip),
@@ -885,14 +938,21 @@ pub fn diagnose(
             (_, Channel::FluxDensity) => {
                 (base_fit_flux.clone(), base_score_flux.clone(), evidence(e, &flux_sigs))
             }
+            (_, Channel::Temperature) => (
+                channel_scores(spec, &base.params, fit_files, &fit_skip, channel)?,
+                channel_scores(spec, &base.params, score_files, &score_skip, channel)?,
+                heating_evidence(fit_files, &base_sims, &fit_skip),
+            ),
             _ => (base_fit_disp.clone(), base_score_disp.clone(), evidence(e, &sigs)),
         };
         let n_eff: f64 = base_fit_s.iter().map(|s| effective_samples(&s.residual)).sum();
         let refit = r.ok().map(|(f, _)| f);
         // The refit contains the given structure (the effect switched off or negligible), so a
         // fit cost above the baseline's is a failed search, not evidence against the effect.
-        // Compared only where both costs weigh the same channels (not when `amp` adds the current).
-        if let Some(f) = refit.as_ref().filter(|_| e != Effect::AmplifierDynamics) {
+        // Compared only where both costs weigh the same channels (not when `amp` adds the current
+        // or coil heating the temperature).
+        let adds_a_channel = e == Effect::AmplifierDynamics || channel == Channel::Temperature;
+        if let Some(f) = refit.as_ref().filter(|_| !adds_a_channel) {
             let (b, a) = (base.fit.cost(), f.fit.cost());
             if a > b * 1.0001 {
                 failed_refits.push(format!("`{e}` ({:.2} % > {:.2} %)", a.sqrt() * 100.0, b.sqrt() * 100.0));
@@ -962,6 +1022,7 @@ pub fn diagnose(
             match channel {
                 Channel::Current => "the amplifier lag −di/dt of command → current",
                 Channel::FluxDensity => flux_signature_words(e.info().signature),
+                Channel::Temperature => "the accumulated coil heating ∫i² dt of the temperature",
                 Channel::Displacement => signature_words(e.info().signature),
             },
             r2 * 100.0,
@@ -1100,8 +1161,8 @@ pub fn diagnose(
         Some(c) if c.channel == "displacement" => {
             (spec.with(c.effect), c.refit.as_ref().map_or(base.params, |f| f.params), c.nrmse_after)
         }
-        // Judged on the flux density: what is left is reported on the displacement.
-        Some(c) if c.channel == "flux_density" => {
+        // Judged on another channel: what is left is reported on the displacement.
+        Some(c) => {
             let p = c.refit.as_ref().map_or(base.params, |f| f.params);
             let val = displacement_scores(spec.with(c.effect), &p, score_files, &score_skip)?;
             (spec.with(c.effect), p, mean(val.iter().map(|s| s.nrmse)))
@@ -1156,6 +1217,53 @@ pub fn diagnose(
 mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
+
+    /// Plumbing, on the model's own data (it proves the wiring, not the physics: the
+    /// independent rig's suite does that): with `temperature_C` logged, coil heating is judged
+    /// on the temperature, and named where the model lacks it.
+    #[test]
+    fn coil_heating_is_judged_on_a_logged_temperature() {
+        let dt = 2e-3;
+        let heating = ModelSpec::parse("linear+thermal").unwrap();
+        let mut p = model_core::ActuatorParams::TERFENOL_DEMO;
+        p.dt_s = dt as f32;
+        p.thermal.tau_s = 60.0;
+        p.thermal.thermal_resistance_c_per_w = 4.0;
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let mut file = |name: &str, f_hz: f64, amp_a: f64, secs: f64| {
+            let n = (secs / dt) as usize;
+            let mut rec = Recording::with_time(name, n, dt);
+            let w = 2.0 * std::f64::consts::PI * f_hz * dt;
+            rec.current_a = Some((0..n).map(|k| 0.3 + amp_a * (w * k as f64).sin()).collect());
+            let (sim, _) = fit::simulate_drive(heating, &p, &rec).unwrap();
+            // Uniform noise: 0.01 µm and 0.02 °C rms.
+            let mut noisy = |v: f64, rms: f64| v + rng.random_range(-1.0..1.0) * rms * 3f64.sqrt();
+            rec.displacement_um = Some(sim.displacement_um.iter().map(|y| noisy(y + 5.0, 0.01)).collect());
+            rec.temperature_c = Some(sim.temperature_rise_c.iter().map(|t| noisy(22.0 + t, 0.02)).collect());
+            rec
+        };
+        let fit_files = vec![file("fit", 2.0, 1.0, 12.0)];
+        let val_files = vec![file("val", 3.0, 0.8, 10.0)];
+        let d = diagnose(ModelSpec::LINEAR, &p, &fit_files, &val_files, FitOptions::default()).unwrap();
+        let c = d.candidates.iter().find(|c| c.effect == Effect::ThermalDrift).unwrap();
+        assert_eq!(c.channel, "temperature", "{d}");
+        assert_eq!(d.verdict, Some(Effect::ThermalDrift), "{d}");
+        assert!(c.nrmse_before > 3.0 * c.nrmse_after, "{d}");
+        // Without the log it is judged on the displacement, as before.
+        let unlogged = |files: &[Recording]| -> Vec<Recording> {
+            files.iter().cloned().map(|r| Recording { temperature_c: None, ..r }).collect()
+        };
+        let d = diagnose(
+            ModelSpec::LINEAR,
+            &p,
+            &unlogged(&fit_files),
+            &unlogged(&val_files),
+            FitOptions::default(),
+        )
+        .unwrap();
+        let c = d.candidates.iter().find(|c| c.effect == Effect::ThermalDrift).unwrap();
+        assert_eq!(c.channel, "displacement", "{d}");
+    }
 
     #[test]
     fn required_wins_is_the_one_sided_sign_test_at_five_percent() {

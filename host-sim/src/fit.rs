@@ -1,7 +1,9 @@
 //! Identification: one parameter set for a model spec from one or more recordings jointly, a
 //! displacement offset per file (closed form: the mean residual), cost = mean over files of
 //! NRMSE² (plus the current channel's when the model has an amplifier and the file measured the
-//! current, and the flux density's when a search coil measured it: [`flux_fit`]). With a
+//! current, the flux density's when a search coil measured it: [`flux_fit`], and the coil
+//! temperature's when the model has coil heating and the file logged `temperature_C`:
+//! [`temperature_fit`]). With a
 //! hysteretic law each file also starts from its own initial magnetic state
 //! ([`InitialState`]), a nuisance parameter like the offset. The free parameters and their
 //! bounds come from the effect registry
@@ -111,6 +113,9 @@ pub struct Simulation {
     pub field_a_per_m: Vec<f64>,
     /// Model magnetization [A/m] (as the field).
     pub magnetization_a_per_m: Vec<f64>,
+    /// Model temperature rise of the coil heating [°C] (runs of a model with `thermal_drift`;
+    /// empty otherwise: no rise).
+    pub temperature_rise_c: Vec<f64>,
     /// The pre-history the run started from: the field excursion above the bias [A/m] (0:
     /// demagnetised, then the bias), estimated for the file unless given.
     pub initial_excursion_a_per_m: f64,
@@ -270,8 +275,13 @@ pub fn run_model(
         current_a: Vec::with_capacity(n),
         field_a_per_m: Vec::with_capacity(n),
         magnetization_a_per_m: Vec::with_capacity(n),
+        temperature_rise_c: Vec::new(),
         initial_excursion_a_per_m: excursion,
     };
+    let heating = spec.has(Effect::ThermalDrift);
+    if heating {
+        out.temperature_rise_c.reserve(n);
+    }
     let mut y = s.mech.displacement_m as f64; // rest: the delay line holds this value too
     let mut i = if drive == Drive::CommandDynamic { 0.0 } else { input[0] };
     let (mut h, mut m) = (p.coil.bias_a_per_m as f64, f64::NAN);
@@ -282,6 +292,9 @@ pub fn run_model(
         if all_channels {
             out.field_a_per_m.push(h);
             out.magnetization_a_per_m.push(m);
+        }
+        if heating {
+            out.temperature_rise_c.push(s.temperature_rise_c as f64);
         }
         let magnetic = match &kept {
             Some(run) => run[k],
@@ -419,6 +432,8 @@ pub struct FileScore {
     pub nrmse_current: Option<f64>,
     /// The flux density's fit, when the file measured it.
     pub flux: Option<FluxFit>,
+    /// The coil temperature's fit, when the model has coil heating and the file logged it.
+    pub temperature: Option<TemperatureFit>,
     /// Fitted displacement offset [µm].
     pub offset_um: f64,
     /// The initial state's excursion [A/m] (`None`: a law without memory).
@@ -479,14 +494,36 @@ pub fn flux_fit(measured: &[f64], field: &[f64], magnetization: &[f64]) -> (Flux
     (FluxFit { nrmse: nrmse(measured, &model), scale, offset_t }, model)
 }
 
-/// Scores a simulation against its file.
-pub fn score(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> FileScore {
-    score_with_flux(spec, rec, sim).0
+/// How the model's coil heating matches a logged temperature.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TemperatureFit {
+    /// NRMSE of the temperature.
+    pub nrmse: f64,
+    /// The temperature the rise is counted from [°C]: the coil's when the file starts, taken
+    /// to be in equilibrium with its surroundings (the model's rise starts at 0).
+    pub ambient_c: f64,
 }
 
-/// [`score`], and the model's flux density when the file measured one (what the flux's residual
-/// block needs: fitted once).
-fn score_with_flux(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> (FileScore, Option<Vec<f64>>) {
+/// The logged temperature as the model explains it: T = T_amb + θ, with θ the model's rise
+/// (`rise` empty: none, a model without coil heating) and T_amb by least squares (the mean
+/// difference, like the displacement's offset). Returns the fit and the model's temperature
+/// [°C] sample by sample.
+pub fn temperature_fit(measured: &[f64], rise: &[f64]) -> (TemperatureFit, Vec<f64>) {
+    let at = |k: usize| rise.get(k).copied().unwrap_or(0.0);
+    let n = measured.len().max(1) as f64;
+    let ambient_c = measured.iter().enumerate().map(|(k, t)| t - at(k)).sum::<f64>() / n;
+    let model: Vec<f64> = (0..measured.len()).map(|k| ambient_c + at(k)).collect();
+    (TemperatureFit { nrmse: nrmse(measured, &model), ambient_c }, model)
+}
+
+/// Scores a simulation against its file.
+pub fn score(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> FileScore {
+    score_with_models(spec, rec, sim).0
+}
+
+/// [`score`], and the model's flux density and temperature where the file measured them (what
+/// their residual blocks need: fitted once).
+fn score_with_models(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> (FileScore, ChannelModels) {
     let meas = rec.displacement_um.as_deref().unwrap_or_default();
     let offset = meas.iter().zip(&sim.displacement_um).map(|(a, b)| a - b).sum::<f64>() / meas.len() as f64;
     let shifted: Vec<f64> = sim.displacement_um.iter().map(|y| y + offset).collect();
@@ -501,15 +538,26 @@ fn score_with_flux(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> (FileS
         }
         None => (None, None),
     };
+    let temperature = match rec.temperature_c.as_deref() {
+        Some(t) if spec.has(Effect::ThermalDrift) => Some(temperature_fit(t, &sim.temperature_rise_c)),
+        _ => None,
+    };
     let memory = has_memory(spec);
     let score = FileScore {
         nrmse: nrmse(meas, &shifted),
         nrmse_current,
         flux,
+        temperature: temperature.as_ref().map(|t| t.0),
         offset_um: offset,
         initial_excursion_a_per_m: memory.then_some(sim.initial_excursion_a_per_m),
     };
-    (score, flux_model)
+    (score, ChannelModels { flux: flux_model, temperature: temperature.map(|t| t.1) })
+}
+
+/// The models of the channels fitted in closed form ([`score_with_models`]).
+struct ChannelModels {
+    flux: Option<Vec<f64>>,
+    temperature: Option<Vec<f64>>,
 }
 
 /// Scores of a parameter set on a set of files, and the cost the fit minimises.
@@ -530,7 +578,9 @@ impl Evaluation {
         let mut sum = 0.0;
         let mut n = 0.0f64;
         for f in &self.files {
-            for e in [Some(f.nrmse), f.nrmse_current, f.flux.map(|b| b.nrmse)].into_iter().flatten() {
+            let channels =
+                [Some(f.nrmse), f.nrmse_current, f.flux.map(|b| b.nrmse), f.temperature.map(|t| t.nrmse)];
+            for e in channels.into_iter().flatten() {
                 sum += e * e;
                 n += 1.0;
             }
@@ -700,9 +750,9 @@ fn evaluate_prepared(spec: ModelSpec, params: &ActuatorParams, files: &[Prepared
 }
 
 /// The residuals the fit's cost is made of, one block per file and channel (displacement with
-/// its offset re-solved, then the current and the flux density where [`score`] scores them),
-/// each with the number of unknowns solved in closed form for it (displacement 1: the offset;
-/// flux density 2: scale and zero) and scaled by 1/(range·√n) so that the sum of squares over a
+/// its offset re-solved, then the current, the flux density and the temperature where [`score`]
+/// scores them), each with the number of unknowns solved in closed form for it (displacement 1:
+/// the offset; flux density 2: scale and zero; temperature 1: the ambient) and scaled by 1/(range·√n) so that the sum of squares over a
 /// block is its NRMSE²: the cost ([`Evaluation::cost`]) is the mean of the blocks' sums of
 /// squares.
 pub fn residual_blocks(
@@ -724,15 +774,18 @@ fn blocks_of(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> Vec<(usize, 
         let w = 1.0 / ((hi - lo).max(1e-12) * (measured.len() as f64).sqrt());
         measured.iter().zip(model).map(|(a, b)| w * (a - b)).collect()
     }
-    let (s, flux_model) = score_with_flux(spec, rec, sim);
+    let (s, models) = score_with_models(spec, rec, sim);
     let meas = rec.displacement_um.as_deref().unwrap_or_default();
     let mut blocks = vec![(1, scaled(meas, sim.displacement_um.iter().map(|y| y + s.offset_um)))];
     if s.nrmse_current.is_some() {
         let i = rec.current_a.as_deref().unwrap_or_default();
         blocks.push((0, scaled(i, sim.current_a.iter().copied())));
     }
-    if let (Some(b), Some(model)) = (rec.flux_density_t.as_deref(), flux_model) {
+    if let (Some(b), Some(model)) = (rec.flux_density_t.as_deref(), models.flux) {
         blocks.push((2, scaled(b, model.into_iter())));
+    }
+    if let (Some(t), Some(model)) = (rec.temperature_c.as_deref(), models.temperature) {
+        blocks.push((1, scaled(t, model.into_iter())));
     }
     blocks
 }
@@ -1431,5 +1484,20 @@ mod tests {
         // A flux that does not follow M at all: the scale stops at its range, never negative.
         let upside_down: Vec<f64> = b.iter().map(|v| -v).collect();
         assert_eq!(flux_fit(&upside_down, &h, &m).0.scale, FLUX_SCALE_RANGE.0);
+    }
+
+    /// The logged temperature's ambient comes out in closed form; without a rise (a model
+    /// without coil heating) the model is that constant and the whole variation is error.
+    #[test]
+    fn the_temperature_fit_solves_the_ambient() {
+        let rise: Vec<f64> = (0..500).map(|k| 0.4 * (1.0 - (-(k as f64) / 300.0).exp())).collect();
+        let logged: Vec<f64> = rise.iter().map(|r| 23.5 + r).collect();
+        let (f, model) = temperature_fit(&logged, &rise);
+        assert!((f.ambient_c - 23.5).abs() < 1e-9 && f.nrmse < 1e-9, "{f:?}");
+        assert!(model.iter().zip(&logged).all(|(a, b)| (a - b).abs() < 1e-9));
+        let (none, flat) = temperature_fit(&logged, &[]);
+        let mean = logged.iter().sum::<f64>() / logged.len() as f64;
+        assert!((none.ambient_c - mean).abs() < 1e-9 && flat.iter().all(|t| *t == none.ambient_c));
+        assert!(none.nrmse > 0.2, "{none:?}");
     }
 }

@@ -19,7 +19,7 @@ pub struct FileScoreRow {
     /// `fit` or `val` (fit only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub split: Option<&'static str>,
-    /// `displacement`, `current`, `flux_density` or `magnetization`.
+    /// `displacement`, `current`, `flux_density`, `temperature` or `magnetization`.
     pub channel: &'static str,
     /// NRMSE on that channel (fraction).
     pub nrmse: f64,
@@ -30,6 +30,9 @@ pub struct FileScoreRow {
     /// larger the rod's magnetization swing is than the model's).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub flux_scale: Option<f64>,
+    /// Temperature rows: the temperature the model's coil heating starts from [°C] (fitted).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ambient_c: Option<f64>,
     /// The estimated initial magnetic state: the pre-history field excursion above the bias
     /// [A/m] (displacement rows of hysteretic models).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -58,6 +61,7 @@ impl FileScoreRow {
             nrmse,
             offset_um: None,
             flux_scale: None,
+            ambient_c: None,
             initial_excursion_a_per_m: None,
             plots: None,
             measured: None,
@@ -71,11 +75,11 @@ impl FileScoreRow {
     /// Whether this row is its file's first (a recording's displacement row, a loop file's only
     /// row): what counts files.
     pub fn is_first_of_file(&self) -> bool {
-        self.channel != "current" && self.flux_scale.is_none()
+        !matches!(self.channel, "current" | "temperature") && self.flux_scale.is_none()
     }
 
     /// A recording's rows: displacement (with its offset and initial state), then the current
-    /// and the flux density where the model is scored on them.
+    /// the flux density and the temperature where the model is scored on them.
     pub fn for_recording(file: &str, split: Option<&'static str>, s: &crate::fit::FileScore) -> Vec<Self> {
         let mut rows = vec![FileScoreRow {
             offset_um: Some(s.offset_um),
@@ -89,6 +93,12 @@ impl FileScoreRow {
             rows.push(FileScoreRow {
                 flux_scale: Some(b.scale),
                 ..FileScoreRow::new(file, split, "flux_density", b.nrmse)
+            });
+        }
+        if let Some(t) = s.temperature {
+            rows.push(FileScoreRow {
+                ambient_c: Some(t.ambient_c),
+                ..FileScoreRow::new(file, split, "temperature", t.nrmse)
             });
         }
         rows

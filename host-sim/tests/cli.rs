@@ -412,6 +412,27 @@ fn coil_recording(path: &std::path::Path, wave: refrig::Waveform, seed: u64) {
     rec.write_csv(std::fs::File::create(path).unwrap(), false).unwrap();
 }
 
+/// The independent rig logs its coil's temperature (ambient 22 °C, 0.02 °C noise): with coil
+/// heating in the model it is a scored channel, and the temperature the heating rises from comes
+/// out as the rig's ambient.
+#[test]
+fn a_logged_coil_temperature_is_a_scored_channel_of_models_with_coil_heating() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.csv");
+    coil_recording(&path, refrig::Waveform::Sine { amplitude_v: 1.2, frequency_hz: 30.0, phase_rad: 0.0 }, 4);
+    let file = path.to_str().unwrap();
+    let rows = |model: &str| json(&gma(&["fit", "--model", model, "--json", file]))["files"].clone();
+    let with_heating = rows("linear+thermal");
+    let temperature = with_heating.as_array().unwrap().iter().find(|r| r["channel"] == "temperature");
+    let t = temperature.unwrap_or_else(|| panic!("a temperature row: {with_heating}"));
+    let ambient = t["ambient_c"].as_f64().unwrap();
+    assert!((ambient - 22.0).abs() < 0.05, "ambient {ambient} °C: {t}");
+    assert!(t["nrmse"].as_f64().unwrap().is_finite(), "{t}");
+    // Without coil heating the model has no temperature to score.
+    let without = rows("linear");
+    assert!(without.as_array().unwrap().iter().all(|r| r["channel"] != "temperature"), "{without}");
+}
+
 #[test]
 fn a_search_coils_flux_density_is_a_scored_channel_of_fit_compare_and_diagnose() {
     let dir = tempfile::tempdir().unwrap();
@@ -482,7 +503,8 @@ fn a_search_coils_flux_density_is_a_scored_channel_of_fit_compare_and_diagnose()
         let v: Vec<f64> = line.split(',').skip(5).map(|x| x.parse().unwrap()).collect();
         assert!((v[0] - v[1] - v[2]).abs() < 1e-12, "{line}");
     }
-    // diagnose judges the rod's effects on the flux density, the rest on the displacement.
+    // diagnose judges the rod's effects on the flux density, the amplifier on the current, coil
+    // heating on the rig's logged temperature, the rest on the displacement.
     let d = json(&gma(&[
         "diagnose",
         "--model",
@@ -497,6 +519,7 @@ fn a_search_coils_flux_density_is_a_scored_channel_of_fit_compare_and_diagnose()
         let expected = match c["effect"].as_str().unwrap() {
             "eddy_current" | "magnetic_aftereffect" => "flux_density",
             "amplifier_dynamics" => "current",
+            "thermal_drift" => "temperature",
             _ => "displacement",
         };
         assert_eq!(c["channel"], expected, "{c}");

@@ -10,6 +10,9 @@
 //! the complete structure minus it) and the complete case. The ignored test prints one row per
 //! case and a summary table against the targets; it asserts only that the machinery ran.
 //! Recordings are cached under `target/holdout-suite/` (keyed by a hash of the rig and drive).
+//! The rig logs its coil's temperature too; the suite gives `gma` the command, current and
+//! displacement only, unless `HOLDOUT_THERMOMETER=on` (then coil heating is judged on the
+//! temperature).
 
 use std::collections::hash_map::DefaultHasher;
 use std::fs;
@@ -117,7 +120,33 @@ fn recording(rig: &Rig, name: &str, drive: &Drive) -> PathBuf {
         drop(file);
         fs::rename(&partial, &path).expect("rename recording");
     }
-    path
+    if std::env::var("HOLDOUT_THERMOMETER").is_ok_and(|v| v == "on") {
+        path
+    } else {
+        without_temperature(&path)
+    }
+}
+
+/// A copy of the recording at `path` without its `temperature_C` column (cached beside it).
+fn without_temperature(path: &Path) -> PathBuf {
+    let out = path.with_extension("no-temperature.csv");
+    if !out.exists() {
+        let text = fs::read_to_string(path).expect("read recording");
+        let header = text.lines().next().expect("header");
+        let column = header.split(',').position(|c| c == "temperature_C").expect("a temperature_C column");
+        let kept: String = text
+            .lines()
+            .map(|line| {
+                let cells: Vec<&str> =
+                    line.split(',').enumerate().filter(|(i, _)| *i != column).map(|c| c.1).collect();
+                cells.join(",") + "\n"
+            })
+            .collect();
+        let partial = out.with_extension("partial");
+        fs::write(&partial, kept).expect("write recording");
+        fs::rename(&partial, &out).expect("rename recording");
+    }
+    out
 }
 
 fn run_json(args: &[&str]) -> (bool, Value) {

@@ -7,13 +7,16 @@
 //!
 //! Every case is diagnosed twice, on the same recordings: with the command, current and
 //! displacement only, and with the rig's search coil as well (`flux_density_T`, on which the rod's
-//! effects are judged); `GMA_REFRIG_FLUX=off` or `only` runs one of the two.
+//! effects are judged); `GMA_REFRIG_FLUX=off` or `only` runs one of the two. The rig also logs
+//! its coil's temperature; `GMA_REFRIG_THERMOMETER=on` keeps that column in both (coil heating
+//! is then judged on the temperature).
 //!
 //! Run (reduced: law `ja-bulk`, seed 1, about two minutes once the recordings are cached):
 //!   cargo test --release -p host-sim --test refrig_suite hidden_effects -- --ignored --nocapture
 //! Full grid (4 laws × 2 seeds, about 20 minutes on 2 cores): `GMA_REFRIG_SUITE=full` in front
 //! of the same command; one law on both seeds: `GMA_REFRIG_SUITE=preisach` (or `ja-original`,
 //! `ja-bulk`, `ja-inverse`).
+//! `GMA_REFRIG_HEAT=on` adds a heat run to the fit and to the validation files ([`heat_runs`]).
 //! `ja_forms` (`diagnose --ja-variants` per J–A rig law) and `error_budget` are separate tests.
 //! Generated CSVs are cached under `target/refrig-suite/` (the rig costs 1–2 s of CPU per
 //! simulated second); delete the folder after changing the rig.
@@ -24,15 +27,20 @@ use host_sim::diagnose::diagnose;
 use host_sim::fit::FitOptions;
 use host_sim::recording::Recording;
 use model_core::{ActuatorParams, Effect, ModelSpec};
+use rayon::prelude::*;
 use refrig::{Drive, JaVariant, Law, Rig, SearchCoil, Waveform};
 
-/// One excitation of the suite: waveform, offset [V], duration [s].
+/// One excitation of the suite: waveform, offset [V], duration [s], sample rate [Hz].
 struct Excitation {
     label: &'static str,
     waveform: Waveform,
     offset_v: f64,
     duration_s: f64,
+    sample_rate_hz: f64,
 }
+
+/// The suite's sample rate, but for the heat runs.
+const RATE_HZ: f64 = 10_000.0;
 
 fn sine(
     label: &'static str,
@@ -46,6 +54,7 @@ fn sine(
         waveform: Waveform::Sine { amplitude_v, frequency_hz, phase_rad: 0.0 },
         offset_v,
         duration_s,
+        sample_rate_hz: RATE_HZ,
     }
 }
 
@@ -65,6 +74,7 @@ fn excitations() -> (Vec<Excitation>, Vec<Excitation>) {
         waveform: Waveform::Steps { levels_v: levels_v.to_vec(), dwell_s: 0.25 },
         offset_v: 0.0,
         duration_s,
+        sample_rate_hz: RATE_HZ,
     };
     let fit = vec![
         sine("sine20", 1.2, 20.0, 0.0, 0.3),
@@ -73,6 +83,7 @@ fn excitations() -> (Vec<Excitation>, Vec<Excitation>) {
             waveform: Waveform::schroeder_multisine(1.0, &low),
             offset_v: 0.0,
             duration_s: 0.3,
+            sample_rate_hz: RATE_HZ,
         },
         Excitation {
             label: "chirp20-2500",
@@ -85,6 +96,7 @@ fn excitations() -> (Vec<Excitation>, Vec<Excitation>) {
             },
             offset_v: 0.0,
             duration_s: 0.4,
+            sample_rate_hz: RATE_HZ,
         },
         steps("steps", &[0.0, 1.2, 0.3, -0.8, 0.6, -1.2, 0.0], 1.75),
     ];
@@ -100,16 +112,31 @@ fn excitations() -> (Vec<Excitation>, Vec<Excitation>) {
             },
             offset_v: 0.0,
             duration_s: 0.35,
+            sample_rate_hz: RATE_HZ,
         },
         Excitation {
             label: "ms50-2000",
             waveform: Waveform::schroeder_multisine(1.2, &high),
             offset_v: 0.1,
             duration_s: 0.3,
+            sample_rate_hz: RATE_HZ,
         },
         steps("steps-val", &[0.0, -1.0, 0.8, -0.2, 1.3, -0.5], 1.5),
     ];
     (fit, val)
+}
+
+/// The heat runs an engineer records to see coil heating, one to fit and one to validate: a
+/// slow sine at high current for seconds, logged at 200 Hz (the coil's time constant is minutes:
+/// what shows is its initial rate of rise, about 0.1 °C/s here). The other files are 0.2–1.75 s
+/// long: the coil warms by 0.01–0.1 °C in them, at the thermometer's noise (0.02 °C). Fit: 2 Hz,
+/// 1.2 V about 0.3 V, 10 s; validation: 3 Hz, 1.0 V about 0.2 V, 8 s.
+fn heat_runs() -> (Excitation, Excitation) {
+    let slow = |label, amplitude_v, frequency_hz, offset_v, duration_s| Excitation {
+        sample_rate_hz: 200.0,
+        ..sine(label, amplitude_v, frequency_hz, offset_v, duration_s)
+    };
+    (slow("heat2", 1.2, 2.0, 0.3, 10.0), slow("heat3", 1.0, 3.0, 0.2, 8.0))
 }
 
 fn cache_dir() -> PathBuf {
@@ -137,6 +164,7 @@ fn recording(
     ));
     if !file.exists() {
         let mut rig = Rig {
+            sample_rate_hz: exc.sample_rate_hz,
             duration_s: exc.duration_s,
             seed: seed * 100 + salt,
             drive: Drive { waveform: exc.waveform.clone(), offset_v: exc.offset_v },
@@ -164,11 +192,21 @@ enum Channels {
 }
 
 impl Channels {
-    fn label(self) -> &'static str {
-        match self {
+    fn label(self) -> String {
+        let base = match self {
             Channels::DisplacementOnly => "displacement only",
             Channels::WithSearchCoil => "with a search coil",
+        };
+        if Self::thermometer() {
+            format!("{base} + thermometer")
+        } else {
+            base.to_string()
         }
+    }
+
+    /// Whether the coil's temperature column is kept (`GMA_REFRIG_THERMOMETER=on`).
+    fn thermometer() -> bool {
+        std::env::var("GMA_REFRIG_THERMOMETER").is_ok_and(|v| v == "on")
     }
 
     fn apply(self, files: &[Recording]) -> Vec<Recording> {
@@ -178,6 +216,9 @@ impl Channels {
             .map(|mut r| {
                 if self == Channels::DisplacementOnly {
                     r.flux_density_t = None;
+                }
+                if !Self::thermometer() {
+                    r.temperature_c = None;
                 }
                 r
             })
@@ -285,19 +326,25 @@ fn hidden_effects_on_the_independent_rig() {
         }
     };
     let seeds: &[u64] = if full { &[1, 2] } else { &[1] };
-    let (fit_exc, val_exc) = excitations();
+    let (mut fit_exc, mut val_exc) = excitations();
+    if std::env::var("GMA_REFRIG_HEAT").is_ok_and(|v| v == "on") {
+        let (heat_fit, heat_val) = heat_runs();
+        fit_exc.push(heat_fit);
+        val_exc.push(heat_val);
+    }
     let init = engineer_init();
     let mut rows = Vec::new();
     for &(law_name, law) in &laws {
         for &seed in seeds {
             let files = |hysteresis: bool| {
+                // Simulated in parallel the first time (the rig is serial).
                 let fit: Vec<Recording> = fit_exc
-                    .iter()
+                    .par_iter()
                     .enumerate()
                     .map(|(i, e)| recording(law, law_name, hysteresis, seed, e, i as u64))
                     .collect();
                 let val: Vec<Recording> = val_exc
-                    .iter()
+                    .par_iter()
                     .enumerate()
                     .map(|(i, e)| recording(law, law_name, hysteresis, seed, e, 10 + i as u64))
                     .collect();

@@ -46,15 +46,17 @@ impl Aftereffect {
     }
 }
 
-/// Coil heating → rod thermal expansion: temperature rise θ' = (R_th R i² − θ)/τ_th, expansion
-/// Δy = α_T L θ (α_T = 12.9e-6 /°C for Terfenol-D, 002 §VII).
+/// Coil heating → rod thermal expansion: the coil's temperature rise θ' = (R_th R i² − θ)/τ_th
+/// (what a thermometer on the winding reads, above its surroundings), expansion Δy = α_T L θ
+/// (α_T = 12.9e-6 /°C for Terfenol-D, 002 §VII): the rod is taken to follow the coil.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct ThermalParams {
     /// Coil resistance R [Ω].
     pub coil_resistance_ohm: f32,
-    /// Thermal resistance coil→ambient seen by the rod R_th [°C/W].
+    /// Thermal resistance R_th of the coil to its surroundings [°C/W] (τ_th = R_th × its heat
+    /// capacity).
     pub thermal_resistance_c_per_w: f32,
     /// Thermal time constant τ_th [s].
     pub tau_s: f32,

@@ -117,8 +117,8 @@ fn long_about() -> String {
         "Model workbench for giant-magnetostrictive (Terfenol-D) actuators: compare a model with \
          measurements, see where it fails, learn which physical effect is missing, add it and watch \
          the error fall.\n\nMeasurement CSV columns (by name): time_s [s], command_V, current_A, \
-         displacement_um, force_N, temperature_C, flux_density_T (a search coil on the rod: a third \
-         scored channel) (other names or units: `--column`, see `gma fit --help`). Model specs are \
+         displacement_um, force_N, temperature_C (the coil's: scored, with coil heating in the model), \
+         flux_density_T (a search coil on the rod: a third scored channel) (other names or units: `--column`, see `gma fit --help`). Model specs are \
          `+`-joined effects: {} (`gma effects` \
          describes each). File formats, model specs and the JSON output: docs/formats.md and \
          docs/cli.md in the source repository.",
