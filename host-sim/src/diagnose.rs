@@ -314,16 +314,21 @@ fn signals(rec: &Recording, sim: &Simulation, offset: f64, flux: bool) -> Signal
     let hmean = h.iter().sum::<f64>() / h.len() as f64;
     let cubic: Vec<f64> = h.iter().map(|v| (v - hmean).powi(3)).collect();
     let creep = lowpass(y, dt, 0.05).iter().zip(y).map(|(l, v)| l - v).collect();
+    let heat = joule_heat(&sim.current_a, dt);
+    Signals { residual, rate, accel, branch, cubic, creep, heat }
+}
+
+/// The accumulated coil heating ∫i² dt [A² s] of a current sampled every `dt` s: the
+/// coil-heating signature (its resistance aside).
+fn joule_heat(current: &[f64], dt: f64) -> Vec<f64> {
     let mut acc = 0.0;
-    let heat = sim
-        .current_a
+    current
         .iter()
         .map(|i| {
             acc += i * i * dt;
             acc
         })
-        .collect();
-    Signals { residual, rate, accel, branch, cubic, creep, heat }
+        .collect()
 }
 
 /// R² of the least-squares fit of `r` by `a·f + b` (one regressor and a constant).
@@ -375,15 +380,7 @@ fn heating_evidence(files: &[Recording], sims: &[Simulation], skip: &[usize]) ->
     let (mut num, mut den) = (0.0, 0.0);
     for ((rec, sim), &k) in files.iter().zip(sims).zip(skip) {
         let t = &rec.temperature_c.as_deref().unwrap_or_default()[k..];
-        let dt = rec.dt_s();
-        let mut acc = 0.0;
-        let heat: Vec<f64> = sim.current_a[k..]
-            .iter()
-            .map(|i| {
-                acc += i * i * dt;
-                acc
-            })
-            .collect();
+        let heat = joule_heat(&sim.current_a[k..], rec.dt_s());
         let m = mean(t.iter().copied());
         let var = t.iter().map(|v| (v - m) * (v - m)).sum::<f64>();
         num += r2(t, &heat) * var;
