@@ -15,11 +15,11 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
-use model_core::effects::STRAIN_SCALE;
+use model_core::effects::{ROD_THERMAL_LAG, STRAIN_SCALE};
 use model_core::{Actuator, ActuatorParams, Effect, MagnetizationLaw, ModelSpec};
 use rayon::prelude::*;
 
-use crate::params::{free_params, FreeParam};
+use crate::params::{free_params, FreeParam, Given};
 use crate::progress::Progress;
 use crate::recording::Recording;
 use crate::results::StartScore;
@@ -866,7 +866,7 @@ pub struct Constraints {
 /// Every parameter `spec` identifies on these files (λ_s first), with the registry's ranges.
 pub fn identifiable(spec: ModelSpec, files: &[Recording]) -> Result<Vec<FreeParam>> {
     let command_driven = prepare(spec, files)?.iter().any(|p| p.drive != Drive::Current);
-    Ok(free_params(spec, command_driven))
+    Ok(free_params(spec, Given::by(files, command_driven)))
 }
 
 impl Constraints {
@@ -1056,7 +1056,40 @@ pub fn fit_constrained(
 }
 
 /// The displacement fit with the search `plan` ([`PLAN`] for `gma fit`).
+///
+/// The rod's thermal lag (searched when a file logs the coil's temperature) nests the model
+/// whose rod follows the coil: the fit first holds it at its start value (0, none, unless the
+/// parameter file gives one), then frees it in a local search from that optimum, so the larger
+/// model never ends in a worse basin than the one it contains (searched together from the
+/// start, the complete structure on the independent rig ended at 1.44 % fit NRMSE where the
+/// nested one reaches 0.55 %).
 fn fit_planned(
+    spec: ModelSpec,
+    starts: &[ActuatorParams],
+    files: &[Recording],
+    opts: FitOptions,
+    constraints: &Constraints,
+    plan: &Plan,
+) -> Result<FitResult> {
+    let rod_lag_free = spec.has(Effect::ThermalDrift)
+        && files.iter().any(|r| r.temperature_c.is_some())
+        && !constraints.is_fixed(ROD_THERMAL_LAG.key);
+    if !rod_lag_free {
+        return fit_searched(spec, starts, files, opts, constraints, plan);
+    }
+    let mut held = constraints.clone();
+    held.fixed.push(ROD_THERMAL_LAG.key);
+    let nested = fit_searched(spec, starts, files, opts, &held, plan)?;
+    let mut freed = fit_searched(spec, &[nested.params], files, opts, constraints, &REFINE)?;
+    freed.evaluations += nested.evaluations;
+    freed.time_limited |= nested.time_limited;
+    // The start the user gave, not the nested optimum the local search began from.
+    freed.start = nested.start;
+    Ok(freed)
+}
+
+/// One search of [`fit_planned`].
+fn fit_searched(
     spec: ModelSpec,
     starts: &[ActuatorParams],
     files: &[Recording],
@@ -1093,7 +1126,7 @@ fn fit_planned(
     let mut lambda_param = FreeParam::of(&STRAIN_SCALE);
     lambda_param.bound = c.narrow(Bound { lo: LAMBDA_RANGE.0, hi: LAMBDA_RANGE.1, ..lambda_param.bound });
     let lambda_range = (!lambda_fixed).then_some((lambda_param.bound.lo, lambda_param.bound.hi));
-    let free: Vec<FreeParam> = free_params(spec, command_driven)
+    let free: Vec<FreeParam> = free_params(spec, Given::by(files, command_driven))
         .into_iter()
         .filter(|f| f.name() != STRAIN_SCALE.key && !c.is_fixed(f.name()))
         .map(|f| FreeParam { bound: c.narrow(f.bound), ..f })
@@ -1323,7 +1356,7 @@ mod tests {
     #[test]
     fn the_mode_parameters_are_the_registrys() {
         let names: Vec<&str> =
-            free_params(ModelSpec::LINEAR.with(model_core::Effect::MechanicalDynamics), false)
+            free_params(ModelSpec::LINEAR.with(model_core::Effect::MechanicalDynamics), Given::default())
                 .iter()
                 .map(|f| f.name())
                 .collect();

@@ -10,9 +10,12 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use model_core::effects::{
-    parameter_tables, spec_words, table_of, Param, Scale, AMPLIFIER_GAIN, PARAMETER_FILE_FORMAT, STRAIN_SCALE,
+    parameter_tables, spec_words, table_of, Param, Scale, AMPLIFIER_GAIN, PARAMETER_FILE_FORMAT,
+    ROD_THERMAL_LAG, STRAIN_SCALE,
 };
-use model_core::{Actuator, ActuatorParams, ModelSpec};
+use model_core::{Actuator, ActuatorParams, Effect, ModelSpec};
+
+use crate::recording::Recording;
 use serde::Deserialize as _;
 
 use crate::error::Located;
@@ -66,16 +69,36 @@ impl FreeParam {
     }
 }
 
+/// What the recordings give, where it decides which parameters a fit can identify.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Given {
+    /// The files give the command, not the current: the amplifier gain is identified.
+    pub command_driven: bool,
+    /// A file logs the coil's temperature: with `thermal_drift` the rod's lag behind the coil is
+    /// identified (the thermometer pins the coil's own lag).
+    pub coil_temperature: bool,
+}
+
+impl Given {
+    /// What `files` give.
+    pub fn by(files: &[Recording], command_driven: bool) -> Self {
+        Given { command_driven, coil_temperature: files.iter().any(|r| r.temperature_c.is_some()) }
+    }
+}
+
 /// The continuous parameters `spec` identifies, from the effect registry: the strain scale, the
-/// magnetization law's, the amplifier gain when `command_driven` (the files give the command,
-/// not the current), and each effect's in chain order.
-pub fn free_params(spec: ModelSpec, command_driven: bool) -> Vec<FreeParam> {
+/// magnetization law's, the amplifier gain when the files give the command, not the current,
+/// each effect's in chain order, and the rod's thermal lag when they log the coil's temperature.
+pub fn free_params(spec: ModelSpec, given: Given) -> Vec<FreeParam> {
     let mut v: Vec<&'static Param> = vec![&STRAIN_SCALE];
     v.extend(spec.law().params());
-    if command_driven {
+    if given.command_driven {
         v.push(&AMPLIFIER_GAIN);
     }
     v.extend(spec.effects().flat_map(|e| e.info().params));
+    if given.coil_temperature && spec.has(Effect::ThermalDrift) {
+        v.push(&ROD_THERMAL_LAG);
+    }
     v.into_iter().map(FreeParam::of).collect()
 }
 

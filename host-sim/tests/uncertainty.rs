@@ -71,7 +71,7 @@ fn the_95_percent_intervals_cover_the_true_parameters() {
             u.params
                 .iter()
                 .map(|p| {
-                    let free = host_sim::params::free_params(spec, false);
+                    let free = host_sim::params::free_params(spec, host_sim::params::Given::default());
                     let true_value = (free.iter().find(|f| f.name() == p.bound.name).unwrap().get)(&t);
                     let (lo, hi) = p.ci95.expect("identifiable");
                     let sd = if p.bound.log { p.std_ln.unwrap() } else { p.std.unwrap() };

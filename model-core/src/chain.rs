@@ -154,6 +154,7 @@ impl ActuatorParams {
             tau_s: 30.0,
             rod_length_m: 0.08,
             expansion_per_c: ThermalParams::TERFENOL_EXPANSION_PER_C,
+            rod_tau_s: 0.0,
         },
         delay_samples: 3.0,
     };
@@ -204,8 +205,10 @@ pub struct ActuatorState {
     pub preisach: PreisachState,
     /// Slow magnetization of the aftereffect [A/m].
     pub m_slow_a_per_m: f32,
-    /// Coil temperature rise [°C].
+    /// Coil temperature rise [°C] (what a thermometer on the winding reads).
     pub temperature_rise_c: f32,
+    /// The rod's temperature rise [°C] (behind the coil's by `thermal.rod_tau_s`).
+    pub rod_temperature_rise_c: f32,
     /// Mechanics.
     pub mech: MechState,
     /// Sensor delay line [m].
@@ -216,6 +219,7 @@ pub struct ActuatorState {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ThermalTailState {
     temperature_rise_c: f32,
+    rod_temperature_rise_c: f32,
     mech: MechState,
     delay: DelayLine<MAX_DELAY_SAMPLES>,
 }
@@ -390,6 +394,7 @@ impl Actuator {
             preisach,
             m_slow_a_per_m: m0,
             temperature_rise_c: 0.0,
+            rod_temperature_rise_c: 0.0,
             mech: MechState { displacement_m: y0, velocity_m_per_s: 0.0 },
             delay,
         }
@@ -399,6 +404,7 @@ impl Actuator {
     pub fn thermal_tail_rest(&self) -> ThermalTailState {
         ThermalTailState {
             temperature_rise_c: 0.0,
+            rod_temperature_rise_c: 0.0,
             mech: MechState::default(),
             delay: DelayLine::clamped(self.delay_samples, 0.0),
         }
@@ -412,7 +418,7 @@ impl Actuator {
     #[inline]
     pub fn thermal_tail_step(&self, s: &mut ThermalTailState, current_a: f32) -> f32 {
         let elongation = match &self.thermal {
-            Some(th) => th.step(&mut s.temperature_rise_c, current_a),
+            Some(th) => th.step(&mut s.temperature_rise_c, &mut s.rod_temperature_rise_c, current_a),
             None => 0.0,
         };
         let y = match &self.mech {
@@ -495,7 +501,7 @@ impl Actuator {
         let MagneticOutput { current_a: current, field_a_per_m: h, magnetization_a_per_m: m_obs } = magnetic;
         let strain = self.magnetostriction.strain(m_obs);
         let thermal = match &self.thermal {
-            Some(th) => th.step(&mut s.temperature_rise_c, current),
+            Some(th) => th.step(&mut s.temperature_rise_c, &mut s.rod_temperature_rise_c, current),
             None => 0.0,
         };
         let y_free = strain * self.rod_length_m + thermal;

@@ -57,7 +57,7 @@ impl Compensator {
         }
         let md = &self.model;
         let st = &mut s.model;
-        let thermal = md.thermal.as_ref().map_or(0.0, |th| th.elongation_m(st.temperature_rise_c));
+        let thermal = md.thermal.as_ref().map_or(0.0, |th| th.elongation_m(st.rod_temperature_rise_c));
         let strain = (y_ref_m - thermal) / md.rod_length_m;
         let m_obs = md.magnetostriction.magnetization_for(strain, self.branch_sign);
         let m = match &md.aftereffect {
@@ -84,7 +84,7 @@ impl Compensator {
         };
         let current = within(md.coil.current_for(h_coil), MAX_INPUT);
         if let Some(th) = &md.thermal {
-            th.step(&mut st.temperature_rise_c, current);
+            th.step(&mut st.temperature_rise_c, &mut st.rod_temperature_rise_c, current);
         }
         let input = match &md.amp {
             Some(amp) => {

@@ -47,8 +47,9 @@ impl Aftereffect {
 }
 
 /// Coil heating → rod thermal expansion: the coil's temperature rise θ' = (R_th R i² − θ)/τ_th
-/// (what a thermometer on the winding reads, above its surroundings), expansion Δy = α_T L θ
-/// (α_T = 12.9e-6 /°C for Terfenol-D, 002 §VII): the rod is taken to follow the coil.
+/// (what a thermometer on the winding reads, above its surroundings), the rod's rise behind it
+/// θ_r' = (θ − θ_r)/τ_r (heat crosses the gap between winding and rod; τ_r = 0: the rod follows
+/// the coil at once), expansion Δy = α_T L θ_r (α_T = 12.9e-6 /°C for Terfenol-D, 002 §VII).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
@@ -64,6 +65,12 @@ pub struct ThermalParams {
     pub rod_length_m: f32,
     /// Expansion coefficient α_T [1/°C].
     pub expansion_per_c: f32,
+    /// Time constant τ_r [s] of the rod's temperature behind the coil's; 0 (the default, and
+    /// every parameter file before 2026-11-26): the rod follows the coil at once. A fit
+    /// identifies it only from recordings that log the coil's temperature, which pins the coil's
+    /// own lag: from the displacement alone the two lags trade.
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub rod_tau_s: f32,
 }
 
 impl ThermalParams {
@@ -71,10 +78,12 @@ impl ThermalParams {
     pub const TERFENOL_EXPANSION_PER_C: f32 = 12.9e-6;
 }
 
-/// Validated thermal drift; state is the temperature rise θ [°C].
+/// Validated thermal drift; state is the coil's and the rod's temperature rise θ, θ_r [°C].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ThermalDrift {
     lag: FirstOrderLag,
+    /// The rod behind the coil (None: τ_r = 0, the rod at the coil's temperature).
+    rod_lag: Option<FirstOrderLag>,
     metres_per_c: f32,
 }
 
@@ -100,20 +109,36 @@ impl ThermalDrift {
             |a| (0.0..=1e-3).contains(&a),
             "in [0, 1e-3] 1/°C",
         )?;
+        let rod_tau = check("thermal.rod_tau_s", p.rod_tau_s, |t| (0.0..=1e5).contains(&t), "in [0, 1e5] s")?;
+        let rod_lag = if rod_tau > 0.0 {
+            Some(FirstOrderLag::new("thermal.rod_tau_s", rod_tau, 1.0, dt_s)?)
+        } else {
+            None
+        };
         let gain = p.coil_resistance_ohm * p.thermal_resistance_c_per_w;
-        Ok(Self { lag: FirstOrderLag::new("thermal.tau_s", p.tau_s, gain, dt_s)?, metres_per_c: a * l })
+        Ok(Self {
+            lag: FirstOrderLag::new("thermal.tau_s", p.tau_s, gain, dt_s)?,
+            rod_lag,
+            metres_per_c: a * l,
+        })
     }
 
-    /// One sample at coil current `i`: returns the thermal elongation [m].
+    /// One sample at coil current `i`: advances the coil's rise θ and the rod's θ_r, returns
+    /// the thermal elongation [m].
     #[inline]
-    pub fn step(&self, theta_c: &mut f32, current_a: f32) -> f32 {
-        self.lag.step(theta_c, current_a * current_a) * self.metres_per_c
+    pub fn step(&self, theta_c: &mut f32, rod_theta_c: &mut f32, current_a: f32) -> f32 {
+        let coil = self.lag.step(theta_c, current_a * current_a);
+        *rod_theta_c = match &self.rod_lag {
+            Some(lag) => lag.step(rod_theta_c, coil),
+            None => coil,
+        };
+        *rod_theta_c * self.metres_per_c
     }
 
-    /// Elongation [m] for a temperature rise θ.
+    /// Elongation [m] for a rod temperature rise θ_r.
     #[inline]
-    pub fn elongation_m(&self, theta_c: f32) -> f32 {
-        theta_c * self.metres_per_c
+    pub fn elongation_m(&self, rod_theta_c: f32) -> f32 {
+        rod_theta_c * self.metres_per_c
     }
 }
 
@@ -231,16 +256,50 @@ mod tests {
                 tau_s: 60.0,
                 rod_length_m: 0.1,
                 expansion_per_c: ThermalParams::TERFENOL_EXPANSION_PER_C,
+                rod_tau_s: 0.0,
             },
             1e-3,
         )
         .unwrap();
-        let mut theta = 0.0;
+        let (mut theta, mut rod) = (0.0, 0.0);
         let mut y = 0.0;
         for _ in 0..20_000 {
-            y = th.step(&mut theta, 2.0);
+            y = th.step(&mut theta, &mut rod, 2.0);
         }
         // θ(20 s) = 10 °C·(1 − e^{−1/3}) = 2.835 °C → 3.66 µm.
         assert!((theta - 2.835).abs() < 0.01 && (y * 1e6 - 3.657).abs() < 0.01, "{theta} °C, {} µm", y * 1e6);
+    }
+
+    /// The rod's rise follows the coil's through its own lag: for a heating step the two-node
+    /// response θ_r(t) = G(1 − (τ e^{−t/τ} − τ_r e^{−t/τ_r})/(τ − τ_r)) (G = R_th R i²), and the
+    /// elongation is the rod's, not the coil's.
+    #[test]
+    fn the_rod_lags_the_coil() {
+        let (tau, tau_r, dt) = (60.0_f64, 15.0_f64, 1e-2_f32);
+        let p = ThermalParams {
+            coil_resistance_ohm: 5.0,
+            thermal_resistance_c_per_w: 0.5,
+            tau_s: tau as f32,
+            rod_length_m: 0.1,
+            expansion_per_c: ThermalParams::TERFENOL_EXPANSION_PER_C,
+            rod_tau_s: tau_r as f32,
+        };
+        let th = ThermalDrift::new(p, dt).unwrap();
+        let (mut coil, mut rod, mut y) = (0.0, 0.0, 0.0);
+        let steps = 2_000; // 20 s
+        for _ in 0..steps {
+            y = th.step(&mut coil, &mut rod, 2.0);
+        }
+        let t = steps as f64 * dt as f64;
+        let g = 10.0;
+        let exact_coil = g * (1.0 - (-t / tau).exp());
+        let exact_rod = g * (1.0 - (tau * (-t / tau).exp() - tau_r * (-t / tau_r).exp()) / (tau - tau_r));
+        assert!((coil as f64 - exact_coil).abs() < 2e-3, "coil {coil} °C, exact {exact_coil}");
+        assert!((rod as f64 - exact_rod).abs() < 2e-3, "rod {rod} °C, exact {exact_rod}");
+        assert!(rod < 0.7 * coil, "the rod behind the coil: {rod} against {coil} °C");
+        assert_eq!(y, th.elongation_m(rod));
+        let bad = ThermalParams { rod_tau_s: -1.0, ..p };
+        assert!(ThermalDrift::new(bad, dt).is_err());
+        assert!(ThermalDrift::new(ThermalParams { rod_tau_s: f32::NAN, ..p }, dt).is_err());
     }
 }

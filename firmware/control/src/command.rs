@@ -26,7 +26,8 @@ use crate::reference::Waveform;
 /// 2: in load-parameters `delay_samples` is an f32 (was a u16), and the Preisach parameters carry
 /// the optional interaction spread.
 /// 3: the Preisach parameters carry the optional reversible fraction and field.
-pub const PROTOCOL_VERSION: u8 = 3;
+/// 4: the thermal parameters carry the rod's lag behind the coil (`rod_tau_s`, f32).
+pub const PROTOCOL_VERSION: u8 = 4;
 /// Longest spec text in a load command [bytes].
 pub const MAX_SPEC_BYTES: usize = 96;
 /// Longest raw frame (header, payload, CRC) [bytes]: room for a parameter set.
@@ -322,6 +323,9 @@ impl Reply {
 }
 
 /// What one complete frame turned out to be.
+// A load command carries its parameter set by value (about 210 bytes): there is no heap on the
+// board to box it, and one `Received` lives at a time.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum Received {
     /// A valid command and its tag.

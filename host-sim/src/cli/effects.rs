@@ -5,7 +5,7 @@ use anyhow::Result;
 use clap::Args;
 use model_core::effects::{
     Candidacy, EffectInfo, Inverse, JaVariant, MagnetizationLaw, Param, Scale, Signature, Stage,
-    AMPLIFIER_GAIN, EFFECTS, JA_VARIANT_KEY, SHORTHANDS, STRAIN_SCALE,
+    AMPLIFIER_GAIN, EFFECTS, JA_VARIANT_KEY, ROD_THERMAL_LAG, SHORTHANDS, STRAIN_SCALE,
 };
 use model_core::ActuatorParams;
 use serde_json::json;
@@ -132,6 +132,7 @@ fn identified() -> Vec<(String, Vec<&'static Param>)> {
     for e in EFFECTS.iter().filter(|e| !e.params.is_empty()) {
         rows.push((format!("`{}`", e.name), e.params.iter().collect()));
     }
+    rows.push(("`thermal_drift` on files with `temperature_C`".into(), vec![&ROD_THERMAL_LAG]));
     rows
 }
 

@@ -10,7 +10,7 @@ use model_core::amplifier::SecondOrderAmpParams;
 use model_core::chain::MAX_INPUT;
 use model_core::{Actuator, ActuatorParams, Compensator, Effect, ModelSpec};
 
-const FIELDS: usize = 33;
+const FIELDS: usize = 34;
 
 #[derive(Arbitrary, Debug)]
 enum Value {
@@ -71,6 +71,7 @@ fn params(c: &Case) -> ActuatorParams {
         &mut p.thermal.coil_resistance_ohm,
         &mut p.thermal.thermal_resistance_c_per_w,
         &mut p.thermal.tau_s,
+        &mut p.thermal.rod_tau_s,
         &mut so.k_u,
         &mut so.b_s2,
         &mut so.c_s,
