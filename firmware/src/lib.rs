@@ -5,6 +5,8 @@
 pub mod drive;
 #[cfg(feature = "qemu")]
 pub mod semihosting;
+#[cfg(target_os = "none")]
+pub mod stack;
 
 /// The model-core workload of the QEMU smoke test (also run on the host by build.rs).
 pub mod smoke_case {

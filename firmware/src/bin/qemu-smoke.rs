@@ -40,6 +40,7 @@ fn compare(name: &str, got: &[f32], expected: &[f32], rtol: f32, perturb: bool) 
 /// The board's control code (gma-control) in closed loop with the simulated rig for 10 000
 /// ticks (1 s at 10 kHz): tracking within 1 % RMS of amplitude, then a probe disconnect that
 /// must trip within one tick, and a corrupt parameter set that must never enable the bridge.
+#[inline(never)] // its frame (two actuators, a controller) is freed before the next check runs
 fn closed_loop(force_fail: bool) -> u32 {
     use gma_control::command::Command;
     use gma_control::faults::FaultCode;
@@ -169,6 +170,7 @@ impl Operator {
 /// and ignored → a gate-driver fault on the break input: outputs off in its own tick, latched,
 /// visible in telemetry → disarm and clear by command → idle; then a bus over-voltage trip, the
 /// deadline latch, and a watchdog reset booting latched (an arm command refused).
+#[inline(never)]
 fn drive_loop() -> u32 {
     use core::sync::atomic::Ordering;
     use firmware::drive::{
@@ -205,7 +207,8 @@ fn drive_loop() -> u32 {
     let cfg = control_config();
     let timing = BridgeTiming { period_ticks: 4250, max_duty: quiet_window_max_duty() };
     let rig = || CoilActuator::new(spec, &p, 1e-4).map(|plant| Rig::new(plant, 1));
-    let (Ok(mut rig_a), Ok(mut rig_b), Ok(mut rig_c)) = (rig(), rig(), rig()) else { return 1 };
+    // Each phase below builds its own rig and drive in a block of its own: alive together, the
+    // three took a 57 KB frame and overflowed the stack (`qemu-smoke: stack peak`).
     // SAFETY: the only writes to these slots.
     #[allow(unsafe_code)]
     let (queue_a, queue_b, queue_c, replies) = unsafe {
@@ -218,225 +221,240 @@ fn drive_loop() -> u32 {
     };
     let (reply_producer, reply_consumer) = replies.split();
     let mut op = Operator { port: CommandPort::new(reply_producer), replies: reply_consumer, tag: 0 };
-    let (producer, mut consumer) = queue_a.split();
-    let ctl = Controller::new(cfg, spec, &p, ResetCause::PowerOn);
-    let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS_RUN);
+    {
+        let Ok(mut rig_a) = rig() else { return 1 };
+        let (producer, mut consumer) = queue_a.split();
+        let ctl = Controller::new(cfg, spec, &p, ResetCause::PowerOn);
+        let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS_RUN);
 
-    // Boot idle: no switching while the current zero is calibrated; an early arm is refused.
-    let mut idle = true;
-    for _ in 0..cfg.offset_calibration_ticks / 2 {
-        let out = trigger(&mut drive, &mut rig_a);
-        idle &= !out.bridge_enabled && !drive.stage().outputs_enabled;
-    }
-    let early = op.send(&mut drive, &Command::Arm);
-    for _ in cfg.offset_calibration_ticks / 2..cfg.offset_calibration_ticks {
-        let out = trigger(&mut drive, &mut rig_a);
-        idle &= !out.bridge_enabled && !drive.stage().outputs_enabled;
-    }
-    let zero = drive.controller().current_zero_v();
-    hprintln!("qemu-smoke: drive loop: current zero calibrated at boot {:?} V", zero);
-    check(
-        idle && early.is_some_and(|r| r.outcome == Err(Refusal::NotCalibrated) && !r.armed)
-            && zero.is_some_and(|v| (v - 1.65).abs() < 0.01),
-        "boot idle: outputs off through the offset calibration, an early arm command refused",
-    );
-    while consumer.dequeue().is_some() {}
-
-    // Arm by a command frame; run.
-    let arm = op.send(&mut drive, &Command::Arm);
-    check(acked(arm) && arm.is_some_and(|r| r.armed), "arm command frame decoded, executed, acknowledged");
-    let mut decoder = Decoder::default();
-    let mut bytes = [0u8; 8 * MAX_ENCODED];
-    let (mut decoded, mut in_order, mut timed, mut first_seq) = (0u32, true, true, None);
-    let mut enabled = true;
-    let mut widest = 0u16;
-    let mut keep_alive = true;
-    for k in 0..3000 {
-        if k % 500 == 0 {
-            keep_alive &= acked(op.send(&mut drive, &Command::Ping));
+        // Boot idle: no switching while the current zero is calibrated; an early arm is refused.
+        let mut idle = true;
+        for _ in 0..cfg.offset_calibration_ticks / 2 {
+            let out = trigger(&mut drive, &mut rig_a);
+            idle &= !out.bridge_enabled && !drive.stage().outputs_enabled;
         }
-        let out = trigger(&mut drive, &mut rig_a);
-        enabled &= out.bridge_enabled && drive.stage().outputs_enabled;
-        let [a, b] = drive.stage().compare;
-        widest = widest.max(a.abs_diff(b));
-        let n = encode_queued(&mut consumer, &mut bytes);
-        for &byte in &bytes[..n] {
-            if let Some(d) = decoder.push(byte) {
-                let first = *first_seq.get_or_insert(d.frame.seq);
-                in_order &= d.frame.seq == first.wrapping_add(decoded) && d.gap == 0;
-                timed &= d.tick_cycles.is_some();
-                decoded += 1;
+        let early = op.send(&mut drive, &Command::Arm);
+        for _ in cfg.offset_calibration_ticks / 2..cfg.offset_calibration_ticks {
+            let out = trigger(&mut drive, &mut rig_a);
+            idle &= !out.bridge_enabled && !drive.stage().outputs_enabled;
+        }
+        let zero = drive.controller().current_zero_v();
+        hprintln!("qemu-smoke: drive loop: current zero calibrated at boot {:?} V", zero);
+        check(
+            idle && early.is_some_and(|r| r.outcome == Err(Refusal::NotCalibrated) && !r.armed)
+                && zero.is_some_and(|v| (v - 1.65).abs() < 0.01),
+            "boot idle: outputs off through the offset calibration, an early arm command refused",
+        );
+        while consumer.dequeue().is_some() {}
+
+        // Arm by a command frame; run.
+        let arm = op.send(&mut drive, &Command::Arm);
+        check(
+            acked(arm) && arm.is_some_and(|r| r.armed),
+            "arm command frame decoded, executed, acknowledged",
+        );
+        let mut decoder = Decoder::default();
+        let mut bytes = [0u8; 8 * MAX_ENCODED];
+        let (mut decoded, mut in_order, mut timed, mut first_seq) = (0u32, true, true, None);
+        let mut enabled = true;
+        let mut widest = 0u16;
+        let mut keep_alive = true;
+        for k in 0..3000 {
+            if k % 500 == 0 {
+                keep_alive &= acked(op.send(&mut drive, &Command::Ping));
+            }
+            let out = trigger(&mut drive, &mut rig_a);
+            enabled &= out.bridge_enabled && drive.stage().outputs_enabled;
+            let [a, b] = drive.stage().compare;
+            widest = widest.max(a.abs_diff(b));
+            let n = encode_queued(&mut consumer, &mut bytes);
+            for &byte in &bytes[..n] {
+                if let Some(d) = decoder.push(byte) {
+                    let first = *first_seq.get_or_insert(d.frame.seq);
+                    in_order &= d.frame.seq == first.wrapping_add(decoded) && d.gap == 0;
+                    timed &= d.tick_cycles.is_some();
+                    decoded += 1;
+                }
             }
         }
-    }
-    let y = rig_a.displacement_from_rest_um();
-    check(enabled && keep_alive, "armed: bridge switching for 3000 ticks with a keep-alive every 500");
-    check(
-        decoded == 3000 && in_order && timed && decoder.corrupt == 0,
-        "3000 telemetry records queued, encoded in thread mode, decoded in order (format 2)",
-    );
-    hprintln!("qemu-smoke: drive loop: displacement at the last tick {} µm (reference 15 ± 12.5 µm)", y);
-    check((1.0..=29.0).contains(&y), "tracking: the displacement is inside the reference's range");
-    let window = (timing.max_duty * timing.period_ticks as f32) as u16 + 1;
-    let full = [1.0f32, -1.0, f32::INFINITY, f32::NAN, 0.0].map(|d| timing.compare_values(d));
-    let spans = full.map(|(a, b)| a.abs_diff(b));
-    hprintln!(
-        "qemu-smoke: drive loop: duty limit {} = {} of {} ticks; widest in closed loop {}",
-        timing.max_duty,
-        window,
-        timing.period_ticks,
-        widest
-    );
-    check(
-        widest <= window
-            && spans[..3].iter().all(|&s| s <= window && s + 2 >= window)
-            && spans[3] == 0
-            && spans[4] == 0,
-        "compare values: full duty and beyond stop at the quiet-window limit, NaN and 0 give equal legs",
-    );
+        let y = rig_a.displacement_from_rest_um();
+        check(enabled && keep_alive, "armed: bridge switching for 3000 ticks with a keep-alive every 500");
+        check(
+            decoded == 3000 && in_order && timed && decoder.corrupt == 0,
+            "3000 telemetry records queued, encoded in thread mode, decoded in order (format 2)",
+        );
+        hprintln!("qemu-smoke: drive loop: displacement at the last tick {} µm (reference 15 ± 12.5 µm)", y);
+        check((1.0..=29.0).contains(&y), "tracking: the displacement is inside the reference's range");
+        let window = (timing.max_duty * timing.period_ticks as f32) as u16 + 1;
+        let full = [1.0f32, -1.0, f32::INFINITY, f32::NAN, 0.0].map(|d| timing.compare_values(d));
+        let spans = full.map(|(a, b)| a.abs_diff(b));
+        hprintln!(
+            "qemu-smoke: drive loop: duty limit {} = {} of {} ticks; widest in closed loop {}",
+            timing.max_duty,
+            window,
+            timing.period_ticks,
+            widest
+        );
+        check(
+            widest <= window
+                && spans[..3].iter().all(|&s| s <= window && s + 2 >= window)
+                && spans[3] == 0
+                && spans[4] == 0,
+            "compare values: full duty and beyond stop at the quiet-window limit, NaN and 0 give equal legs",
+        );
 
-    // A corrupt frame: counted, no reply, nothing changes.
-    let mut frame = [0u8; gma_control::command::MAX_ENCODED];
-    let n = Command::Disarm.encode(99, &mut frame).unwrap_or(0);
-    frame[n / 2] ^= 0x10;
-    let corrupt_before = op.port.decoder.corrupt;
-    op.port.on_bytes(&frame[..n], |r| Some(firmware::drive::execute(drive.controller(), r)));
-    let out = trigger(&mut drive, &mut rig_a);
-    check(
-        op.port.decoder.corrupt == corrupt_before + 1 && op.replies.dequeue().is_none() && out.bridge_enabled,
-        "corrupt command frame counted, not answered, not executed",
-    );
-
-    // A gate-driver fault on the break input (the records before it are dropped here).
-    while consumer.dequeue().is_some() {}
-    let from = rig_a.tick();
-    let gate_fault = Injection { fault: Fault::GateDriverFault, from, ticks: 5 };
-    if rig_a.injections.push(gate_fault).is_err() {
-        return failures + 1;
-    }
-    let out = trigger(&mut drive, &mut rig_a);
-    check(
-        !out.bridge_enabled
-            && !drive.stage().outputs_enabled
-            && FaultCode(out.frame.faults).contains(FaultCode::BRIDGE_BREAK),
-        "break input: outputs off in its own tick, bridge_break in its record",
-    );
-    let (mut stays_off, mut visible, mut seen) = (true, true, 0);
-    for _ in 0..20 {
+        // A corrupt frame: counted, no reply, nothing changes.
+        let mut frame = [0u8; gma_control::command::MAX_ENCODED];
+        let n = Command::Disarm.encode(99, &mut frame).unwrap_or(0);
+        frame[n / 2] ^= 0x10;
+        let corrupt_before = op.port.decoder.corrupt;
+        op.port.on_bytes(&frame[..n], |r| Some(firmware::drive::execute(drive.controller(), r)));
         let out = trigger(&mut drive, &mut rig_a);
-        stays_off &= !out.bridge_enabled && !drive.stage().outputs_enabled;
-        let n = encode_queued(&mut consumer, &mut bytes);
-        for &byte in &bytes[..n] {
-            if let Some(d) = decoder.push(byte) {
-                visible &= FaultCode(d.frame.faults).contains(FaultCode::BRIDGE_BREAK);
-                seen += 1;
+        check(
+            op.port.decoder.corrupt == corrupt_before + 1
+                && op.replies.dequeue().is_none()
+                && out.bridge_enabled,
+            "corrupt command frame counted, not answered, not executed",
+        );
+
+        // A gate-driver fault on the break input (the records before it are dropped here).
+        while consumer.dequeue().is_some() {}
+        let from = rig_a.tick();
+        let gate_fault = Injection { fault: Fault::GateDriverFault, from, ticks: 5 };
+        if rig_a.injections.push(gate_fault).is_err() {
+            return failures + 1;
+        }
+        let out = trigger(&mut drive, &mut rig_a);
+        check(
+            !out.bridge_enabled
+                && !drive.stage().outputs_enabled
+                && FaultCode(out.frame.faults).contains(FaultCode::BRIDGE_BREAK),
+            "break input: outputs off in its own tick, bridge_break in its record",
+        );
+        let (mut stays_off, mut visible, mut seen) = (true, true, 0);
+        for _ in 0..20 {
+            let out = trigger(&mut drive, &mut rig_a);
+            stays_off &= !out.bridge_enabled && !drive.stage().outputs_enabled;
+            let n = encode_queued(&mut consumer, &mut bytes);
+            for &byte in &bytes[..n] {
+                if let Some(d) = decoder.push(byte) {
+                    visible &= FaultCode(d.frame.faults).contains(FaultCode::BRIDGE_BREAK);
+                    seen += 1;
+                }
             }
         }
-    }
-    check(
-        stays_off
-            && visible
-            && seen == 21
-            && COUNTERS_RUN.trips.load(Ordering::Relaxed) & trip::BREAK_INPUT != 0,
-        "break input: latched off after the pin released, bridge_break in every decoded frame",
-    );
-    rig_a.injections.clear();
+        check(
+            stays_off
+                && visible
+                && seen == 21
+                && COUNTERS_RUN.trips.load(Ordering::Relaxed) & trip::BREAK_INPUT != 0,
+            "break input: latched off after the pin released, bridge_break in every decoded frame",
+        );
+        rig_a.injections.clear();
 
-    // Disarm and clear through commands: back to idle, the fault gone, still not switching.
-    let disarm = op.send(&mut drive, &Command::Disarm);
-    let clear = op.send(&mut drive, &Command::ClearFaults);
-    let mut idle_again = true;
-    for _ in 0..50 {
-        let out = trigger(&mut drive, &mut rig_a);
-        idle_again &= !out.bridge_enabled && !drive.stage().outputs_enabled && out.frame.faults == 0;
-    }
-    check(
-        acked(disarm) && acked(clear) && clear.is_some_and(|r| r.faults == 0 && !r.armed) && idle_again,
-        "disarm and clear by command: faults cleared, idle (no switching without a new arm)",
-    );
-
-    // Re-armed, the bus pumped over its limit: bus_overvoltage trips and the bridge goes off.
-    let rearm = op.send(&mut drive, &Command::Arm);
-    rig_a.bus_v = 40.0;
-    let mut tripped_after = None;
-    for k in 0..10 {
-        let out = trigger(&mut drive, &mut rig_a);
-        if !out.bridge_enabled && FaultCode(out.frame.faults).contains(FaultCode::BUS_OVERVOLTAGE) {
-            tripped_after = Some(k + 1);
-            break;
+        // Disarm and clear through commands: back to idle, the fault gone, still not switching.
+        let disarm = op.send(&mut drive, &Command::Disarm);
+        let clear = op.send(&mut drive, &Command::ClearFaults);
+        let mut idle_again = true;
+        for _ in 0..50 {
+            let out = trigger(&mut drive, &mut rig_a);
+            idle_again &= !out.bridge_enabled && !drive.stage().outputs_enabled && out.frame.faults == 0;
         }
+        check(
+            acked(disarm) && acked(clear) && clear.is_some_and(|r| r.faults == 0 && !r.armed) && idle_again,
+            "disarm and clear by command: faults cleared, idle (no switching without a new arm)",
+        );
+
+        // Re-armed, the bus pumped over its limit: bus_overvoltage trips and the bridge goes off.
+        let rearm = op.send(&mut drive, &Command::Arm);
+        rig_a.bus_v = 40.0;
+        let mut tripped_after = None;
+        for k in 0..10 {
+            let out = trigger(&mut drive, &mut rig_a);
+            if !out.bridge_enabled && FaultCode(out.frame.faults).contains(FaultCode::BUS_OVERVOLTAGE) {
+                tripped_after = Some(k + 1);
+                break;
+            }
+        }
+        let refused_while_over = op.send(&mut drive, &Command::ClearFaults);
+        rig_a.bus_v = 24.0;
+        trigger(&mut drive, &mut rig_a);
+        let cleared = op.send(&mut drive, &Command::ClearFaults);
+        hprintln!("qemu-smoke: drive loop: bus at 40 V tripped after {:?} ticks", tripped_after);
+        check(
+            acked(rearm)
+                && tripped_after.is_some_and(|k| k <= 3)
+                && !drive.stage().outputs_enabled
+                && refused_while_over.is_some_and(|r| r.outcome == Err(Refusal::FaultStillPresent))
+                && acked(cleared),
+            "bus over-voltage: tripped within 3 ticks, kept while present, cleared by command after",
+        );
     }
-    let refused_while_over = op.send(&mut drive, &Command::ClearFaults);
-    rig_a.bus_v = 24.0;
-    trigger(&mut drive, &mut rig_a);
-    let cleared = op.send(&mut drive, &Command::ClearFaults);
-    hprintln!("qemu-smoke: drive loop: bus at 40 V tripped after {:?} ticks", tripped_after);
-    check(
-        acked(rearm)
-            && tripped_after.is_some_and(|k| k <= 3)
-            && !drive.stage().outputs_enabled
-            && refused_while_over.is_some_and(|r| r.outcome == Err(Refusal::FaultStillPresent))
-            && acked(cleared),
-        "bus over-voltage: tripped within 3 ticks, kept while present, cleared by command after",
-    );
 
     // Deadline: one late tick is counted, three in a row latch missed_deadline in the third.
-    let (producer, _consumer) = queue_b.split();
-    let ctl = Controller::new(cfg, spec, &p, ResetCause::PowerOn);
-    let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS_DEADLINE);
-    for _ in 0..cfg.offset_calibration_ticks {
-        trigger(&mut drive, &mut rig_b);
+    {
+        let Ok(mut rig_b) = rig() else { return 1 };
+        let (producer, _consumer) = queue_b.split();
+        let ctl = Controller::new(cfg, spec, &p, ResetCause::PowerOn);
+        let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS_DEADLINE);
+        for _ in 0..cfg.offset_calibration_ticks {
+            trigger(&mut drive, &mut rig_b);
+        }
+        let armed = acked(op.send(&mut drive, &Command::Arm));
+        for _ in 0..10 {
+            trigger(&mut drive, &mut rig_b);
+        }
+        drive.stage().late = true;
+        let mut on_while_counting = true;
+        for _ in 1..DEADLINE_LATCH_AFTER {
+            on_while_counting &= trigger(&mut drive, &mut rig_b).bridge_enabled;
+        }
+        let out = trigger(&mut drive, &mut rig_b);
+        let latched = !out.bridge_enabled
+            && !drive.stage().outputs_enabled
+            && FaultCode(out.frame.faults).contains(FaultCode::MISSED_DEADLINE);
+        drive.stage().late = false;
+        let out = trigger(&mut drive, &mut rig_b);
+        let stays_off =
+            !out.bridge_enabled && FaultCode(out.frame.faults).contains(FaultCode::MISSED_DEADLINE);
+        check(
+            armed
+                && on_while_counting
+                && latched
+                && stays_off
+                && COUNTERS_DEADLINE.deadline_overruns.load(Ordering::Relaxed) == DEADLINE_LATCH_AFTER as u32
+                && COUNTERS_DEADLINE.trips.load(Ordering::Relaxed) & trip::DEADLINE != 0,
+            "deadline: late ticks counted, missed_deadline latched, bridge off in the 3rd late tick in a row",
+        );
     }
-    let armed = acked(op.send(&mut drive, &Command::Arm));
-    for _ in 0..10 {
-        trigger(&mut drive, &mut rig_b);
-    }
-    drive.stage().late = true;
-    let mut on_while_counting = true;
-    for _ in 1..DEADLINE_LATCH_AFTER {
-        on_while_counting &= trigger(&mut drive, &mut rig_b).bridge_enabled;
-    }
-    let out = trigger(&mut drive, &mut rig_b);
-    let latched = !out.bridge_enabled
-        && !drive.stage().outputs_enabled
-        && FaultCode(out.frame.faults).contains(FaultCode::MISSED_DEADLINE);
-    drive.stage().late = false;
-    let out = trigger(&mut drive, &mut rig_b);
-    let stays_off = !out.bridge_enabled && FaultCode(out.frame.faults).contains(FaultCode::MISSED_DEADLINE);
-    check(
-        armed
-            && on_while_counting
-            && latched
-            && stays_off
-            && COUNTERS_DEADLINE.deadline_overruns.load(Ordering::Relaxed) == DEADLINE_LATCH_AFTER as u32
-            && COUNTERS_DEADLINE.trips.load(Ordering::Relaxed) & trip::DEADLINE != 0,
-        "deadline: late ticks counted, missed_deadline latched, bridge off in the 3rd late tick in a row",
-    );
 
     // Watchdog reset: the RCC_CSR flags (IWDG with the pin flag every internal reset sets) boot
-    // the controller with watchdog_reset latched; an arm command is refused, nothing switches.
-    let cause = ResetCause::from_rcc_flags(true, false, false, false, true, false);
-    let (producer, _consumer) = queue_c.split();
-    let ctl = Controller::new(cfg, spec, &p, cause);
-    let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS_WATCHDOG);
-    let mut off = true;
-    let mut shown = true;
-    for _ in 0..cfg.offset_calibration_ticks + 10 {
+    {
+        let Ok(mut rig_c) = rig() else { return 1 };
+        // the controller with watchdog_reset latched; an arm command is refused, nothing switches.
+        let cause = ResetCause::from_rcc_flags(true, false, false, false, true, false);
+        let (producer, _consumer) = queue_c.split();
+        let ctl = Controller::new(cfg, spec, &p, cause);
+        let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS_WATCHDOG);
+        let mut off = true;
+        let mut shown = true;
+        for _ in 0..cfg.offset_calibration_ticks + 10 {
+            let out = trigger(&mut drive, &mut rig_c);
+            off &= !out.bridge_enabled && !drive.stage().outputs_enabled;
+            shown &= FaultCode(out.frame.faults).contains(FaultCode::WATCHDOG_RESET);
+        }
+        let arm = op.send(&mut drive, &Command::Arm);
         let out = trigger(&mut drive, &mut rig_c);
-        off &= !out.bridge_enabled && !drive.stage().outputs_enabled;
-        shown &= FaultCode(out.frame.faults).contains(FaultCode::WATCHDOG_RESET);
+        check(
+            cause == ResetCause::Watchdog
+                && ResetCause::from_rcc_flags(false, false, false, false, true, false) == ResetCause::Pin
+                && off
+                && shown
+                && arm.is_some_and(|r| r.outcome == Err(Refusal::FaultLatched) && !r.armed)
+                && !out.bridge_enabled,
+            "watchdog reset: boots with watchdog_reset latched, arm refused, never switching",
+        );
     }
-    let arm = op.send(&mut drive, &Command::Arm);
-    let out = trigger(&mut drive, &mut rig_c);
-    check(
-        cause == ResetCause::Watchdog
-            && ResetCause::from_rcc_flags(false, false, false, false, true, false) == ResetCause::Pin
-            && off
-            && shown
-            && arm.is_some_and(|r| r.outcome == Err(Refusal::FaultLatched) && !r.armed)
-            && !out.bridge_enabled,
-        "watchdog reset: boots with watchdog_reset latched, arm refused, never switching",
-    );
 
     // Dead time: the smallest whole number of timer ticks that covers DEAD_TIME_NS.
     let timer_hz = 170_000_000u64;
@@ -455,11 +473,38 @@ fn drive_loop() -> u32 {
     failures
 }
 
+/// Stack the smoke run may reach, of the region between `.bss` and the top of RAM: a quarter is
+/// kept free for what the board adds (the executor's task polls, interrupt frames).
+const STACK_BUDGET_FRACTION: f32 = 0.75;
+
 #[entry]
 fn main() -> ! {
+    firmware::stack::paint();
     let mut buf = [0u8; 128];
     let force_fail = cmdline(&mut buf).split_whitespace().any(|a| a == "force-fail");
 
+    let mut failures = open_loop(force_fail);
+    failures += closed_loop(force_fail);
+    failures += drive_loop();
+    let (peak, size) = (firmware::stack::peak(), firmware::stack::size());
+    let budget = if force_fail { 0 } else { (STACK_BUDGET_FRACTION * size as f32) as usize };
+    hprintln!("qemu-smoke: stack peak {} B of {} B (budget {} B)", peak, size, budget);
+    if peak > budget {
+        hprintln!("qemu-smoke: FAIL stack peak {} B over its budget {} B", peak, budget);
+        failures += 1;
+    }
+    if failures == 0 {
+        hprintln!("qemu-smoke: PASS");
+        exit(0)
+    } else {
+        hprintln!("qemu-smoke: FAIL ({} checks failed)", failures);
+        exit(1)
+    }
+}
+
+/// The model-core workload against the host's checkpoints, and the open-loop tracking bound.
+#[inline(never)]
+fn open_loop(force_fail: bool) -> u32 {
     let mut failures = 0u32;
     match smoke_workload() {
         Err(e) => {
@@ -487,13 +532,5 @@ fn main() -> ! {
             }
         }
     }
-    failures += closed_loop(force_fail);
-    failures += drive_loop();
-    if failures == 0 {
-        hprintln!("qemu-smoke: PASS");
-        exit(0)
-    } else {
-        hprintln!("qemu-smoke: FAIL ({} checks failed)", failures);
-        exit(1)
-    }
+    failures
 }
