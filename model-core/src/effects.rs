@@ -292,7 +292,7 @@ pub const EFFECTS: [EffectInfo; 9] = [
         effect: Effect::ThermalDrift,
         name: "thermal_drift",
         alias: Some("thermal"),
-        adds: "coil heating R i² → rod temperature → thermal expansion",
+        adds: "coil heating R i² → coil temperature → the rod's (behind it) → thermal expansion",
         stage: Stage::Thermal,
         law: None,
         implies: None,

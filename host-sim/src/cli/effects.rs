@@ -34,6 +34,9 @@ pub fn run(a: &EffectsArgs) -> Result<()> {
             for p in e.params {
                 out!("    {}", param_line(p));
             }
+            if e.effect == model_core::Effect::ThermalDrift {
+                out!("    {} (only on files with `temperature_C`)", param_line(&ROD_THERMAL_LAG));
+            }
         }
         for (word, effects) in SHORTHANDS {
             let names: Vec<&str> = effects.iter().map(|e| e.name()).collect();
