@@ -19,7 +19,7 @@ use model_core::effects::{ROD_THERMAL_LAG, STRAIN_SCALE};
 use model_core::{Actuator, ActuatorParams, Effect, MagnetizationLaw, ModelSpec};
 use rayon::prelude::*;
 
-use crate::params::{free_params, FreeParam, Given};
+use crate::params::{free_params, logs_coil_temperature, FreeParam, Given};
 use crate::progress::Progress;
 use crate::recording::Recording;
 use crate::results::StartScore;
@@ -1072,7 +1072,7 @@ fn fit_planned(
     plan: &Plan,
 ) -> Result<FitResult> {
     let rod_lag_free = spec.has(Effect::ThermalDrift)
-        && files.iter().any(|r| r.temperature_c.is_some())
+        && logs_coil_temperature(files)
         && !constraints.is_fixed(ROD_THERMAL_LAG.key);
     if !rod_lag_free {
         return fit_searched(spec, starts, files, opts, constraints, plan);

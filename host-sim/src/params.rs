@@ -14,13 +14,12 @@ use model_core::effects::{
     ROD_THERMAL_LAG, STRAIN_SCALE,
 };
 use model_core::{Actuator, ActuatorParams, Effect, ModelSpec};
-
-use crate::recording::Recording;
 use serde::Deserialize as _;
 
 use crate::error::Located;
 use crate::files::{echo, Input};
 use crate::located;
+use crate::recording::Recording;
 use crate::search::Bound;
 
 /// One identified parameter: its bounds and scale ([`Bound`], named as in parameter files,
@@ -82,8 +81,13 @@ pub struct Given {
 impl Given {
     /// What `files` give.
     pub fn by(files: &[Recording], command_driven: bool) -> Self {
-        Given { command_driven, coil_temperature: files.iter().any(|r| r.temperature_c.is_some()) }
+        Given { command_driven, coil_temperature: logs_coil_temperature(files) }
     }
+}
+
+/// Whether any of `files` logs the coil's temperature (`temperature_C`).
+pub fn logs_coil_temperature(files: &[Recording]) -> bool {
+    files.iter().any(|r| r.temperature_c.is_some())
 }
 
 /// The continuous parameters `spec` identifies, from the effect registry: the strain scale, the
