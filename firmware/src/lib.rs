@@ -3,6 +3,8 @@
 #![no_std]
 
 pub mod drive;
+#[cfg(target_os = "none")]
+pub mod fault;
 #[cfg(feature = "qemu")]
 pub mod semihosting;
 #[cfg(target_os = "none")]

@@ -1,8 +1,9 @@
 //! Stack high-water mark: the stack region below the current stack pointer is painted with a
 //! pattern, and the deepest word no longer holding it shows how far the stack has reached. The
-//! stack is the one RAM use the linker does not budget (cortex-m-rt puts it at the top of RAM,
-//! growing down towards `.bss`): the model constructors build their tables by value, and a
-//! frame that grows with an inlining decision is found here, not as a lockup on the board.
+//! stack is the one RAM use the linker does not budget (flip-link puts it at the bottom of RAM,
+//! under `.data`/`.bss`, growing down towards 0x2000_0000, past which an overflow faults, see
+//! [`crate::fault`]): the model constructors build their tables by value, and a frame that grows
+//! with an inlining decision is found here, not as a fault on the board.
 
 #![allow(unsafe_code)]
 
@@ -14,16 +15,22 @@ const PATTERN: u32 = 0x5AC4_5AC4;
 const GUARD_BYTES: usize = 256;
 
 extern "C" {
-    /// Lowest address the stack may reach (cortex-m-rt: the end of `.bss` and the heap).
+    /// Lowest address the stack may reach: the start of SRAM (set by flip-link).
     static _stack_end: u32;
-    /// Initial stack pointer, the top of RAM (cortex-m-rt).
+    /// Initial stack pointer, right under `.data`/`.bss` (set by flip-link).
     static _stack_start: u32;
 }
 
 /// The stack's region [lowest, top) in bytes.
+#[allow(unused_unsafe)] // taking an extern static's address is safe since Rust 1.82, not before
 fn region() -> (usize, usize) {
     // SAFETY: only the addresses of the linker symbols are taken, never their contents.
     unsafe { (addr_of!(_stack_end) as usize, addr_of!(_stack_start) as usize) }
+}
+
+/// The lowest address the stack may reach; below it an access faults.
+pub fn lowest() -> usize {
+    region().0
 }
 
 /// Bytes the stack may use in all.

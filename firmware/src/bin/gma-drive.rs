@@ -10,15 +10,16 @@
 //!
 //! Safe state: MOE off, every gate low (OSSI = OSSR = 1, idle levels 0). It holds from before the
 //! channels are enabled, on any latched fault, on a break-input trip (hardware, in the same PWM
-//! cycle), in the panic and HardFault handlers, while a debugger halts the core (TIM1 frozen),
-//! and after a watchdog reset.
+//! cycle), in the panic and HardFault handlers (a stack overflow faults below SRAM and the
+//! HardFault entry resets the stack pointer first, `firmware::fault`), on a core lockup, a CCM
+//! SRAM parity error or a flash ECC error (system break inputs, hardware), while a debugger
+//! halts the core (TIM1 frozen), and after a watchdog reset.
 #![no_std]
 #![no_main]
 
 use core::cell::RefCell;
 
 use cortex_m::peripheral::NVIC;
-use cortex_m_rt::{exception, ExceptionFrame};
 use critical_section::Mutex;
 use defmt::{error, info, warn};
 use embassy_executor::Spawner;
@@ -90,9 +91,11 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     }
 }
 
-#[exception]
-#[allow(unsafe_code)]
-unsafe fn HardFault(_frame: &ExceptionFrame) -> ! {
+/// Called by `firmware::fault`'s HardFault entry with the stack pointer reset, so that it runs
+/// even after a stack overflow; the watchdog, no longer fed, then resets the board.
+#[allow(unsafe_code)] // no_mangle: the symbol the HardFault entry branches to.
+#[no_mangle]
+extern "C" fn gma_hard_fault() -> ! {
     bridge_off();
     loop {
         cortex_m::asm::nop();
@@ -207,6 +210,16 @@ async fn main(spawner: Spawner) {
     pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
     let reset_cause = take_reset_cause();
     let p = embassy_stm32::init(clocks());
+    // System break sources on TIM1's break input, in hardware (RM0440 §9.1.2 SYSCFG_CFGR2;
+    // set-once bits, cleared only by reset): a core lockup (a fault the HardFault handler could
+    // not take), a parity error in CCM SRAM (where the control state lives) and a double ECC
+    // error in flash each clear MOE with no code running. Set before TIM1 is configured, so
+    // the bridge is never enabled without them. (embassy_stm32::init enabled SYSCFG's clock.)
+    pac::SYSCFG.cfgr2().modify(|w| {
+        w.set_cll(true);
+        w.set_spl(true);
+        w.set_eccl(true);
+    });
     info!(
         "gma-drive: SYSCLK 170 MHz, model `{}`, reset by {}",
         MODEL_SPEC,

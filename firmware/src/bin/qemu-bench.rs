@@ -44,6 +44,15 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     exit(101)
 }
 
+/// Called by `firmware::fault`'s HardFault entry with the stack pointer reset.
+#[allow(unsafe_code)] // no_mangle: the symbol the HardFault entry branches to.
+#[no_mangle]
+extern "C" fn gma_hard_fault() -> ! {
+    let status = firmware::fault::FaultStatus::read();
+    hprintln!("qemu-bench: HardFault (CFSR {:#010x}, HFSR {:#010x})", status.cfsr, status.hfsr);
+    exit(102)
+}
+
 /// One period of a 400 Hz sine sampled at 10 kHz (25 samples), unit amplitude.
 fn unit_sine() -> [f32; 25] {
     core::array::from_fn(|k| model_core::math::sin_cos(2.0 * core::f32::consts::PI * k as f32 / 25.0).0)

@@ -3,11 +3,15 @@
 //! ja+eddy+amp+mech plant — and compares every checkpoint with the values the host computed at
 //! build time from the same code, plus an absolute bound on the tracking error. Exit status 0
 //! only when every check passes. `-append force-fail` perturbs the expectations, to prove that
-//! a failure is reported.
+//! a failure is reported; `-append stack-overflow` runs only the stack-overflow check (a
+//! recursion without end must end in the HardFault handler, on an address just below the
+//! stack, with the statics untouched).
 #![no_std]
 #![no_main]
 // `!(error <= limit)` on purpose: a NaN error must fail the check.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 use cortex_m_rt::entry;
 use cortex_m_semihosting::hprintln;
@@ -18,6 +22,67 @@ use firmware::smoke_case::*;
 fn panic(info: &core::panic::PanicInfo) -> ! {
     hprintln!("qemu-smoke: PANIC {}", info);
     exit(101)
+}
+
+/// Set while the stack-overflow check digs: the one run where a HardFault is the expected end.
+static DIGGING: AtomicBool = AtomicBool::new(false);
+/// A block of statics with a known pattern, checked after the overflow: a stack that grew into
+/// `.bss` (the layout before flip-link) would have overwritten it on its way down.
+static CANARY: [AtomicU32; 64] = [const { AtomicU32::new(0) }; 64];
+const CANARY_WORD: u32 = 0xC0DE_5AFE;
+
+/// Called by `firmware::fault`'s HardFault entry with the stack pointer reset.
+#[allow(unsafe_code)] // no_mangle: the symbol the HardFault entry branches to.
+#[no_mangle]
+extern "C" fn gma_hard_fault() -> ! {
+    let status = firmware::fault::FaultStatus::read();
+    hprintln!(
+        "qemu-smoke: HardFault (CFSR {:#010x}, HFSR {:#010x}, bus fault address {:x?}, stack floor {:#010x})",
+        status.cfsr,
+        status.hfsr,
+        status.bus_fault_address,
+        firmware::stack::lowest()
+    );
+    if !DIGGING.load(Ordering::Relaxed) {
+        hprintln!("qemu-smoke: FAIL unexpected HardFault");
+        exit(102)
+    }
+    // One frame of `dig` (a little over 256 B) is the farthest a single push can land below.
+    let at_the_floor = status.is_stack_overflow(1024);
+    let intact = CANARY.iter().all(|w| w.load(Ordering::Relaxed) == CANARY_WORD);
+    if at_the_floor && intact {
+        hprintln!("qemu-smoke: PASS stack overflow faulted below the stack's floor, statics intact");
+        exit(0)
+    }
+    hprintln!(
+        "qemu-smoke: FAIL stack overflow: fault below the floor {}, statics intact {}",
+        at_the_floor,
+        intact
+    );
+    exit(1)
+}
+
+/// Recurses `depth` levels with a 256 B frame each: far past the stack when depth is large.
+#[inline(never)]
+fn dig(depth: u32) -> u32 {
+    let mut frame = [depth; 64];
+    core::hint::black_box(&mut frame);
+    if depth == 0 {
+        return frame[0];
+    }
+    dig(depth - 1).wrapping_add(frame[1])
+}
+
+/// The stack-overflow check: ends in `gma_hard_fault`, or fails here if the recursion returns.
+fn stack_overflow_check() -> ! {
+    for w in &CANARY {
+        w.store(CANARY_WORD, Ordering::Relaxed);
+    }
+    DIGGING.store(true, Ordering::Relaxed);
+    // 100 000 frames of 256 B: 25 MB, several hundred times the stack.
+    let sum = dig(core::hint::black_box(100_000));
+    hprintln!("qemu-smoke: FAIL a recursion of 25 MB returned ({}) without a fault", sum);
+    exit(1)
 }
 
 /// Compares `got` with `expected` within `rtol` of the expected signal's peak; returns failures.
@@ -473,15 +538,19 @@ fn drive_loop() -> u32 {
     failures
 }
 
-/// Stack the smoke run may reach, of the region between `.bss` and the top of RAM: a quarter is
-/// kept free for what the board adds (the executor's task polls, interrupt frames).
+/// Stack the smoke run may reach, of its region (the start of SRAM up to `.data`/`.bss`): a
+/// quarter is kept free for what the board adds (the executor's task polls, interrupt frames).
 const STACK_BUDGET_FRACTION: f32 = 0.75;
 
 #[entry]
 fn main() -> ! {
     firmware::stack::paint();
     let mut buf = [0u8; 128];
-    let force_fail = cmdline(&mut buf).split_whitespace().any(|a| a == "force-fail");
+    let args = cmdline(&mut buf);
+    if args.split_whitespace().any(|a| a == "stack-overflow") {
+        stack_overflow_check();
+    }
+    let force_fail = args.split_whitespace().any(|a| a == "force-fail");
 
     let mut failures = open_loop(force_fail);
     failures += closed_loop(force_fail);
