@@ -204,6 +204,8 @@ fn controller(reset: ResetCause) -> Controller {
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
+    // Paint the free stack first, so that the status log can report how deep it has reached.
+    firmware::stack::paint();
     // Frozen while a debugger halts the core: TIM1 (a halted loop must not keep switching) and
     // the watchdog (halting is not a fault).
     pac::DBGMCU.apb2fzr().modify(|w| w.set_tim1(true));
@@ -358,7 +360,8 @@ async fn main(spawner: Spawner) {
 }
 
 /// Thread mode: sends the waiting command replies, then encodes the queued records (format 2,
-/// CRC-16 + COBS), by DMA; logs the drive's counters once a second when something is wrong.
+/// CRC-16 + COBS), by DMA; logs the drive's counters once a second when something is wrong,
+/// and the stack's high-water mark whenever it has grown.
 async fn telemetry_tx(
     mut tx: UartTx<'static, embassy_stm32::mode::Async>,
     mut queue: Consumer<'static, TimedFrame>,
@@ -366,6 +369,7 @@ async fn telemetry_tx(
 ) -> ! {
     let mut batch = [0u8; TX_BATCH];
     let mut last_report = Instant::now();
+    let mut stack_logged = 0;
     loop {
         let n = encode_replies(&mut replies, &mut batch);
         let n = n + encode_queued(&mut queue, &mut batch[n..]);
@@ -378,6 +382,11 @@ async fn telemetry_tx(
         }
         if last_report.elapsed().as_secs() >= 1 {
             last_report = Instant::now();
+            let stack_peak = firmware::stack::peak();
+            if stack_peak > stack_logged {
+                stack_logged = stack_peak;
+                info!("gma-drive: stack peak {} B of {} B", stack_peak, firmware::stack::size());
+            }
             let load = |c: &core::sync::atomic::AtomicU32| c.load(core::sync::atomic::Ordering::Relaxed);
             let (dropped, late, trips) =
                 (load(&COUNTERS.telemetry_dropped), load(&COUNTERS.deadline_overruns), load(&COUNTERS.trips));
