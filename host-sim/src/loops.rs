@@ -334,7 +334,7 @@ impl LoopModel {
                 Bound::lin("mean_field_ratio", MEAN_FIELD_RATIO.0, MEAN_FIELD_RATIO.1),
                 field("k_a_per_m", 1e-4 * h_max, 5.0 * h_max),
                 // The total-magnetization form weighs reversibility by c/(1 + c): c near 1 is common.
-                Bound::lin("c", 0.0, if v == JaVariant::Szewczyk { 0.9999 } else { 0.99 }),
+                Bound::lin("c", 0.0, if v.is_total_magnetization() { 0.9999 } else { 0.99 }),
             ],
             LoopModel::Preisach => vec![
                 ms,

@@ -385,7 +385,7 @@ mod tests {
         let old = parse_file("old.toml", FORMAT_1, spec("ja")).unwrap();
         assert_eq!(old.params.ja.variant, JaVariant::Bulk);
         assert!(to_toml(&old.params, "t").unwrap().contains("variant = \"bulk\""));
-        for v in [JaVariant::Original1986, JaVariant::Szewczyk] {
+        for v in [JaVariant::Original1986, JaVariant::Szewczyk, JaVariant::Ungated1986] {
             let text = FORMAT_1.replace("c = 0.19454733\n", &format!("c = 0.19454733\nvariant = \"{v}\"\n"));
             let f = parse_file("p.toml", &text, spec("ja")).unwrap();
             assert_eq!(f.params.ja.variant, v);

@@ -221,7 +221,7 @@ fn diagnose_compares_the_ja_forms_on_request() {
     let d = json(&gma(&["diagnose", "--model", "ja", "--ja-variants", "--json", "--val", &val, &fit, &fit2]));
     let rows = d["ja_variants"].as_array().unwrap_or_else(|| panic!("no ja_variants in {d:#}"));
     let names: Vec<&str> = rows.iter().map(|r| r["variant"].as_str().unwrap()).collect();
-    assert_eq!(names, ["bulk", "ja1986", "szewczyk"]);
+    assert_eq!(names, ["bulk", "ja1986", "szewczyk", "ja1986-ungated"]);
     assert_eq!(rows[0]["given"], true);
     assert!((rows[0]["nrmse"].as_f64().unwrap() - d["nrmse_val"].as_f64().unwrap()).abs() < 1e-12);
     assert!(

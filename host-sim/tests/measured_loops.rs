@@ -106,11 +106,12 @@ fn measured_loops_in_every_variant_and_from_published_sets() {
     let mut default_per_loop = Vec::new();
     let mut wins = vec![0usize; JaVariant::ALL.len()];
     println!(
-        "\n{:44} {:>8} {:>8} {:>8} {:>10} {:>9} {:>8} {:>14} {:>10}",
+        "\n{:44} {:>8} {:>8} {:>8} {:>8} {:>10} {:>9} {:>8} {:>14} {:>10}",
         "material (MEASURED loop)",
         "bulk %",
         "ja1986 %",
         "szewczyk %",
+        "ungated %",
         "preisach %",
         "best J–A",
         "refused?",
@@ -239,14 +240,19 @@ fn measured_loops_in_every_variant_and_from_published_sets() {
             }
         }
         println!(
-            "{:44} {:>8} {:>8} {:>8} {:>10} {:>9} {:>8} {:>14} {:>10}",
+            "{:44} {:>8} {:>8} {:>8} {:>8} {:>10} {:>9} {:>8} {:>14} {:>10}",
             material,
             pct(by_variant[0]),
             pct(by_variant[1]),
             pct(by_variant[2]),
+            pct(by_variant[3]),
             pct(preisach),
             if tied.len() > 1 { "tie".to_string() } else { tied.first().unwrap_or(&"—").to_string() },
-            if refused.is_empty() { "no".to_string() } else { format!("{} of 3", refused.len()) },
+            if refused.is_empty() {
+                "no".to_string()
+            } else {
+                format!("{} of {}", refused.len(), JaVariant::ALL.len())
+            },
             pct(published),
             pct(from_published),
         );

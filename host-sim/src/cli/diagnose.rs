@@ -13,7 +13,7 @@ pub struct DiagnoseArgs {
     #[command(flatten)]
     pub mf: ModelFiles,
     /// Also refit the model in each other form of Jiles–Atherton (`[ja] variant`) and say
-    /// whether one fits clearly better (two more fits)
+    /// whether one fits clearly better (three more fits)
     #[arg(long)]
     pub ja_variants: bool,
     /// Also refit the model with the other hysteresis law (`ja` ↔ `preisach`, the rest of the
