@@ -214,6 +214,7 @@ impl FileAnalysis {
             title: format!("{} — {title}", self.name),
             x_label: "lag [ms]".into(),
             y_label: "correlation [1]".into(),
+            y_range: None,
             series: vec![
                 Series {
                     label: label.into(),
@@ -248,6 +249,7 @@ impl FileAnalysis {
             title: format!("{} — residual spectrum (Welch, Hann, 50 % overlap)", self.name),
             x_label: "frequency [Hz]".into(),
             y_label: "PSD [dB re 1 µm²/Hz]".into(),
+            y_range: None,
             series: vec![
                 Series {
                     label: "measured displacement".into(),
@@ -280,6 +282,7 @@ impl FileAnalysis {
                 ),
                 x_label: "frequency [Hz]".into(),
                 y_label: format!("gain [dB re 1 {unit}]"),
+                y_range: None,
                 series: vec![
                     Series { label: "measured".into(), points: gain(&self.measured), color: 0 },
                     Series { label: format!("model {model_label}"), points: gain(&self.model), color: 1 },
@@ -289,6 +292,7 @@ impl FileAnalysis {
                 title: String::new(),
                 x_label: "frequency [Hz]".into(),
                 y_label: "phase [deg]".into(),
+                y_range: None,
                 series: vec![
                     Series { label: "measured".into(), points: phase(&self.measured), color: 0 },
                     Series { label: format!("model {model_label}"), points: phase(&self.model), color: 1 },
@@ -298,6 +302,7 @@ impl FileAnalysis {
                 title: String::new(),
                 x_label: "frequency [Hz]".into(),
                 y_label: "coherence γ² [1]".into(),
+                y_range: Some((0.0, 1.0)),
                 series: vec![Series {
                     label: "measured".into(),
                     points: self.band.iter().map(|&k| (f[k], self.measured.coherence[k])).collect(),

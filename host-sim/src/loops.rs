@@ -689,6 +689,7 @@ pub fn chart(f: &LoopFile, m: &[f64], label: &str) -> crate::plots::Chart {
         title: format!("{} — {label}", f.name),
         x_label: "field H [kA/m]".into(),
         y_label: unit.into(),
+        y_range: None,
         series: vec![
             Series {
                 label: "measured".into(),

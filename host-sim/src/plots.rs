@@ -5,6 +5,8 @@ use std::path::Path;
 use std::sync::Once;
 
 use anyhow::{anyhow, bail, Result};
+use plotters::coord::ranged1d::Ranged;
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
@@ -29,6 +31,8 @@ pub struct Chart {
     pub y_label: String,
     /// The curves.
     pub series: Vec<Series>,
+    /// A fixed y range (e.g. 0–1 for a coherence); `None`: the data's.
+    pub y_range: Option<(f64, f64)>,
 }
 
 const PALETTE: [RGBColor; 5] = [
@@ -86,27 +90,81 @@ where
     if x0 > x1 {
         (x0, x1, y0, y1) = (1.0, 10.0, 0.0, 1.0);
     }
+    if let Some((lo, hi)) = c.y_range {
+        (y0, y1) = (lo, hi);
+    }
     let scale = if scale == XScale::Log && x1 < 10.0 * x0 { XScale::Linear } else { scale };
     let pad = |a: f64, b: f64| if b > a { 0.04 * (b - a) } else { 0.5 * a.abs().max(1e-9) };
     let py = pad(y0, y1);
     let y = (y0 - py)..(y1 + py);
+    let y_format = linear_format(&y);
     match scale {
         XScale::Linear => {
             let px = pad(x0, x1);
-            draw_on(area, c, (x0 - px)..(x1 + px), y, shown)
+            let x = (x0 - px)..(x1 + px);
+            draw_on(area, c, x.clone(), &linear_format(&x), y, &y_format, shown)
         }
         XScale::Log => {
             let (lo, hi) = if x1 > x0 { (x0 / 1.1, x1 * 1.1) } else { (x0 / 2.0, x0 * 2.0) };
-            draw_on(area, c, (lo..hi).log_scale(), y, shown)
+            let (bold, light) = log_ticks(lo, hi);
+            let x = (lo..hi).log_scale().with_key_points(bold).with_light_points(light);
+            draw_on(area, c, x, &log_label, y, &y_format, shown)
         }
     }
+}
+
+/// How many labels the mesh asks each axis' key points for (at most).
+const LABELS: usize = 11;
+
+/// Tick labels of a linear axis over `range`: as many decimals as the tick step needs (at least
+/// one), and 0 for a tick that rounding leaves at −0.
+fn linear_format(range: &std::ops::Range<f64>) -> impl Fn(&f64) -> String {
+    let ticks = RangedCoordf64::from(range.clone()).key_points(LABELS);
+    let step = ticks.windows(2).map(|w| w[1] - w[0]).fold(f64::INFINITY, f64::min);
+    let decimals =
+        if step.is_finite() && step > 0.0 { (-step.log10() - 1e-6).ceil().max(1.0) as usize } else { 1 };
+    move |v: &f64| {
+        let v = if v.abs() < 0.5 * 10f64.powi(-(decimals as i32)) { 0.0 } else { *v };
+        format!("{v:.decimals$}")
+    }
+}
+
+/// Ticks of a logarithmic axis over `lo..hi`: labelled (bold) ticks at 1, 2, 3, 5, 7 × 10^k, or at
+/// 1, 2, 5 × 10^k, or at the decades (every n-th when they are many), the densest choice that
+/// labels at most ten; light ticks at every 1…9 × 10^k.
+fn log_ticks(lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>) {
+    let (k0, k1) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+    let at = |mantissas: &[f64], every: i32| -> Vec<f64> {
+        (k0..=k1)
+            .filter(|k| (k - k0) % every == 0)
+            .flat_map(|k| mantissas.iter().map(move |m| m * 10f64.powi(k)))
+            .filter(|v| (lo..=hi).contains(v))
+            .collect()
+    };
+    let light =
+        if k1 - k0 <= 8 { at(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0], 1) } else { at(&[1.0], 1) };
+    for mantissas in [&[1.0, 2.0, 3.0, 5.0, 7.0][..], &[1.0, 2.0, 5.0], &[1.0]] {
+        let bold = at(mantissas, 1);
+        if bold.len() <= 10 {
+            return (bold, light);
+        }
+    }
+    (at(&[1.0], (k1 - k0).div_euclid(10) + 1), light)
+}
+
+/// A logarithmic axis' tick label: the value m × 10^k with the decimals 10^k needs (200, 0.5).
+fn log_label(v: &f64) -> String {
+    let decimals = (-(v.log10() + 1e-9).floor()).max(0.0) as usize;
+    format!("{v:.decimals$}")
 }
 
 fn draw_on<DB: DrawingBackend, X>(
     area: &DrawingArea<DB, Shift>,
     c: &Chart,
     x: X,
+    x_format: &dyn Fn(&f64) -> String,
     y: std::ops::Range<f64>,
+    y_format: &dyn Fn(&f64) -> String,
     shown: impl Fn(f64, f64) -> bool,
 ) -> Result<()>
 where
@@ -125,6 +183,10 @@ where
         .configure_mesh()
         .x_desc(&c.x_label)
         .y_desc(&c.y_label)
+        .x_labels(LABELS)
+        .x_label_formatter(x_format)
+        .y_labels(LABELS)
+        .y_label_formatter(y_format)
         .label_style(("sans-serif", 13))
         .light_line_style(RGBColor(235, 235, 235))
         .draw()
@@ -152,7 +214,6 @@ where
         .position(SeriesLabelPosition::UpperLeft)
         .draw()
         .map_err(|e| anyhow!("{e}"))?;
-    area.present().map_err(|e| anyhow!("{e}"))?;
     Ok(())
 }
 
@@ -168,8 +229,7 @@ pub fn write_panels(path: &Path, charts: &[Chart], scale: XScale) -> Result<()> 
     let size = (800, 500 + 300 * charts.len().saturating_sub(1) as u32);
     match path.extension().and_then(|e| e.to_str()) {
         Some("svg") => {
-            let mut text = String::new();
-            draw_panels(&SVGBackend::with_string(&mut text, size).into_drawing_area(), charts, scale)?;
+            let text = svg_text(size, |root| draw_panels(root, charts, scale))?;
             crate::files::write_atomic(path, text.as_bytes())
         }
         Some("png") => {
@@ -177,8 +237,9 @@ pub fn write_panels(path: &Path, charts: &[Chart], scale: XScale) -> Result<()> 
             // file beside the target (concurrent runs never share one), then rename it into place.
             let tmp = crate::files::partial_file_with_suffix(crate::files::output_dir(path), ".partial.png")?;
             {
-                let area = BitMapBackend::new(tmp.path(), size).into_drawing_area();
-                draw_panels(&area, charts, scale)?;
+                let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
+                draw_panels(&root, charts, scale)?;
+                root.present().map_err(|e| anyhow!("{e}"))?;
             }
             crate::files::persist(tmp, path)
         }
@@ -202,9 +263,23 @@ where
 
 /// Stacked panels as SVG text (for inlining in HTML); `size` is the whole figure's.
 pub fn svg_panels(charts: &[Chart], size: (u32, u32), scale: XScale) -> Result<String> {
+    svg_text(size, |root| draw_panels(root, charts, scale))
+}
+
+/// One SVG document of `size` drawn by `draw` on its root area. The document is presented once,
+/// on the root, after everything is drawn: the SVG backend closes the document (`</svg>`) at the
+/// first `present`, so presenting a panel would leave the panels drawn after it outside.
+fn svg_text(
+    size: (u32, u32),
+    draw: impl FnOnce(&DrawingArea<SVGBackend<'_>, Shift>) -> Result<()>,
+) -> Result<String> {
     register_font()?;
     let mut text = String::new();
-    draw_panels(&SVGBackend::with_string(&mut text, size).into_drawing_area(), charts, scale)?;
+    {
+        let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
+        draw(&root)?;
+        root.present().map_err(|e| anyhow!("{e}"))?;
+    }
     Ok(text)
 }
 
@@ -292,24 +367,17 @@ where
         .position(SeriesLabelPosition::UpperRight)
         .draw()
         .map_err(|e| anyhow!("{e}"))?;
-    area.present().map_err(|e| anyhow!("{e}"))?;
     Ok(())
 }
 
 /// The bar chart as SVG text (for inlining in HTML).
 pub fn bars_svg(bars: &Bars, size: (u32, u32)) -> Result<String> {
-    register_font()?;
-    let mut text = String::new();
-    draw_bars(&SVGBackend::with_string(&mut text, size).into_drawing_area(), bars)?;
-    Ok(text)
+    svg_text(size, |root| draw_bars(root, bars))
 }
 
 /// The chart as SVG text (for inlining in HTML).
 pub fn svg(chart: &Chart, size: (u32, u32)) -> Result<String> {
-    register_font()?;
-    let mut text = String::new();
-    draw(&SVGBackend::with_string(&mut text, size).into_drawing_area(), chart, XScale::Linear)?;
-    Ok(text)
+    svg_text(size, |root| draw(root, chart, XScale::Linear))
 }
 
 /// Every `step`-th point (plots need no more than a few thousand).
@@ -320,6 +388,82 @@ pub fn thin<T: Copy>(v: &[T], max_points: usize) -> Vec<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The text of every `<text>` element of an SVG document.
+    fn texts(svg: &str) -> Vec<String> {
+        svg.split("<text")
+            .skip(1)
+            .map(|t| t[t.find('>').unwrap() + 1..t.find("</text>").unwrap()].trim().to_string())
+            .collect()
+    }
+
+    #[test]
+    fn a_log_axis_labels_its_whole_range_once_per_tick() {
+        // A spectrum from 156 Hz to 5 kHz: labels below the first full decade too.
+        let (bold, light) = log_ticks(156.0 / 1.1, 5000.0 * 1.1);
+        assert_eq!(bold, [200.0, 300.0, 500.0, 700.0, 1000.0, 2000.0, 3000.0, 5000.0]);
+        assert!(light.len() > bold.len() && light.windows(2).all(|w| w[0] < w[1]), "{light:?}");
+        // Three decades: 1-2-5; many: the decades only; each tick once (no second 10).
+        assert_eq!(log_ticks(9.0, 5500.0).0, [10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0, 5000.0]);
+        assert_eq!(log_ticks(0.9, 11.0).0, [1.0, 2.0, 3.0, 5.0, 7.0, 10.0]);
+        assert_eq!(log_ticks(1e-3, 1e9).0, [1e-3, 1e-1, 1e1, 1e3, 1e5, 1e7, 1e9]);
+        let labels: Vec<String> = [0.3, 0.02, 200.0, 5000.0].map(|k| log_label(&k)).to_vec();
+        assert_eq!(labels, ["0.3", "0.02", "200", "5000"]);
+        let f = |k: f64| (k, -20.0 - k / 100.0);
+        let chart = Chart {
+            title: "spectrum".into(),
+            x_label: "frequency [Hz]".into(),
+            y_label: "PSD".into(),
+            series: vec![Series {
+                label: "r".into(),
+                points: (156..5000).step_by(13).map(|k| f(k as f64)).collect(),
+                color: 0,
+            }],
+            y_range: None,
+        };
+        let t = texts(&svg_panels(&[chart], (800, 500), XScale::Log).unwrap());
+        for label in ["200", "500", "1000", "5000"] {
+            assert_eq!(t.iter().filter(|s| *s == label).count(), 1, "{label} in {t:?}");
+        }
+    }
+
+    #[test]
+    fn linear_tick_labels_are_distinct_and_never_negative_zero() {
+        let labels = |r: std::ops::Range<f64>| {
+            let f = linear_format(&r);
+            RangedCoordf64::from(r).key_points(LABELS).iter().map(|&v| f(&v)).collect::<Vec<_>>()
+        };
+        // A coherence of 0.99996–1: each tick its own label (not all `1.0`).
+        let c = labels(0.999_958..1.000_002);
+        assert!(c.len() >= 4 && c.windows(2).all(|w| w[0] != w[1]), "{c:?}");
+        // Ticks from −0.4: the one at 0 reads 0.0, not −0.0.
+        let r = labels(-0.46..1.04);
+        assert!(
+            r.contains(&"0.0".to_string())
+                && !r.iter().any(|s| s.starts_with('-') && s.parse::<f64>() == Ok(0.0)),
+            "{r:?}"
+        );
+        assert_eq!(linear_format(&(-0.46..1.04))(&-1e-17), "0.0");
+        assert_eq!(labels(-180.0..-20.0)[0], "-180.0");
+    }
+
+    #[test]
+    fn stacked_panels_make_one_svg_document() {
+        let panel = |y: &str| Chart {
+            title: String::new(),
+            x_label: "frequency [Hz]".into(),
+            y_label: y.into(),
+            series: vec![Series { label: "m".into(), points: vec![(100.0, 0.5), (2000.0, 0.9)], color: 0 }],
+            y_range: None,
+        };
+        let svg = svg_panels(&[panel("gain"), panel("phase"), panel("coherence")], (900, 760), XScale::Log)
+            .unwrap();
+        assert!(svg.starts_with("<svg") && svg.matches("<svg").count() == 1, "{svg:.200}");
+        let end = svg.rfind("</svg>").unwrap();
+        assert!(svg[end + "</svg>".len()..].trim().is_empty(), "text after </svg>");
+        assert_eq!(svg.matches("</svg>").count(), 1);
+        assert!(svg.find("coherence").unwrap() < end);
+    }
 
     #[test]
     fn bars_stand_in_their_groups_in_proportion_to_their_values() {

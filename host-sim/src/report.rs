@@ -139,6 +139,7 @@ fn drive_loop(
         title: format!("{} — {what}", rec.name),
         x_label: unit.into(),
         y_label: y_label.into(),
+        y_range: None,
         series,
     })
 }
@@ -162,6 +163,7 @@ pub fn residual_chart(rec: &Recording, models: &[(ModelSpec, ActuatorParams)]) -
         title: format!("{} — residual", rec.name),
         x_label: "time [s]".into(),
         y_label: "measured − model [µm]".into(),
+        y_range: None,
         series,
     })
 }
@@ -176,6 +178,7 @@ pub fn time_chart(rec: &Recording, sim: &Simulation, offset_um: f64, label: &str
         title: format!("{} — time series", rec.name),
         x_label: "time [s]".into(),
         y_label: "displacement [µm]".into(),
+        y_range: None,
         series: vec![
             Series { label: "measured".into(), points: plots::thin(&measured, 4000), color: 0 },
             Series { label: format!("model {label}"), points: plots::thin(&model, 4000), color: 1 },

@@ -331,6 +331,19 @@ fn demo_finds_the_hidden_effects_and_writes_the_report() {
     assert_eq!(section.matches("residual ACF:").count(), 5, "{section:.2000}");
     assert_eq!(section.matches("\n  frequency response current_A").count(), 5);
     assert!(section.matches("<svg").count() >= 10);
+    // Every inline figure is one SVG element with all its panels inside (the correlation and
+    // Bode figures stack two and three panels).
+    let figures: Vec<&str> =
+        html.split("<div class=fig>").skip(1).map(|f| &f[..f.find("</div>").unwrap()]).collect();
+    assert_eq!(figures.len(), html.matches("<svg").count(), "a figure outside `<div class=fig>`");
+    for (k, fig) in figures.iter().enumerate() {
+        common::one_svg_document(fig).unwrap_or_else(|e| panic!("inline figure {k}: {e}\n{:.300}", fig));
+    }
+    for label in ["phase [deg]", "coherence γ² [1]", "to residual cross-correlation"] {
+        let inside =
+            figures.iter().filter(|f| f.find(label).is_some_and(|at| at < f.rfind("</svg>").unwrap()));
+        assert_eq!(inside.count(), 5, "`{label}` inside one figure per analysed file");
+    }
 }
 
 #[test]

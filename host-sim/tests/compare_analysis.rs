@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{err, gma, refused};
+use common::{err, gma, one_svg_document, refused};
 use std::path::Path;
 
 fn simulate(path: &Path, model: &str, waveform: &str, freq_hz: &str, duration_s: &str) {
@@ -115,6 +115,36 @@ fn compare_writes_the_analysis_plots_and_a_time_series_csv_that_adds_up() {
         fr(&no_eddy, "phase_error_deg_rms"),
         fr(&lumped, "phase_error_deg_rms")
     );
+}
+
+#[test]
+fn every_svg_plot_is_one_document_with_all_its_panels_inside() {
+    // The Bode plot (gain, phase, coherence) and the correlation plot (autocorrelation above,
+    // cross-correlation below) are stacked panels in one figure: each must be drawn into the one
+    // SVG document, not after the first panel closed it.
+    let dir = tempfile::tempdir().unwrap();
+    let val = dir.path().join("val.csv");
+    simulate(&val, "ja+mech+eddy", "chirp", "2000", "0.5");
+    let plots = dir.path().join("plots");
+    let o =
+        gma(&["compare", "--model", "ja+mech", "--out-dir", plots.to_str().unwrap(), val.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", err(&o));
+    for kind in ["loop", "time", "residual", "correlation", "spectrum", "bode"] {
+        let svg = std::fs::read_to_string(plots.join(format!("val-{kind}.svg"))).unwrap();
+        one_svg_document(&svg).unwrap_or_else(|e| panic!("val-{kind}.svg: {e}"));
+    }
+    // The later panels' labels lie inside the document.
+    for (kind, labels) in [
+        ("bode", &["gain [dB re 1 µm/A]", "phase [deg]", "coherence γ² [1]"][..]),
+        ("correlation", &["residual autocorrelation", "current_A to residual cross-correlation"][..]),
+    ] {
+        let svg = std::fs::read_to_string(plots.join(format!("val-{kind}.svg"))).unwrap();
+        let end = svg.rfind("</svg>").unwrap();
+        for label in labels {
+            let at = svg.find(label).unwrap_or_else(|| panic!("val-{kind}.svg lacks `{label}`"));
+            assert!(at < end, "val-{kind}.svg: `{label}` after the closing `</svg>`");
+        }
+    }
 }
 
 #[test]
