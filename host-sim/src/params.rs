@@ -221,12 +221,23 @@ pub fn parse_file(file: &str, text: &str, spec: ModelSpec) -> Result<ParamFile> 
     Ok(ParamFile { params, format_version, defaulted })
 }
 
-/// `text` with its `format_version` line blanked (line numbers kept).
+/// `text` with its top-level `format_version` line blanked with spaces: every byte keeps its
+/// offset (line endings too), so an error's span gives the file's line, column and text.
 fn without_format_version(text: &str) -> String {
-    text.lines()
-        .map(|l| if l.trim_start().starts_with("format_version") { "" } else { l })
-        .collect::<Vec<_>>()
-        .join("\n")
+    let mut top_level = true;
+    let mut out = String::with_capacity(text.len());
+    for line in text.split_inclusive('\n') {
+        top_level &= !line.trim_start().starts_with('[');
+        let body = line.trim_end_matches(['\r', '\n']);
+        let key = body.split_once('=').map(|(k, _)| k.trim());
+        if top_level && key == Some("format_version") {
+            out.push_str(&" ".repeat(body.len()));
+            out.push_str(&line[body.len()..]);
+        } else {
+            out.push_str(line);
+        }
+    }
+    out
 }
 
 /// Whether `e` is a missing top-level field among `missing`.

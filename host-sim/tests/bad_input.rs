@@ -302,6 +302,49 @@ fn bad_parameter_files_name_the_file_line_and_parameter_in_every_command() {
     assert!(!Path::new(&out).exists());
 }
 
+/// Every parameter file gma writes starts with a comment and `format_version`: an error after
+/// them keeps its line, column, quoted text and parameter, in the message and in `--json`'s
+/// fields (LF or CRLF line endings alike).
+#[test]
+fn errors_after_the_format_version_line_point_at_the_right_place_and_parameter() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.csv").to_str().unwrap().to_string();
+    let demo = toml::to_string(&model_core::ActuatorParams::TERFENOL_DEMO).unwrap();
+    let written = format!("# written by gma fit\nformat_version = 2\n{demo}");
+    let alpha = replace_line(&written, "alpha", "alpha = \"0.1\"");
+    let alpha_line = alpha.lines().position(|l| l.starts_with("alpha")).unwrap() + 1;
+    let cases = [
+        (
+            "typo.toml",
+            "format_version = 2\n[mech]\nnatural_frequency_hz = 1200\ndamping_ratoi = 0.3\n".to_string(),
+            "ja+mech",
+            (4, 1),
+            "unknown field `damping_ratoi`".to_string(),
+            "(at `damping_ratoi`)".to_string(),
+        ),
+        (
+            "alpha.toml",
+            alpha,
+            "ja",
+            (alpha_line, 9),
+            "parameter `ja.alpha`: invalid type: string \"0.1\"".to_string(),
+            "(found `\"0.1\"`)".to_string(),
+        ),
+    ];
+    for (name, text, model, (line, col), what, quoted) in cases {
+        for (eol, text) in [("LF", text.clone()), ("CRLF", text.replace('\n', "\r\n"))] {
+            let p = write(dir.path(), name, text.as_bytes());
+            let o = gma(&["simulate", "--model", model, "--params", &p, "--out", &out, "--json"]);
+            let place = format!("{name}:{line}:{col}: ");
+            refused(&o, &[&place, &what, &quoted], &format!("{name} ({eol})"));
+            let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+            let e = &j["error"];
+            assert_eq!((e["line"].as_u64(), e["column"].as_u64()), (Some(line as u64), Some(col)), "{e}");
+        }
+    }
+    assert!(!Path::new(&out).exists());
+}
+
 #[test]
 fn out_of_range_arguments_are_refused_with_the_option_named() {
     let dir = tempfile::tempdir().unwrap();
