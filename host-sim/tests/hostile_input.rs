@@ -240,6 +240,27 @@ fn json_errors_are_one_object_that_points_into_the_file() {
     assert!(gma(&["fit", "--help", "--json"]).status.success());
 }
 
+/// A usage error with `--json`: the error object's message says what is wrong with the command
+/// line (the missing argument's name, the unknown option), not only clap's first line.
+#[test]
+fn a_json_usage_error_names_the_missing_or_unknown_argument() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = write(dir.path(), "r.csv", &recording());
+    for (args, expected) in [
+        (vec!["fit", "--json", path(&file)], "the following required arguments were not provided: --model <"),
+        (vec!["fit", "--model", "ja", "--json", "--no-such-option", path(&file)], "'--no-such-option'"),
+        (vec!["diagnose", "--json", "--model", "ja"], "required arguments were not provided: <"),
+    ] {
+        let o = gma(&args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        let e = &json(&o)["error"];
+        assert_eq!(e["exit_code"], 2, "{args:?}: {e}");
+        let message = e["message"].as_str().unwrap();
+        assert!(message.contains(expected), "{args:?}: message lacks `{expected}`: {e}");
+        assert!(!message.contains('\n') && !message.contains("Usage:") && !message.contains("--help"), "{e}");
+    }
+}
+
 #[test]
 fn control_characters_from_a_file_never_reach_the_terminal() {
     let dir = tempfile::tempdir().unwrap();

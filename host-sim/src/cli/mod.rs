@@ -140,9 +140,7 @@ pub fn main() -> ExitCode {
                 return ExitCode::SUCCESS;
             }
             if json_asked {
-                let first =
-                    e.to_string().lines().next().unwrap_or("").trim_start_matches("error: ").to_string();
-                print_json_error(&first, None, EXIT_USAGE);
+                print_json_error(&usage_error_message(&e.to_string()), None, EXIT_USAGE);
             }
             let _ = e.print();
             return ExitCode::from(EXIT_USAGE);
@@ -161,6 +159,25 @@ pub fn main() -> ExitCode {
             ExitCode::from(EXIT_FAILURE)
         }
     }
+}
+
+/// A usage error as clap renders it, on one line for `--json`: its lines (the missing
+/// arguments, a tip) joined, without the usage line and the pointer to `--help` that follow.
+fn usage_error_message(rendered: &str) -> String {
+    let mut message = String::new();
+    for line in rendered.lines().map(str::trim) {
+        if line.starts_with("Usage:") || line.starts_with("For more information") {
+            break;
+        }
+        if line.is_empty() {
+            continue;
+        }
+        if !message.is_empty() {
+            message.push_str(if message.ends_with(':') { " " } else { "; " });
+        }
+        message.push_str(line.strip_prefix("error: ").unwrap_or(line));
+    }
+    message
 }
 
 /// `base` and `extra` (both serialising to JSON objects) as one JSON object: a command's result
