@@ -45,7 +45,7 @@ pub const MIN_DISPLACEMENT_SPAN_UM: f64 = 1e-6;
 /// The drive `spec` uses for `rec`, or why it cannot be simulated.
 pub fn drive_for(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
     let Some(y) = rec.displacement_um.as_deref() else {
-        bail!("{}: no `displacement_um` column: nothing to compare the model with", rec.name);
+        return Err(rec.no_displacement_error());
     };
     let span =
         |v: &[f64]| v.iter().fold(f64::MIN, |a, &b| a.max(b)) - v.iter().fold(f64::MAX, |a, &b| a.min(b));

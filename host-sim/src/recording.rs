@@ -49,6 +49,9 @@ pub struct Recording {
     /// Mean flux density of the rod [T] from a search coil around it (arbitrary offset: an
     /// integrator's zero).
     pub flux_density_t: Option<Vec<f64>>,
+    /// The columns as the source names them (a file's header, the arrays' names), for messages
+    /// about a column it lacks; empty for a recording made in memory.
+    pub header: Vec<String>,
 }
 
 impl Recording {
@@ -63,6 +66,7 @@ impl Recording {
             force_n: None,
             temperature_c: None,
             flux_density_t: None,
+            header: Vec::new(),
         }
     }
 
@@ -89,6 +93,7 @@ impl Recording {
             force_n: cut(&self.force_n),
             temperature_c: cut(&self.temperature_c),
             flux_density_t: cut(&self.flux_density_t),
+            header: self.header.clone(),
         }
     }
 
@@ -114,6 +119,38 @@ impl Recording {
             "flux_density_T" => self.flux_density_t.as_ref(),
             _ => None,
         }
+    }
+
+    /// Why the recording cannot be compared with a model: it has no `displacement_um`. Names the
+    /// columns it has and, for one that looks like a displacement under another name or unit,
+    /// the `--column` that reads it.
+    pub fn no_displacement_error(&self) -> anyhow::Error {
+        let what = "nothing to compare the model with";
+        if self.header.is_empty() {
+            return anyhow::anyhow!("{}: no `displacement_um` column: {what}", self.name);
+        }
+        let units = crate::columns::UNITS[3];
+        let candidate = self.header.iter().find(|h| looks_like_displacement(h));
+        // The unit a name ends in: `displacement_mm`, `x(mm)`, `x [mm]`.
+        let unit = candidate.and_then(|h| {
+            let tail = h.rsplit(['_', '(', '[', ' ']).next()?.trim_end_matches([')', ']']);
+            units.iter().find(|u| u.name == tail).map(|u| u.name)
+        });
+        let header = candidate.map_or("HEADER".to_string(), |h| echo(h));
+        let mut hint = match candidate {
+            Some(_) => format!("if `{header}` is the displacement, read it with "),
+            None => "a displacement column of another name or unit is read with ".to_string(),
+        };
+        hint.push_str(&format!("`--column displacement_um={header}:{}`", unit.unwrap_or("UNIT")));
+        if unit.is_none() {
+            let names: Vec<&str> = units.iter().map(|u| u.name).collect();
+            hint.push_str(&format!(" (UNIT: {})", names.join(", ")));
+        }
+        let message = format!(
+            "no `displacement_um` column (header has: {}): {what}; {hint}",
+            header_list(self.header.iter().map(String::as_str))
+        );
+        Located::at(&self.name, 1, None, message).into()
     }
 
     /// Reads and validates a measurement CSV, all of it (`-` is standard input).
@@ -232,6 +269,7 @@ impl Recording {
             temperature_c: take(5, &mut cols),
             flux_density_t: take(6, &mut cols),
             time_s: std::mem::take(&mut cols[0]),
+            header: headers.iter().map(|h| h.trim().to_string()).collect(),
         };
         if r.len() < 3 {
             located!(file;
@@ -281,6 +319,7 @@ impl Recording {
             force_n: interp(&self.force_n),
             temperature_c: interp(&self.temperature_c),
             flux_density_t: interp(&self.flux_density_t),
+            header: self.header.clone(),
         })
     }
 
@@ -509,13 +548,28 @@ fn jitter(file: &str, line: u64, col: usize, step: f64, dt: f64, resample: bool)
 }
 
 /// The header's names as a message lists them: each quoted as a cell, at most 24.
-fn header_list(headers: &csv::StringRecord) -> String {
+fn header_list<'a>(headers: impl IntoIterator<Item = &'a str>) -> String {
     const SHOWN: usize = 24;
-    let mut names: Vec<String> = headers.iter().take(SHOWN).map(|h| echo(h.trim())).collect();
-    if headers.len() > SHOWN {
-        names.push(format!("… ({} more)", headers.len() - SHOWN));
+    let (mut names, mut more) = (Vec::new(), 0);
+    for h in headers {
+        if names.len() < SHOWN {
+            names.push(echo(h.trim()));
+        } else {
+            more += 1;
+        }
+    }
+    if more > 0 {
+        names.push(format!("… ({more} more)"));
     }
     names.join(", ")
+}
+
+/// Whether a column's name suggests a displacement under another name or unit
+/// (`displacement_mm`, `disp`, `x_um`, `x [mm]`, `x`).
+fn looks_like_displacement(header: &str) -> bool {
+    let h = header.trim().to_ascii_lowercase();
+    let stem = h.split(['_', '(', '[', ' ']).next().unwrap_or("");
+    stem.starts_with("disp") || stem == "x"
 }
 
 /// The column index of each canonical column: a mapped column by its header (which must be in

@@ -58,7 +58,18 @@ fn bad_csvs() -> Vec<(&'static str, Vec<u8>, Vec<&'static str>)> {
         (
             "no_displacement.csv",
             csv("time_s,current_A,x_um", &good_rows()),
-            vec!["no_displacement.csv", "no `displacement_um` column"],
+            vec![
+                "no_displacement.csv:1: no `displacement_um` column (header has: time_s, current_A, x_um)",
+                "if `x_um` is the displacement, read it with `--column displacement_um=x_um:um`",
+            ],
+        ),
+        (
+            "other_displacement.csv",
+            csv("time_s,current_A,y", &good_rows()),
+            vec![
+                "other_displacement.csv:1: no `displacement_um` column (header has: time_s, current_A, y)",
+                "`--column displacement_um=HEADER:UNIT` (UNIT: um, µm, m, mm, nm)",
+            ],
         ),
         (
             "duplicate.csv",

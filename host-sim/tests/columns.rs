@@ -159,6 +159,39 @@ fn a_file_in_ms_ma_and_mm_fits_exactly_as_its_si_twin() {
     assert_eq!(a["ladder"], b["ladder"]);
 }
 
+/// A displacement column in other units is refused with the file's columns listed and the
+/// `--column` that reads it; following that hint reads the file as its SI twin.
+#[test]
+fn a_displacement_in_other_units_is_refused_with_the_column_option_that_reads_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let si = simulated(dir.path());
+    let mm = dir.path().join("mm.csv");
+    let mut r = rows(&si);
+    r[0][2] = "displacement_mm".into();
+    for row in &mut r[1..] {
+        row[2] = shift_decimal(&row[2], -3);
+    }
+    write_rows(&mm, &r);
+    let cmp = dir.path().join("c");
+    let base = ["compare", "--model", "ja", "--json", "--out-dir", path(&cmp)];
+    let o = gma(&args(&base, &[path(&mm)]));
+    let hint = "`--column displacement_um=displacement_mm:mm`";
+    refused(
+        &o,
+        &["mm.csv:1: no `displacement_um` column", "header has: time_s, current_A, displacement_mm", hint],
+        "mm",
+    );
+    let e: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(e["error"]["line"].as_u64(), Some(1), "{e}");
+    let option = hint.trim_matches('`').split_once(' ').unwrap();
+    let twin = json(&gma(&args(&base, &[path(&si)])));
+    let read = json(&gma(&args(&base, &[option.0, option.1, path(&mm)])));
+    assert_eq!(
+        (&read["nrmse"], &read["files"][0]["offset_um"]),
+        (&twin["nrmse"], &twin["files"][0]["offset_um"])
+    );
+}
+
 #[test]
 fn mapped_values_are_checked_after_conversion() {
     let dir = tempfile::tempdir().unwrap();

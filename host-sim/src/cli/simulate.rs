@@ -266,6 +266,7 @@ fn run_on_drive(
         force_n: None,
         temperature_c: None,
         flux_density_t: flux,
+        header: Vec::new(),
     };
     Ok((rec, drive))
 }
