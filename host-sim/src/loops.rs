@@ -104,8 +104,20 @@ fn unit_factor(header: &str) -> Option<(char, f64)> {
     Some((quantity, f))
 }
 
+/// The separator a loop file's first line uses: a tab, a comma, or (refused by [`parse`] with a
+/// hint, but still a loop file) a semicolon when the line has no comma.
+fn separator(first: &str) -> char {
+    if first.contains('\t') {
+        '\t'
+    } else if first.contains(';') && !first.contains(',') {
+        ';'
+    } else {
+        ','
+    }
+}
+
 /// Whether `text` looks like a loop file (named loop columns, or two columns with an H/B header
-/// or none).
+/// or none; separated by a semicolon too, so that such a file is told what is wrong with it).
 pub fn looks_like_loop(text: &str) -> bool {
     let first = text.lines().next().unwrap_or("").to_ascii_lowercase();
     if first.contains("field_a_per_m") {
@@ -114,7 +126,7 @@ pub fn looks_like_loop(text: &str) -> bool {
     if first.contains("time_s") || first.contains("displacement_um") {
         return false;
     }
-    let sep = if first.contains('\t') { '\t' } else { ',' };
+    let sep = separator(&first);
     let fields: Vec<&str> = first.split(sep).collect();
     fields.len() == 2
         && (fields.iter().all(|f| f.trim().parse::<f64>().is_ok()) || first.trim_start().starts_with('h'))
@@ -150,7 +162,15 @@ pub fn parse(name: &str, text: &str) -> Result<LoopFile> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()).peekable();
     let Some(&(_, first)) = lines.peek() else { located!(name; "empty file") };
-    let sep = if first.contains('\t') { '\t' } else { ',' };
+    let sep = separator(first);
+    if sep == ';' {
+        located!(name, Some(1), None;
+            "the file seems to separate columns with `;` (first line `{}`); loop files are comma- or \
+             tab-separated, as in `{}`",
+            echo(first),
+            echo(&first.replace(';', ","))
+        );
+    }
     let cells: Vec<&str> = first.split(sep).map(str::trim).collect();
     let numeric = cells.iter().all(|c| c.parse::<f64>().is_ok());
     // Column indices and unit factors for H and the value.

@@ -439,6 +439,22 @@ fn malformed_loop_files_are_refused_with_their_line() {
             vec!["nan.csv:3:2:", "not a finite number"],
         ),
         ("ragged.csv", "H [kA/m],B [T]\n1,0.1\n2\n3,0.3\n4,0.4\n5,0.5\n", vec!["ragged.csv:3:", "1 fields"]),
+        // Semicolons (a spreadsheet's export in some locales): said, not `no time_s column`.
+        (
+            "semicolon.csv",
+            "H(Oe);B(T)\n1;0.1\n2;0.2\n3;0.3\n4;0.4\n5;0.5\n",
+            vec!["semicolon.csv:1: the file seems to separate columns with `;`", "comma- or tab-separated"],
+        ),
+        (
+            "semicolon_named.csv",
+            "field_A_per_m;flux_density_T\n1;0.1\n2;0.2\n3;0.3\n4;0.4\n5;0.5\n",
+            vec!["semicolon_named.csv:1: the file seems to separate columns with `;`"],
+        ),
+        (
+            "semicolon_unnamed.csv",
+            "-40000;-0.95\n1;0.1\n2;0.2\n3;0.3\n4;0.4\n5;0.5\n",
+            vec!["semicolon_unnamed.csv:1: the file seems to separate columns with `;`"],
+        ),
     ] {
         let p = write(dir.path(), name, text.as_bytes());
         refused(&gma(&["fit", "--model", "ja", &p]), &expected, name);
