@@ -24,6 +24,7 @@ use crate::progress::{self, Progress};
 use crate::recording::Recording;
 use crate::results::StartScore;
 use crate::search::{minimize, Bound, Fidelity, Found, Local, Plan, SearchOptions, Start};
+use crate::warning::Warning;
 
 mod magnetic_memo;
 pub use magnetic_memo::MagneticMemo;
@@ -838,6 +839,8 @@ pub struct FitResult {
     /// The first start's score (its identified values clamped into the search ranges), and
     /// whether the fit returned it because the search ended worse.
     pub start: StartScore,
+    /// The first start's values that lay outside their search ranges (moved to the nearest end).
+    pub start_moved: Vec<Warning>,
 }
 
 /// Why a parameter set cannot be a J–A fit result: α·M_s/(3a) ≥ 1 makes the anhysteretic
@@ -1289,6 +1292,17 @@ fn fit_searched(
         .filter(|(_, f)| f.name() == MODE_FREQUENCY || f.name() == MODE_DAMPING)
         .map(|(k, _)| k)
         .collect();
+    // The user's start values outside the ranges, said rather than clamped in silence.
+    let start_moved: Vec<Warning> = free
+        .iter()
+        .filter_map(|f| {
+            let given = (f.get)(&starts[0].0);
+            let used = f.from_unit(f.to_unit(given));
+            ((given - used).abs() > 1e-6 * given.abs().max(f64::MIN_POSITIVE)).then_some(
+                Warning::StartMoved { param: f.name(), given, used, lo: f.bound.lo, hi: f.bound.hi },
+            )
+        })
+        .collect();
     // Start points: the fixed parameters come from the first; each start's identified values
     // are clamped into the bounds.
     let bases: Vec<Start<ActuatorParams>> = starts
@@ -1416,6 +1430,7 @@ fn fit_searched(
             }
             Err(why) => StartScore { nrmse: None, kept: false, refused: Some(why), seen_mode },
         },
+        start_moved,
     })
 }
 

@@ -60,6 +60,20 @@ pub enum Warning {
         /// Mean fit NRMSE where the search ended.
         found_nrmse: f64,
     },
+    /// A start value lay outside its parameter's search range: the search began at the range's
+    /// nearest end instead.
+    StartMoved {
+        /// Its name.
+        param: &'static str,
+        /// The value given (parameter file, `--init` or built-in set).
+        given: f64,
+        /// Where the search began.
+        used: f64,
+        /// The range.
+        lo: f64,
+        /// The range.
+        hi: f64,
+    },
     /// `--time-limit` stopped the search: the best point so far.
     TimeLimit {
         /// The limit [s].
@@ -111,6 +125,11 @@ impl fmt::Display for Warning {
                  returned (a fit never ends worse than its start)",
                 found_nrmse * 100.0,
                 start_nrmse * 100.0
+            ),
+            Warning::StartMoved { param, given, used, lo, hi } => write!(
+                f,
+                "start value `{param}` = {given:.4e} lies outside its search range [{lo:.3e}, {hi:.3e}]: the \
+                 search began at {used:.4e}, that range's nearest end"
             ),
             Warning::TimeLimit { seconds } => write!(
                 f,

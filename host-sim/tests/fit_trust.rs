@@ -105,6 +105,53 @@ fn the_displacement_fit_refuses_a_multivalued_set_and_reports_its_start() {
     assert!(ratio < 1.0, "{ratio}");
 }
 
+/// A start value outside its search range is moved to the range's end and the fit says so (as a
+/// warning, in the JSON too), and a parameter file with α·M_s/(3a) ≥ 1 is named as such by the
+/// commands that run it as given (`compare`), not scored in silence.
+#[test]
+fn a_start_outside_its_range_and_a_multivalued_file_are_said_not_passed_over() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut truth = ActuatorParams::TERFENOL_DEMO;
+    truth.dt_s = 2.5e-4;
+    let rec = Plant::new(ModelSpec::parse("ja").unwrap(), truth)
+        .record("loop.csv", &Excitation::Sine { freq_hz: 5.0, amplitude: 2.5, bias: 0.0 }, 0.2, 1)
+        .unwrap();
+    let path = dir.path().join("loop.csv");
+    rec.write(&path).unwrap();
+    let mut start = truth;
+    start.ja.alpha = 0.5; // outside the fit's ±0.1, and α·M_s/(3a) ≫ 1
+    let params = dir.path().join("start.toml");
+    std::fs::write(&params, host_sim::params::to_toml(&start, "test").unwrap()).unwrap();
+    let (file, params) = (path.to_str().unwrap(), params.to_str().unwrap());
+    let o = gma(&["fit", "--model", "ja", "--effort", "0.2", "--json", "--init", params, file]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("start value `ja.alpha` = 5.0000e-1 lies outside its search range"), "{err}");
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let warned = j["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|w| w.as_str().unwrap().contains("`ja.alpha` = 5.0000e-1"));
+    assert!(warned, "{:#}", j["warnings"]);
+    let o = gma(&[
+        "compare",
+        "--model",
+        "ja",
+        "--params",
+        params,
+        "--out-dir",
+        dir.path().to_str().unwrap(),
+        file,
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("gma: warning:") && err.contains("≥ 1") && err.contains("a fit refuses it"),
+        "{err}"
+    );
+}
+
 /// The sensor delay is identified as a real number of samples: a rig whose sensor lags by 2.6
 /// samples (our own plant, interpolating between its integration steps) is fitted to within a
 /// twentieth of a sample from a start of 0, where an integer delay could come no closer than 0.4.

@@ -118,7 +118,7 @@ pub(crate) fn fit_recordings(
     );
     let analysed = uncertainty::analyse(p.spec, &res, fit_files);
     phase.finish();
-    let (uncertainty, warnings) = match analysed {
+    let (uncertainty, mut warnings) = match analysed {
         Ok(u) => {
             let w = u.warnings();
             (Some(u), w)
@@ -128,6 +128,7 @@ pub(crate) fn fit_recordings(
             (None, Vec::new())
         }
     };
+    warnings.splice(0..0, res.start_moved.iter().cloned());
     let mut files = rows("fit", fit_files, &res.fit.files);
     let mut nrmse_val = None;
     if !val_files.is_empty() {
