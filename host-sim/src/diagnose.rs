@@ -73,6 +73,12 @@ pub const FRESH_EFFORT: f64 = 0.5;
 /// comparing them needs far more samples than parameters (20 per parameter).
 pub const MIN_SAMPLES: usize = 200;
 
+/// Whether two candidates' signature R² differ by more than an R²'s significance at the smaller
+/// of their effective sample sizes (χ²₁ at 5 % over N_eff): below it the difference is noise.
+fn r2_differ(a: &Candidate, b: &Candidate) -> bool {
+    (a.evidence_r2 - b.evidence_r2).abs() > CHI2_1_95 / a.n_eff.min(b.n_eff).max(1.0)
+}
+
 /// One candidate effect, as the JSON contract lists it.
 #[derive(Debug, Clone, Serialize)]
 pub struct Candidate {
@@ -216,7 +222,15 @@ impl std::fmt::Display for Diagnosis {
         match self.verdict {
             Some(v) => write!(
                 f,
-                "verdict: `{v}` is missing — try `--model {}+{}`",
+                "verdict: `{v}` is missing{} — try `--model {}+{}`",
+                if self.undistinguished.is_empty() {
+                    String::new()
+                } else {
+                    format!(
+                        ", or `{}` (the data do not tell them apart, above)",
+                        self.undistinguished.iter().map(|e| e.name()).collect::<Vec<_>>().join("`, `")
+                    )
+                },
                 self.model,
                 v.alias().unwrap_or(v.name())
             ),
@@ -835,7 +849,16 @@ pub fn diagnose(
         })
     };
     findings.extend(trend(|r| r.0, "excitation frequency", "Hz"));
-    findings.extend(trend(|r| r.1, "drive amplitude (rms)", "A or V"));
+    // The amplitude is the current's where a file has one, else the command's.
+    let drive_unit = match (
+        all_files.iter().all(|r| r.current_a.is_some()),
+        all_files.iter().all(|r| r.current_a.is_none()),
+    ) {
+        (true, _) => "A (current_A)",
+        (_, true) => "V (command_V)",
+        _ => "A (current_A) or V (command_V, files without a current)",
+    };
+    findings.extend(trend(|r| r.1, "drive amplitude (rms)", drive_unit));
     findings.extend(trend(|r| r.2, "record length", "s"));
     evidence_phase.finish();
 
@@ -952,7 +975,7 @@ pub fn diagnose(
         if let Some(f) = refit.as_ref().filter(|_| !adds_a_channel) {
             let (b, a) = (base.fit.cost(), f.fit.cost());
             if a > b * 1.0001 {
-                failed_refits.push(format!("`{e}` ({:.2} % > {:.2} %)", a.sqrt() * 100.0, b.sqrt() * 100.0));
+                failed_refits.push(format!("`{e}` ({:.4} % > {:.4} %)", a.sqrt() * 100.0, b.sqrt() * 100.0));
             }
         }
         let cand_scores = |files: &[Recording], skip: &[usize]| -> Result<Vec<Scored>> {
@@ -1074,8 +1097,9 @@ pub fn diagnose(
     if candidates.first().is_some_and(Candidate::passes) {
         // Passing candidates on the same channel that the best does not beat on every scored file,
         // or not by strong evidence of the information criterion, cannot be told apart by these
-        // data. Among them the signature evidence decides, then the information criterion —
-        // never the list order.
+        // data. Among them the signature evidence decides where its R² differ by more than the
+        // significance of an R² at their N_eff, else the information criterion — never the list
+        // order.
         let best = candidates[0].clone();
         let tied: Vec<usize> = (0..candidates.len())
             .filter(|&i| {
@@ -1090,7 +1114,12 @@ pub fn diagnose(
             .copied()
             .max_by(|&i, &j| {
                 let (a, b) = (&candidates[i], &candidates[j]);
-                a.evidence_r2.total_cmp(&b.evidence_r2).then(a.delta_bic.total_cmp(&b.delta_bic))
+                let by_r2 = if r2_differ(a, b) {
+                    a.evidence_r2.total_cmp(&b.evidence_r2)
+                } else {
+                    std::cmp::Ordering::Equal
+                };
+                by_r2.then(a.delta_bic.total_cmp(&b.delta_bic))
             })
             .unwrap_or(0);
         let tied_effects: Vec<Effect> = tied.iter().map(|&i| candidates[i].effect).collect();
@@ -1104,13 +1133,31 @@ pub fn diagnose(
                 candidates.iter().filter(|c| undistinguished.contains(&c.effect)).collect();
             let same_signature =
                 others.iter().all(|c| c.effect.info().signature == v.effect.info().signature);
-            let why = if same_signature {
+            let by_bic = |how: String| {
+                let lead = others.iter().map(|c| v.delta_bic - c.delta_bic).fold(f64::INFINITY, f64::min);
                 format!(
-                    "they share the signature ({}), so the information criterion decides: ΔBIC {:+.1} against {}",
-                    signature_words(v.effect.info().signature),
+                    "{how}, so the information criterion decides: ΔBIC {:+.1} against {}{}",
                     v.delta_bic,
-                    others.iter().map(|c| format!("{:+.1}", c.delta_bic)).collect::<Vec<_>>().join(", ")
+                    others.iter().map(|c| format!("{:+.1}", c.delta_bic)).collect::<Vec<_>>().join(", "),
+                    if lead < BIC_STRONG {
+                        format!(
+                            ", a weak preference (a lead under {BIC_STRONG}): treat them as equally likely"
+                        )
+                    } else {
+                        String::new()
+                    }
                 )
+            };
+            let why = if same_signature {
+                by_bic(format!("they share the signature ({})", signature_words(v.effect.info().signature)))
+            } else if others.iter().any(|c| !r2_differ(v, c)) {
+                by_bic(format!(
+                    "their signatures explain the residual alike (R² {:.1} % against {}, differences below an R²'s \
+                     significance at N_eff = {:.0})",
+                    v.evidence_r2 * 100.0,
+                    others.iter().map(|c| format!("{:.1} %", c.evidence_r2 * 100.0)).collect::<Vec<_>>().join(", "),
+                    v.n_eff
+                ))
             } else {
                 format!(
                     "the signature evidence decides: R² {:.1} % against {}",
@@ -1180,11 +1227,11 @@ pub fn diagnose(
             ),
             Some(v) => format!(
                 "with `{v}` added {:.2} % stays unexplained and structured ({:.0} % of lags outside the band, white noise at \
-                 most {:.0} %): diagnose `{}` again; what is left may be none of the known effects",
+                 most {:.0} %): diagnose `{spec}+{}` again; what is left may be none of the known effects",
                 final_val * 100.0,
                 white_final * 100.0,
                 band * 100.0,
-                spec.with(v)
+                v.alias().unwrap_or(v.name())
             ),
         });
     }
