@@ -32,3 +32,49 @@ fn effects_json_lists_every_effect_with_its_parameters() {
     let mech = j["effects"].as_array().unwrap().iter().find(|e| e["alias"] == "mech").unwrap();
     assert_eq!(mech["params"][0]["unit"], "Hz");
 }
+
+/// The plain text lists what the Markdown and the JSON list: every parameter a fit identifies
+/// (the laws', the strain scale and the amplifier gain included, not only the effects'), and the
+/// rod's thermal lag with what its out-of-range default 0 means.
+#[test]
+fn effects_text_lists_every_identified_parameter() {
+    let o = Command::new(env!("CARGO_BIN_EXE_gma")).args(["effects", "--json"]).output().unwrap();
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_gma")).arg("effects").output().unwrap();
+    assert!(o.status.success());
+    let text = String::from_utf8(o.stdout).unwrap();
+    let mut keys = 0;
+    for row in j["identified"].as_array().unwrap() {
+        assert!(text.contains(&format!("{}:", row["when"].as_str().unwrap())), "{}\n{text}", row["when"]);
+        for p in row["params"].as_array().unwrap() {
+            let key = p["key"].as_str().unwrap();
+            assert!(text.lines().any(|l| l.trim_start().starts_with(&format!("{key} ["))), "{key}\n{text}");
+            keys += 1;
+        }
+    }
+    assert!(keys > 20, "{keys}");
+    for key in
+        ["ja.k_a_per_m", "preisach.coercive_a_per_m", "anhysteretic.a_a_per_m", "linear.susceptibility"]
+    {
+        assert!(text.contains(key), "{key}\n{text}");
+    }
+    let rod = text.lines().find(|l| l.contains("thermal.rod_tau_s")).unwrap();
+    assert!(
+        rod.contains("default 0 = no lag") && rod.contains("searched in [0.01, 3000] (log) when a file logs"),
+        "{rod}"
+    );
+    let rod = j["identified"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|r| r["params"].as_array().unwrap())
+        .find(|p| p["key"] == "thermal.rod_tau_s")
+        .unwrap();
+    assert!(rod["note"].as_str().unwrap().contains("default 0 = no lag"), "{rod}");
+    let lambda = &j["identified"][0]["params"][0];
+    assert!(lambda["note"].is_null(), "{lambda}");
+    let o = Command::new(env!("CARGO_BIN_EXE_gma")).args(["effects", "--markdown"]).output().unwrap();
+    let md = String::from_utf8(o.stdout).unwrap();
+    let rod = md.lines().find(|l| l.contains("`thermal.rod_tau_s`")).unwrap();
+    assert!(rod.contains("0 = no lag") && rod.contains("[0.01, 3000] when a file logs"), "{rod}");
+}

@@ -31,12 +31,6 @@ pub fn run(a: &EffectsArgs) -> Result<()> {
         for e in &EFFECTS {
             let alias = e.alias.map(|a| format!(" ({a})")).unwrap_or_default();
             out!("{}{alias}: {} [{}]", e.name, e.adds, stage(e.stage));
-            for p in e.params {
-                out!("    {}", param_line(p));
-            }
-            if e.effect == model_core::Effect::ThermalDrift {
-                out!("    {} (only on files with `temperature_C`)", param_line(&ROD_THERMAL_LAG));
-            }
         }
         for (word, effects) in SHORTHANDS {
             let names: Vec<&str> = effects.iter().map(|e| e.name()).collect();
@@ -44,6 +38,13 @@ pub fn run(a: &EffectsArgs) -> Result<()> {
                 "{word}: {}",
                 if names.is_empty() { "no effects (the minimal model)".into() } else { names.join(" + ") }
             );
+        }
+        out!("parameters a fit identifies (key [unit], search range, scale, default), by when:");
+        for (when, params) in identified() {
+            out!("  {when}:");
+            for p in params {
+                out!("    {}", param_line(p));
+            }
         }
         for v in JaVariant::ALL {
             out!("{JA_VARIANT_KEY} = \"{}\"{}: {} ({})", v.name(), default_mark(v), v.equation(), v.paper());
@@ -111,8 +112,44 @@ fn default(p: &Param) -> f32 {
     (p.get)(&ActuatorParams::TERFENOL_DEMO) as f32
 }
 
+/// A default that lies outside its parameter's search range: what it means, and when the range
+/// is searched instead. The rod's thermal lag defaults to 0, no lag; it is searched only on
+/// files that log the coil's temperature (docs/formats.md, `[thermal] rod_tau_s`).
+struct OffRange {
+    /// What the default means.
+    means: &'static str,
+    /// When the search range applies.
+    searched_when: &'static str,
+}
+
+fn off_range(p: &Param) -> Option<OffRange> {
+    (p.key == ROD_THERMAL_LAG.key).then_some(OffRange {
+        means: "no lag (the rod follows the coil at once)",
+        searched_when: "a file logs `temperature_C`",
+    })
+}
+
 fn param_line(p: &Param) -> String {
-    format!("{} [{}] in {} ({}), default {}", p.key, p.unit, range(p), scale(p), default(p))
+    match off_range(p) {
+        Some(o) => format!(
+            "{} [{}], default {} = {}; searched in {} ({}) when {}",
+            p.key,
+            p.unit,
+            default(p),
+            o.means,
+            range(p),
+            scale(p),
+            o.searched_when
+        ),
+        None => format!("{} [{}] in {} ({}), default {}", p.key, p.unit, range(p), scale(p), default(p)),
+    }
+}
+
+/// The words a JSON parameter carries about its default (`null` when the default is in range).
+fn json_note(p: &Param) -> Option<String> {
+    off_range(p).map(|o| {
+        format!("default {} = {}; searched in {} when {}", default(p), o.means, range(p), o.searched_when)
+    })
 }
 
 /// Which parameters are identified when: (condition, parameters).
@@ -163,13 +200,18 @@ pub fn markdown() -> String {
     for (when, params) in identified() {
         for (k, p) in params.iter().enumerate() {
             let w = if k == 0 { when.as_str() } else { "" };
+            let (searched, default) = match off_range(p) {
+                Some(o) => (
+                    format!("{} when {}", range(p), o.searched_when),
+                    format!("{} = {}", default(p), o.means),
+                ),
+                None => (range(p), default(p).to_string()),
+            };
             s.push_str(&format!(
-                "| {w} | `{}` | {} | {} | {} | {} |\n",
+                "| {w} | `{}` | {} | {searched} | {} | {default} |\n",
                 p.key,
                 p.unit,
-                range(p),
-                scale(p),
-                default(p)
+                scale(p)
             ));
         }
     }
@@ -208,7 +250,7 @@ fn effect_row(e: &EffectInfo) -> String {
 }
 
 fn to_json() -> serde_json::Value {
-    let param = |p: &Param| json!({"key": p.key, "unit": p.unit, "lo": p.lo, "hi": p.hi, "scale": scale(p), "default": default(p)});
+    let param = |p: &Param| json!({"key": p.key, "unit": p.unit, "lo": p.lo, "hi": p.hi, "scale": scale(p), "default": default(p), "note": json_note(p)});
     json!({
         "effects": EFFECTS.iter().map(|e| json!({
             "name": e.name, "alias": e.alias, "adds": e.adds, "stage": stage(e.stage),
