@@ -192,6 +192,28 @@ fn fit_prints_the_json_contract_writes_params_and_is_deterministic() {
     }
 }
 
+/// diagnose refuses loop files: its help says its files are recordings, while fit's and
+/// report's still name loop files.
+#[test]
+fn diagnose_help_says_its_files_are_recordings() {
+    let diagnose = help("diagnose");
+    assert!(
+        diagnose.contains("Displacement recordings (CSV) to fit and diagnose (not magnetization-loop files"),
+        "{diagnose}"
+    );
+    assert!(!diagnose.contains("or magnetization-loop files to fit"), "{diagnose}");
+    for cmd in ["fit", "report"] {
+        assert!(help(cmd).contains("Recordings (CSV) or magnetization-loop files to fit"), "{cmd}");
+    }
+}
+
+/// A command's `--help`, one space between words (wrapping aside).
+fn help(cmd: &str) -> String {
+    let o = gma(&[cmd, "--help"]);
+    assert!(o.status.success(), "{cmd} --help");
+    String::from_utf8_lossy(&o.stdout).split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
 #[test]
 fn diagnose_names_the_missing_effect_in_the_json_contract() {
     let dir = tempfile::tempdir().unwrap();

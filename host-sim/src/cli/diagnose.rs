@@ -7,8 +7,13 @@ use super::common::{Data, ModelFiles};
 use crate::diagnose::{check_ja_variants, check_laws, diagnose};
 use crate::provenance::Provenance;
 
-/// Options of `gma diagnose`.
+/// Options of `gma diagnose`. Its files are displacement recordings only (the shared `FILE`
+/// help also names loop files, which `fit` and `report` take).
 #[derive(Args)]
+#[command(mut_arg("files", |a| a.help(
+    "Displacement recordings (CSV) to fit and diagnose (not magnetization-loop files: those go \
+     to `gma fit` and `gma compare`); `-` reads standard input"
+)))]
 pub struct DiagnoseArgs {
     #[command(flatten)]
     pub mf: ModelFiles,
