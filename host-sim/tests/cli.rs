@@ -207,6 +207,34 @@ fn diagnose_help_says_its_files_are_recordings() {
     }
 }
 
+/// Every `--column` help lists the units of every recognised column (the flux density's
+/// included), and compare's `--out-csv` names the flux columns it adds.
+#[test]
+fn column_help_lists_every_columns_units() {
+    for cmd in ["fit", "compare", "diagnose", "report", "simulate"] {
+        let text = help(cmd);
+        let units = &text[text.find("Units: ").unwrap_or_else(|| panic!("{cmd}: no units\n{text}"))..];
+        for (column, accepted) in host_sim::recording::COLUMNS.iter().zip(host_sim::columns::UNITS) {
+            let at =
+                units.find(&format!(" {column} ")).unwrap_or_else(|| panic!("{cmd}: no {column}: {units}"));
+            let listed = units[at + column.len() + 2..].split([' ', ';']).next().unwrap();
+            let mut listed: Vec<&str> = listed.split('|').collect();
+            let mut accepted: Vec<&str> = accepted.iter().map(|u| u.name).collect();
+            listed.sort();
+            accepted.sort();
+            assert_eq!(listed, accepted, "{cmd}: units of {column}");
+        }
+        assert!(text.contains("--column flux_density_T=B:mT"), "{cmd}");
+    }
+    let compare = help("compare");
+    assert!(
+        compare.contains(
+            "`measured_flux_T, model_flux_T, residual_flux_T` when a recording has `flux_density_T`"
+        ),
+        "{compare}"
+    );
+}
+
 /// A command's `--help`, one space between words (wrapping aside).
 fn help(cmd: &str) -> String {
     let o = gma(&[cmd, "--help"]);

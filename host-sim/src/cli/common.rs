@@ -69,9 +69,10 @@ pub struct ReadArgs {
     /// Read the file's column HEADER as the recognised column CANONICAL, converting from UNIT,
     /// e.g. `--column time_s=time_ms:ms`, `--column displacement_um=x_mm:mm`, `--column
     /// current_A=I:mA`. Units: time_s s|ms|us|µs; displacement_um m|mm|um|µm|nm; current_A A|mA;
-    /// command_V V|mV; force_N N|kN; temperature_C °C|C|K. No UNIT: the canonical unit (a
-    /// rename). Repeat for several columns. Nothing is guessed: unmapped columns are read by
-    /// their exact names as before.
+    /// command_V V|mV; force_N N|kN; temperature_C °C|C|K; flux_density_T T|mT|G (e.g.
+    /// `--column flux_density_T=B:mT`). No UNIT: the canonical unit (a rename). Repeat for
+    /// several columns. Nothing is guessed: unmapped columns are read by their exact names as
+    /// before.
     #[arg(long = "column", value_name = "CANONICAL=HEADER[:UNIT]")]
     pub columns: Vec<String>,
     /// Put the recordings onto a uniform time grid: `linear` interpolates every channel linearly

@@ -43,7 +43,9 @@ pub struct CompareArgs {
     #[arg(long, value_parser = ["svg", "png"], default_value = "svg")]
     pub format: String,
     /// Also write one CSV of every recording's time series: columns `file, time_s, measured_um,
-    /// model_um, residual_um` (model with its fitted offset; residual = measured − model).
+    /// model_um, residual_um` (model with its fitted offset; residual = measured − model), and
+    /// `measured_flux_T, model_flux_T, residual_flux_T` when a recording has `flux_density_T`
+    /// (empty cells for the recordings without it).
     #[arg(long, value_name = "PATH")]
     pub out_csv: Option<PathBuf>,
     /// Largest lag [samples] of the residual autocorrelation and input cross-correlation.
