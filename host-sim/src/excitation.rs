@@ -139,28 +139,28 @@ impl Excitation {
         }
     }
 
-    /// A short description for reports ("sine 50 Hz, 1.0 ± 0.5").
-    pub fn describe(&self) -> String {
+    /// A short description for reports, the drive's levels in `unit` ("sine 50 Hz, 1 ± 0.5 A").
+    pub fn describe(&self, unit: &str) -> String {
         match self {
             Excitation::Sine { freq_hz, amplitude, bias } => {
-                format!("sine {freq_hz} Hz, {bias} ± {amplitude}")
+                format!("sine {freq_hz} Hz, {bias} ± {amplitude} {unit}")
             }
             Excitation::Chirp { f0_hz, f1_hz, amplitude, bias } => {
-                format!("chirp {f0_hz}–{f1_hz} Hz, {bias} ± {amplitude}")
+                format!("chirp {f0_hz}–{f1_hz} Hz, {bias} ± {amplitude} {unit}")
             }
             Excitation::Multisine { freqs_hz, amplitude, bias } => {
                 format!(
-                    "multisine {} tones {:.0}–{:.0} Hz, {bias} ± {amplitude}",
+                    "multisine {} tones {:.0}–{:.0} Hz, {bias} ± {amplitude} {unit}",
                     freqs_hz.len(),
                     freqs_hz[0],
                     freqs_hz[freqs_hz.len() - 1]
                 )
             }
             Excitation::Square { freq_hz, amplitude, bias } => {
-                format!("square {freq_hz} Hz, {bias} ± {amplitude}")
+                format!("square {freq_hz} Hz, {bias} ± {amplitude} {unit}")
             }
             Excitation::AmplitudeSweep { freq_hz, from, to, bias } => {
-                format!("sine {freq_hz} Hz, amplitude {from} → {to}, bias {bias}")
+                format!("sine {freq_hz} Hz, amplitude {from} → {to} {unit}, bias {bias} {unit}")
             }
         }
     }

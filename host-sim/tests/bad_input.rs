@@ -395,6 +395,31 @@ fn out_of_range_arguments_are_refused_with_the_option_named() {
     }
 }
 
+/// Limits that come from the parameter set's sample period are said in the numbers the file
+/// states (dt_s = 1e-4 s, Nyquist 5000 Hz), not in the digits of its f32 image
+/// (9.999999747378752e-5 s, 5000.000126310628 Hz).
+#[test]
+fn simulate_says_its_sample_period_limits_in_the_stated_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.csv").to_str().unwrap().to_string();
+    for (args, expected) in [
+        (
+            vec!["simulate", "--freq-hz", "6000", "--out", &out],
+            "above the Nyquist frequency 5000 Hz of the sample period dt_s = 1e-4 s",
+        ),
+        (vec!["simulate", "--duration-s", "1e-4", "--out", &out], "gives 1 samples at dt_s = 1e-4 s"),
+        (
+            vec!["simulate", "--duration-s", "3000", "--out", &out],
+            "at dt_s = 1e-4 s; at most 2e7 (2000 s) per run",
+        ),
+    ] {
+        let o = gma(&args);
+        refused(&o, &[expected], &args.join(" "));
+        assert!(!stderr(&o).contains("99999"), "{}", stderr(&o));
+    }
+    assert!(!Path::new(&out).exists());
+}
+
 #[test]
 fn a_file_longer_than_max_samples_is_checked_to_the_end_and_the_cut_is_announced() {
     let dir = tempfile::tempdir().unwrap();

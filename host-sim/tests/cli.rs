@@ -242,6 +242,33 @@ fn help(cmd: &str) -> String {
     String::from_utf8_lossy(&o.stdout).split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
+/// The summary of a simulated run gives the drive's levels with their unit: amperes for a
+/// current-driven rig, volts for one with an amplifier (the command drives).
+#[test]
+fn simulate_says_the_drive_levels_with_their_unit() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sim.csv");
+    for (model, said) in [("ja", "sine 50 Hz, 1 ± 1 A"), ("ja+amp", "sine 50 Hz, 1 ± 1 V")] {
+        let o = gma(&["simulate", "--model", model, "--duration-s", "0.02", "--out", out.to_str().unwrap()]);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success() && e.contains(said), "{model}: {e}");
+    }
+    let o = gma(&[
+        "simulate",
+        "--model",
+        "ja",
+        "--waveform",
+        "sweep",
+        "--duration-s",
+        "0.02",
+        "--json",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let j = json(&o);
+    assert!(j["description"].as_str().unwrap().contains("amplitude 0 → 1 A, bias 1 A"), "{j}");
+}
+
 #[test]
 fn diagnose_names_the_missing_effect_in_the_json_contract() {
     let dir = tempfile::tempdir().unwrap();

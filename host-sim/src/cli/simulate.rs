@@ -181,10 +181,10 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         // 9.9999997e-5), or a measured drive's own.
         let (dt_s, duration_s) = match drive {
             None => {
-                let dt: f64 = p.dt_s.to_string().parse().unwrap_or(p.dt_s as f64);
-                (dt, twelve_digits((rec.len().max(1) - 1) as f64 * dt))
+                let dt = stated_dt(p.dt_s);
+                (dt, significant((rec.len().max(1) - 1) as f64 * dt, 12))
             }
-            Some(_) => (twelve_digits(rec.dt_s()), twelve_digits(rec.duration_s())),
+            Some(_) => (significant(rec.dt_s(), 12), significant(rec.duration_s(), 12)),
         };
         let (drive_file, drive_column) = drive.unzip();
         let result = json!({
@@ -208,10 +208,17 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     Ok(())
 }
 
-/// `x` to 12 significant digits: a time axis built as k·dt carries rounding in its last bits
-/// (a 1e-4 s step reads 9.99999999999994e-5), which a report should not repeat.
-fn twelve_digits(x: f64) -> f64 {
-    format!("{x:.11e}").parse().unwrap_or(x)
+/// `x` to `digits` significant digits (at least 1): a time axis built as k·dt carries rounding
+/// in its last bits (a 1e-4 s step reads 9.99999999999994e-5), and a number derived from an f32
+/// period more (0.5 / 9.9999997e-5 s = 5000.000126 Hz), which a message should not repeat.
+fn significant(x: f64, digits: usize) -> f64 {
+    format!("{x:.*e}", digits.max(1) - 1).parse().unwrap_or(x)
+}
+
+/// A parameter set's sample period as its file states it: the shortest decimal that reads back
+/// to the same f32 (1e-4, not 9.999999747378752e-5).
+fn stated_dt(dt_s: f32) -> f64 {
+    dt_s.to_string().parse().unwrap_or(dt_s as f64)
 }
 
 /// The model run on `measured`'s drive: the file's time and command, the drive current (the
@@ -278,7 +285,9 @@ fn run_waveform(
     p: ActuatorParams,
     name: &str,
 ) -> Result<(Recording, String)> {
-    let (dt, dt32) = (p.dt_s as f64, p.dt_s);
+    // The sample period as the parameter file states it (1e-4, not its f32 image
+    // 9.999999747378752e-5), for messages; the checks use the period the plant runs at.
+    let (dt, dt_shown) = (p.dt_s as f64, stated_dt(p.dt_s));
     for (name, v) in [("--freq-hz", a.freq_hz), ("--duration-s", a.duration_s)] {
         if !(v.is_finite() && v > 0.0) {
             bail!("{name} must be a positive number, got {v}");
@@ -294,23 +303,23 @@ fn run_waveform(
     }
     if a.freq_hz > 0.5 / dt {
         bail!(
-            "--freq-hz {} is above the Nyquist frequency {} Hz of the sample period dt_s = {dt:e} s",
+            "--freq-hz {} is above the Nyquist frequency {} Hz of the sample period dt_s = {dt_shown:e} s",
             a.freq_hz,
-            0.5 / dt
+            significant(0.5 / dt_shown, 6)
         );
     }
     let samples = (a.duration_s / dt).round();
     if samples < 3.0 {
         bail!(
-            "--duration-s {} gives {samples} samples at dt_s = {dt:e} s; a recording needs at least 3",
+            "--duration-s {} gives {samples} samples at dt_s = {dt_shown:e} s; a recording needs at least 3",
             a.duration_s
         );
     }
     if samples > MAX_SAMPLES {
         bail!(
-            "--duration-s {} gives {samples:.3e} samples at dt_s = {dt32:e} s; at most {MAX_SAMPLES:e} ({} s) per run",
+            "--duration-s {} gives {samples:.3e} samples at dt_s = {dt_shown:e} s; at most {MAX_SAMPLES:e} ({} s) per run",
             a.duration_s,
-            MAX_SAMPLES as f32 * dt32
+            significant(MAX_SAMPLES * dt_shown, 6)
         );
     }
     if !(1..=MAX_OVERSAMPLE).contains(&a.oversample) {
@@ -337,5 +346,7 @@ fn run_waveform(
     plant.eddy = a.eddy_model;
     plant.flux_noise_t = a.search_coil.then_some(a.flux_noise_mt * 1e-3);
     let rec = plant.record(name, &exc, a.duration_s, a.seed)?;
-    Ok((rec, format!("plant {}, {}", plant.describe(), exc.describe())))
+    // The drive is the command [V] when the plant has an amplifier, else the coil current [A].
+    let unit = if spec.has(model_core::Effect::AmplifierDynamics) { "V" } else { "A" };
+    Ok((rec, format!("plant {}, {}", plant.describe(), exc.describe(unit))))
 }
