@@ -223,6 +223,7 @@ fn model_spec_typos_are_named_with_the_nearest_effect_by_every_command() {
             vec!["diagnose", "--model", spec, &good],
             vec!["report", "--model", spec, "--out", &out, &good],
             vec!["simulate", "--model", spec, "--out", &out],
+            vec!["drive", "load", "--params", "p.toml", "--model", spec, "--out", &out],
         ] {
             refused(&gma(&args), &exp, &format!("{} --model {spec}", args[0]));
         }

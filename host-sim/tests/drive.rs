@@ -139,7 +139,7 @@ fn bad_commands_are_refused_on_the_host_before_sending() {
     );
     refused(
         &gma(&["drive", "load", "--params", "x.toml", "--model", "ja+bogus", "--out", o]),
-        &["--model"],
+        &["model spec `ja+bogus`: unknown effect `bogus`"],
         "bad spec",
     );
     assert!(!out.exists(), "nothing may be written for a refused command");

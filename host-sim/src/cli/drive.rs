@@ -10,7 +10,6 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand, ValueEnum};
 use gma_control::command::{self, Command, Decoder, ReferenceCommand, Refusal, Shape};
 use gma_control::faults::FaultCode;
-use model_core::ModelSpec;
 use serde_json::json;
 
 use crate::files::display;
@@ -192,7 +191,7 @@ fn shape_name(s: WaveShape) -> &'static str {
 }
 
 fn load(l: &LoadArgs) -> Result<Command> {
-    let spec = ModelSpec::parse(&l.model).map_err(|e| anyhow::anyhow!("--model {}: {e}", l.model))?;
+    let spec = crate::params::parse_spec(&l.model)?;
     let params = crate::params::load(Some(l.params.as_path()), spec)?;
     // The board's validation, before anything is sent.
     gma_control::compensator_model(spec, &params, gma_control::ControlConfig::REFERENCE.current_loop.tick_s)
