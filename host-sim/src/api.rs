@@ -21,6 +21,7 @@ use crate::loops::{self, LoopFile};
 use crate::params::ParamSource;
 use crate::recording::{self, Recording, COLUMNS};
 use crate::results::{CompareSummary, FileScoreRow, FitSummary};
+use crate::warning::Warning;
 
 /// Largest deviation of one time step from the median step (fraction), as the CSV reader allows.
 const MAX_TIME_JITTER: f64 = 0.01;
@@ -247,7 +248,8 @@ pub fn read_loop(path: PathBuf, read: &ReadSettings) -> Result<LoopFile> {
 
 /// Reads fit and validation sources: files as the CLI reads them (recordings or loops, never a
 /// mix), arrays in their place among them.
-fn read_sources(fit_src: &[Source], val_src: &[Source], read: &ReadSettings) -> Result<Data> {
+/// Also says which validation file has a fit file's content (files only: arrays are not hashed).
+fn read_sources(fit_src: &[Source], val_src: &[Source], read: &ReadSettings) -> Result<(Data, Vec<Warning>)> {
     let opts = read.options()?;
     let paths = |v: &[Source]| -> Vec<PathBuf> {
         v.iter().filter_map(|s| if let Source::File(p) = s { Some(p.clone()) } else { None }).collect()
@@ -257,15 +259,16 @@ fn read_sources(fit_src: &[Source], val_src: &[Source], read: &ReadSettings) -> 
         let arrays = |v: &[Source]| {
             v.iter().filter_map(|s| if let Source::Arrays(r) = s { Some(r.clone()) } else { None }).collect()
         };
-        return Ok(Data::Recordings(arrays(fit_src), arrays(val_src)));
+        return Ok((Data::Recordings(arrays(fit_src), arrays(val_src)), Vec::new()));
     }
-    let data = common::read_data(open_all(&fit_paths)?, open_all(&val_paths)?, read.max_samples, &opts)?;
+    let (data, warnings) =
+        common::read_inputs(open_all(&fit_paths)?, open_all(&val_paths)?, read.max_samples, &opts)?;
     let has_arrays = fit_src.iter().chain(val_src).any(|s| matches!(s, Source::Arrays(_)));
     match data {
         Data::Loops(..) if has_arrays => bail!(
             "mixing magnetization-loop files and recordings given as arrays in one call: loop files are read from files only"
         ),
-        Data::Loops(f, v) => Ok(Data::Loops(f, v)),
+        Data::Loops(f, v) => Ok((Data::Loops(f, v), warnings)),
         Data::Recordings(f, v) => {
             let merge = |src: &[Source], files: Vec<Recording>| -> Vec<Recording> {
                 let mut files = files.into_iter();
@@ -276,7 +279,7 @@ fn read_sources(fit_src: &[Source], val_src: &[Source], read: &ReadSettings) -> 
                     })
                     .collect()
             };
-            Ok(Data::Recordings(merge(fit_src, f), merge(val_src, v)))
+            Ok((Data::Recordings(merge(fit_src, f), merge(val_src, v)), warnings))
         }
     }
 }
@@ -320,7 +323,7 @@ fn prepare(
     }
     let time_limit = s.time_limit_s.map(common::time_limit).transpose()?;
     let (init, params_source) = params.load(spec)?;
-    let data = read_sources(fit_src, val_src, read)?;
+    let (data, input_warnings) = read_sources(fit_src, val_src, read)?;
     if let Data::Recordings(fit_files, val_files) = &data {
         for r in fit_files.iter().chain(val_files) {
             fit::drive_for(spec, r)?;
@@ -333,6 +336,7 @@ fn prepare(
         data,
         opts: FitOptions { seed: s.seed, progress: false, effort: s.effort, deadline },
         params_source,
+        input_warnings,
     })
 }
 
@@ -445,7 +449,7 @@ pub fn compare(
     }
     let (p, _) = params.load(spec)?;
     let (mut rows, mut predictions, mut total) = (Vec::new(), Vec::new(), 0.0);
-    match read_sources(sources, &[], read)? {
+    match read_sources(sources, &[], read)?.0 {
         Data::Recordings(recs, _) => {
             for r in &recs {
                 fit::drive_for(spec, r)?;

@@ -47,6 +47,8 @@ pub struct Input {
     rest: std::io::BufReader<LineBounded<Box<dyn Read + Send>>>,
     /// Identity of a regular file (device, inode), to refuse writing over an input.
     pub identity: Option<(u64, u64)>,
+    /// The digest of its bytes as they are read.
+    digest: crate::provenance::Digest,
 }
 
 impl Input {
@@ -68,11 +70,18 @@ impl Input {
         };
         // Hashed as it streams (provenance), the first line (with its newline) bounded like
         // every other line.
-        let reader: Box<dyn Read + Send> = Box::new(crate::provenance::hashing(&name, reader));
+        let hashing = crate::provenance::hashing(&name, reader);
+        let digest = hashing.digest();
+        let reader: Box<dyn Read + Send> = Box::new(hashing);
         let mut rest = std::io::BufReader::with_capacity(1 << 16, LineBounded::new(reader));
         let mut head = Vec::new();
         rest.read_until(b'\n', &mut head).map_err(|e| read_error(&name, e))?;
-        Ok(Self { name, head, rest, identity })
+        Ok(Self { name, head, rest, identity, digest })
+    }
+
+    /// Its digest, kept after the input is read (final once it has been read to its end).
+    pub fn digest(&self) -> crate::provenance::Digest {
+        self.digest.clone()
     }
 
     /// Its name and identity, kept after the input is read.

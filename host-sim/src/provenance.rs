@@ -36,6 +36,32 @@ impl<R: Read> Read for Hashing<R> {
     }
 }
 
+impl<R> Hashing<R> {
+    /// The input's digest as it stands whenever asked (final once the input is read to its end).
+    pub fn digest(&self) -> Digest {
+        Digest(self.hashed.clone())
+    }
+}
+
+/// One input's running digest, kept after its reader is gone.
+#[derive(Clone)]
+pub struct Digest(Arc<Hashed>);
+
+impl Digest {
+    /// SHA-256 of the bytes read so far, lower-case hex.
+    pub fn sha256(&self) -> String {
+        self.0.sha256().unwrap_or_default()
+    }
+}
+
+impl Hashed {
+    /// SHA-256 of the bytes read so far (hex) and their count.
+    fn sha256(&self) -> Option<String> {
+        let s = self.state.lock().ok()?;
+        Some(s.0.clone().finalize().iter().map(|b| format!("{b:02x}")).collect())
+    }
+}
+
 /// `inner`, hashed as it is read and listed in [`Provenance::inputs`] under `name`.
 pub fn hashing<R: Read>(name: &str, inner: R) -> Hashing<R> {
     let hashed = Arc::new(Hashed { name: name.into(), state: Mutex::new((Sha256::new(), 0)) });
@@ -62,9 +88,9 @@ pub fn input_digests() -> Vec<InputDigest> {
     let Ok(all) = OPENED.lock() else { return Vec::new() };
     all.iter()
         .filter_map(|h| {
-            let s = h.state.lock().ok()?;
-            let hex = s.0.clone().finalize().iter().map(|b| format!("{b:02x}")).collect();
-            Some(InputDigest { file: h.name.clone(), sha256: hex, bytes: s.1 })
+            let sha256 = h.sha256()?;
+            let bytes = h.state.lock().ok()?.1;
+            Some(InputDigest { file: h.name.clone(), sha256, bytes })
         })
         .collect()
 }
@@ -157,5 +183,6 @@ mod tests {
         // FIPS 180-2 test vector for "abc".
         assert_eq!(d.sha256, "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
         assert_eq!(d.bytes, 3);
+        assert_eq!(r.digest().sha256(), d.sha256);
     }
 }

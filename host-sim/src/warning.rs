@@ -74,6 +74,14 @@ pub enum Warning {
         /// The range.
         hi: f64,
     },
+    /// A validation file has the same content as a fit file (the same file, or a copy): its
+    /// validation figure is a fit figure.
+    ValidationIsFitFile {
+        /// The `--val` file.
+        val: String,
+        /// The fit file with the same bytes.
+        fit: String,
+    },
     /// `--time-limit` stopped the search: the best point so far.
     TimeLimit {
         /// The limit [s].
@@ -130,6 +138,10 @@ impl fmt::Display for Warning {
                 f,
                 "start value `{param}` = {given:.4e} lies outside its search range [{lo:.3e}, {hi:.3e}]: the \
                  search began at {used:.4e}, that range's nearest end"
+            ),
+            Warning::ValidationIsFitFile { val, fit } => write!(
+                f,
+                "{val} is also a fit file (same content as {fit}): its validation figure is not independent"
             ),
             Warning::TimeLimit { seconds } => write!(
                 f,

@@ -192,6 +192,51 @@ fn fit_prints_the_json_contract_writes_params_and_is_deterministic() {
     }
 }
 
+/// A `--val` file with a fit file's content (the same path, or a byte-identical copy) scores
+/// the fit again: fit, diagnose and report say so (fit also in its JSON `warnings`), and still
+/// run; a distinct validation file is not named.
+#[test]
+fn a_validation_file_that_is_a_fit_file_is_said_not_independent() {
+    let dir = tempfile::tempdir().unwrap();
+    let (fit, _, val) = rig(dir.path());
+    let copy = dir.path().join("copy.csv");
+    std::fs::copy(&fit, &copy).unwrap();
+    let copy = copy.to_str().unwrap();
+    let said = |v: &str| {
+        format!("{v} is also a fit file (same content as {fit}): its validation figure is not independent")
+    };
+    let o = gma(&["fit", "--model", "linear", "--json", &fit, "--val", &fit, "--val", copy, "--val", &val]);
+    let j = json(&o);
+    let warnings: Vec<&str> = j["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap()).collect();
+    let e = String::from_utf8_lossy(&o.stderr);
+    for v in [fit.as_str(), copy] {
+        assert!(warnings.contains(&said(v).as_str()), "{warnings:?}");
+        assert!(e.contains(&format!("gma: warning: {}", said(v))), "{e}");
+    }
+    assert!(!e.contains(&format!("{val} is also")) && !warnings.iter().any(|w| w.contains(&val)), "{e}");
+    let report = dir.path().join("r.html");
+    for args in [
+        vec!["diagnose", "--model", "linear", "--time-limit", "2", &fit, "--val", copy],
+        vec![
+            "report",
+            "--model",
+            "linear",
+            "--time-limit",
+            "2",
+            "-o",
+            report.to_str().unwrap(),
+            &fit,
+            "--val",
+            copy,
+        ],
+    ] {
+        let o = gma(&args);
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{}: {e}", args[0]);
+        assert!(e.contains(&format!("gma: warning: {}", said(copy))), "{}: {e}", args[0]);
+    }
+}
+
 /// diagnose refuses loop files: its help says its files are recordings, while fit's and
 /// report's still name loop files.
 #[test]

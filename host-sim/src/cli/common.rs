@@ -130,6 +130,8 @@ pub struct Prepared {
     pub opts: FitOptions,
     /// Where the start values came from (a file or the built-in demo set).
     pub params_source: ParamSource,
+    /// Doubts about the inputs themselves: a `--val` file with a fit file's content.
+    pub input_warnings: Vec<Warning>,
 }
 
 impl Prepared {
@@ -155,7 +157,7 @@ impl ModelFiles {
         let all: Vec<_> = fit_in.iter().chain(&val_in).chain(params_input.as_ref()).map(Input::id).collect();
         check_outputs(outputs, &all)?;
         let (init, params_source) = params::load_input(params_input, spec, "start values")?;
-        let data = read_data(fit_in, val_in, self.read.max_samples, &read_opts)?;
+        let (data, input_warnings) = read_inputs(fit_in, val_in, self.read.max_samples, &read_opts)?;
         if let Data::Recordings(fit_files, val_files) = &data {
             for r in fit_files.iter().chain(val_files) {
                 fit::drive_for(spec, r)?;
@@ -163,7 +165,17 @@ impl ModelFiles {
         }
         let deadline = time_limit.map(|t| Instant::now() + t);
         let opts = FitOptions { seed: self.seed, progress: true, effort: self.effort, deadline };
-        Ok(Prepared { spec, init, data, opts, params_source })
+        Ok(Prepared { spec, init, data, opts, params_source, input_warnings })
+    }
+}
+
+impl Prepared {
+    /// Says the doubts about the inputs on stderr (commands without a JSON `warnings` list;
+    /// `fit` lists them with its other warnings).
+    pub fn warn_about_inputs(&self) {
+        for w in &self.input_warnings {
+            eprintln!("gma: warning: {w}");
+        }
     }
 }
 
@@ -193,6 +205,32 @@ pub fn check_max_samples(n: usize) -> Result<()> {
         bail!("--max-samples must be at least 5, got {n}");
     }
     Ok(())
+}
+
+/// As [`read_data`], and says which validation input has a fit input's content (the same file
+/// given twice, or a copy; compared by the SHA-256 of the bytes read): its validation figure
+/// would be a fit figure.
+pub fn read_inputs(
+    fit_in: Vec<Input>,
+    val_in: Vec<Input>,
+    max_samples: usize,
+    opts: &ReadOptions,
+) -> Result<(Data, Vec<Warning>)> {
+    let digests =
+        |inputs: &[Input]| -> Vec<_> { inputs.iter().map(|i| (i.name.clone(), i.digest())).collect() };
+    let (fit_digests, val_digests) = (digests(&fit_in), digests(&val_in));
+    let data = read_data(fit_in, val_in, max_samples, opts)?;
+    // Every input has been read to its end: the digests are final.
+    let fit_sha: Vec<(String, String)> = fit_digests.into_iter().map(|(n, d)| (n, d.sha256())).collect();
+    let warnings = val_digests
+        .into_iter()
+        .filter_map(|(val, d)| {
+            let sha = d.sha256();
+            let (fit, _) = fit_sha.iter().find(|(_, s)| *s == sha)?;
+            Some(Warning::ValidationIsFitFile { val, fit: fit.clone() })
+        })
+        .collect();
+    Ok((data, warnings))
 }
 
 /// Reads opened inputs: all recordings or all loop files (decided by each first line; a first

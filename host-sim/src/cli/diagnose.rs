@@ -30,6 +30,7 @@ pub struct DiagnoseArgs {
 /// Runs `gma diagnose`.
 pub fn run(a: &DiagnoseArgs) -> Result<()> {
     let p = a.mf.prepare(&[])?;
+    p.warn_about_inputs();
     let Data::Recordings(fit_files, val_files) = &p.data else {
         bail!("diagnose works on displacement recordings; for magnetization loops use `gma fit` and `gma compare`");
     };

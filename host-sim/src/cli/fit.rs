@@ -128,7 +128,8 @@ pub(crate) fn fit_recordings(
             (None, Vec::new())
         }
     };
-    warnings.splice(0..0, res.start_moved.iter().cloned());
+    // First the doubts about the inputs (a `--val` file that is a fit file), then the start's.
+    warnings.splice(0..0, p.input_warnings.iter().chain(&res.start_moved).cloned());
     let mut files = rows("fit", fit_files, &res.fit.files);
     let mut nrmse_val = None;
     if !val_files.is_empty() {
@@ -185,7 +186,8 @@ pub(crate) fn fit_loops(
         true,
         &format!("fitting the magnetization model `{spec}` to {} loop file(s)", fit_files.len()),
     );
-    let res = loops::fit(model, fit_files, &p.init, p.search_options())?;
+    let mut res = loops::fit(model, fit_files, &p.init, p.search_options())?;
+    res.warnings.splice(0..0, p.input_warnings.iter().cloned());
     let mut files: Vec<FileScoreRow> = fit_files
         .iter()
         .zip(&res.nrmse)

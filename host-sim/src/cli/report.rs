@@ -26,6 +26,7 @@ pub struct ReportArgs {
 /// Runs `gma report`.
 pub fn run(a: &ReportArgs) -> Result<()> {
     let p = a.mf.prepare(&[a.out.as_path()])?;
+    p.warn_about_inputs();
     let j = a.mf.json;
     let spec = p.spec;
     // Every input has been read to its end: their digests are final.
@@ -41,7 +42,7 @@ pub fn run(a: &ReportArgs) -> Result<()> {
             a.mf.warn_if_time_limited(res.time_limited);
             say!(j, "loop report written to {}", display(&a.out));
             if j {
-                let result = json!({"report": display(&a.out), "nrmse": res.nrmse, "warnings": res.warnings.iter().map(|w| w.to_string()).collect::<Vec<_>>(),
+                let result = json!({"report": display(&a.out), "nrmse": res.nrmse, "warnings": p.input_warnings.iter().chain(&res.warnings).map(|w| w.to_string()).collect::<Vec<_>>(),
                            "time_limit_reached": res.time_limited});
                 out!("{}", super::merged_json(&result, &extra)?);
             }
