@@ -139,6 +139,14 @@ impl Prepared {
     pub fn search_options(&self) -> SearchOptions {
         SearchOptions { seed: self.opts.seed, effort: self.opts.effort, deadline: self.opts.deadline }
     }
+
+    /// Says the doubts about the inputs on stderr (commands without a JSON `warnings` list;
+    /// `fit` lists them with its other warnings).
+    pub fn warn_about_inputs(&self) {
+        for w in &self.input_warnings {
+            eprintln!("gma: warning: {w}");
+        }
+    }
 }
 
 impl ModelFiles {
@@ -166,16 +174,6 @@ impl ModelFiles {
         let deadline = time_limit.map(|t| Instant::now() + t);
         let opts = FitOptions { seed: self.seed, progress: true, effort: self.effort, deadline };
         Ok(Prepared { spec, init, data, opts, params_source, input_warnings })
-    }
-}
-
-impl Prepared {
-    /// Says the doubts about the inputs on stderr (commands without a JSON `warnings` list;
-    /// `fit` lists them with its other warnings).
-    pub fn warn_about_inputs(&self) {
-        for w in &self.input_warnings {
-            eprintln!("gma: warning: {w}");
-        }
     }
 }
 
