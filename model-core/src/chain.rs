@@ -16,7 +16,7 @@ use crate::error::{check, positive, ParamError};
 use crate::field::{CoilField, FirstOrderLag};
 use crate::magnetization::{
     Anhysteretic, AnhystereticParams, JaParams, JaState, JilesAtherton, LinearMagnetization, Preisach,
-    PreisachParams, PreisachState,
+    PreisachParams, PreisachState, ValidPreisachParams,
 };
 use crate::magnetostriction::{QuadraticMagnetostriction, QuadraticParams};
 use crate::mechanics::{MassSpringDamper, MechState, SecondOrderZoh};
@@ -175,6 +175,16 @@ pub enum Magnetization {
     Preisach(Preisach),
 }
 
+/// A magnetization law whose parameters passed their checks. The Preisach law's table (4 KB) is
+/// built only in the model's final expression: a fallible layer between builder and model
+/// holds a copy of what it returns, and the firmware builds models on its deepest stack path.
+enum CheckedLaw {
+    Preisach(ValidPreisachParams),
+    JilesAtherton(JilesAtherton),
+    Anhysteretic(Anhysteretic),
+    Linear(LinearMagnetization),
+}
+
 /// The validated, discretised actuator model (immutable).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Actuator {
@@ -282,11 +292,11 @@ impl Actuator {
         } else {
             None
         };
-        let magnetization = match spec.law() {
-            MagnetizationLaw::Preisach => Magnetization::Preisach(Preisach::new(p.preisach)?),
-            MagnetizationLaw::JilesAtherton => Magnetization::JilesAtherton(JilesAtherton::new(p.ja)?),
-            MagnetizationLaw::Anhysteretic => Magnetization::Anhysteretic(Anhysteretic::new(p.anhysteretic)?),
-            MagnetizationLaw::Linear => Magnetization::Linear(LinearMagnetization::new(
+        let law = match spec.law() {
+            MagnetizationLaw::Preisach => CheckedLaw::Preisach(p.preisach.validated()?),
+            MagnetizationLaw::JilesAtherton => CheckedLaw::JilesAtherton(JilesAtherton::new(p.ja)?),
+            MagnetizationLaw::Anhysteretic => CheckedLaw::Anhysteretic(Anhysteretic::new(p.anhysteretic)?),
+            MagnetizationLaw::Linear => CheckedLaw::Linear(LinearMagnetization::new(
                 p.linear.offset_a_per_m,
                 p.linear.susceptibility,
             )?),
@@ -318,7 +328,13 @@ impl Actuator {
             amp,
             coil,
             eddy,
-            magnetization,
+            // Last, once nothing can fail: the Preisach table is built right here.
+            magnetization: match law {
+                CheckedLaw::Preisach(v) => Magnetization::Preisach(Preisach::lorentzian(&v)),
+                CheckedLaw::JilesAtherton(m) => Magnetization::JilesAtherton(m),
+                CheckedLaw::Anhysteretic(m) => Magnetization::Anhysteretic(m),
+                CheckedLaw::Linear(m) => Magnetization::Linear(m),
+            },
             aftereffect,
             magnetostriction,
             rod_length_m,

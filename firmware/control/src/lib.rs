@@ -21,7 +21,9 @@ pub mod telemetry;
 pub mod tick;
 pub mod units;
 
-use model_core::{Actuator, ActuatorParams, Compensator, CompensatorState, ModelSpec, ParamError};
+use model_core::{
+    Actuator, ActuatorParams, Compensator, CompensatorState, MagnetizationLaw, ModelSpec, ParamError,
+};
 
 use crate::command::{Command, Refusal, Reply};
 use crate::current::{CurrentLoop, CurrentLoopParams};
@@ -189,36 +191,16 @@ pub struct Controller {
     last_raw: RawSample,
 }
 
-/// The compensator for `spec` with `params`, and its model's rest displacement [m].
-fn compensator_for(
-    spec: ModelSpec,
-    params: &ActuatorParams,
-    tick_s: f32,
-) -> Result<((Compensator, CompensatorState), f32), ParamError> {
-    let model = compensator_model(spec, params, tick_s)?;
-    let c = Compensator::new(model);
-    let s = c.rest_state();
-    let rest = c.model().rest_state().mech.displacement_m;
-    Ok(((c, s), rest))
-}
-
 impl Controller {
     /// Builds the controller for `spec` with the identified `params` (from `gma fit`); the
-    /// compensator inverts [`compensator_model`]. A rejected parameter set or controller design
-    /// (current loop, PID) latches `PARAMETERS_INVALID`; a watchdog `reset` latches
+    /// compensator inverts [`compensator_model`]. A rejected parameter set (a law too slow for the
+    /// tick included) or controller design (current loop, PID) latches `PARAMETERS_INVALID`; a watchdog `reset` latches
     /// `WATCHDOG_RESET`. Either way it starts disarmed.
     pub fn new(cfg: ControlConfig, spec: ModelSpec, params: &ActuatorParams, reset: ResetCause) -> Self {
         let mut faults = FaultMonitor::new(cfg.limits);
         if reset == ResetCause::Watchdog {
             faults.latch(FaultCode::WATCHDOG_RESET);
         }
-        let (compensator, model_rest_m) = match compensator_for(spec, params, cfg.current_loop.tick_s) {
-            Ok((c, rest)) => (Some(c), rest),
-            Err(_) => {
-                faults.latch(FaultCode::PARAMETERS_INVALID);
-                (None, 0.0)
-            }
-        };
         let current_loop = CurrentLoop::new(cfg.current_loop);
         let pid = cfg.pid.map(Pid::new);
         let resonant = cfg.resonant.map(Resonant::new);
@@ -237,7 +219,7 @@ impl Controller {
         let current_loop = current_loop.unwrap_or(CurrentLoop::idle());
         let pid = pid.and_then(Result::ok).map(|p| (p, PidState::default()));
         let resonant = resonant.and_then(Result::ok);
-        Self {
+        let mut c = Self {
             cfg,
             calibration: cfg.calibration,
             offset: OffsetCalibration { sum: 0, samples: 0, done: false },
@@ -245,8 +227,8 @@ impl Controller {
             design_valid,
             current_loop,
             reference: Reference::new(cfg.reference, cfg.current_loop.tick_s),
-            compensator,
-            model_rest_m,
+            compensator: None,
+            model_rest_m: 0.0,
             feedforward_target_um: 0.0,
             faults,
             seq: 0,
@@ -260,7 +242,27 @@ impl Controller {
                 bus: Volts(0.0),
                 break_tripped: false,
             },
+        };
+        if c.install_compensator(spec, params).is_err() {
+            c.faults.latch(FaultCode::PARAMETERS_INVALID);
         }
+        c
+    }
+
+    /// Builds the compensator for `spec` with `params` in place (the one before stays when the
+    /// set is refused). In place: the model holds a Preisach table of 4 KB, and every layer that
+    /// returned it by value kept a copy on the stack of a `load` command, the deepest path.
+    fn install_compensator(
+        &mut self,
+        spec: ModelSpec,
+        params: &ActuatorParams,
+    ) -> Result<(), CompensatorError> {
+        let (spec, p) = compensator_spec(spec, params, self.cfg.current_loop.tick_s)?;
+        let c = Compensator::new(Actuator::new(spec, &p).map_err(CompensatorError::Parameters)?);
+        self.model_rest_m = c.model().rest_state().mech.displacement_m;
+        let s = c.rest_state();
+        self.compensator = Some((c, s));
+        Ok(())
     }
 
     /// A controller whose parameter set could not even be read: PARAMETERS_INVALID latched, the
@@ -385,10 +387,10 @@ impl Controller {
         if !self.design_valid {
             return Err(Refusal::InvalidParameters);
         }
-        let (c, rest) = compensator_for(spec, params, self.cfg.current_loop.tick_s)
-            .map_err(|_| Refusal::InvalidParameters)?;
-        self.compensator = Some(c);
-        self.model_rest_m = rest;
+        self.install_compensator(spec, params).map_err(|e| match e {
+            CompensatorError::Parameters(_) => Refusal::InvalidParameters,
+            CompensatorError::TooSlowForTheTick(_) => Refusal::CompensatorTooSlow,
+        })?;
         self.faults.release(FaultCode::PARAMETERS_INVALID);
         Ok(())
     }
@@ -488,17 +490,67 @@ impl Controller {
 
 /// The model the inverse compensator inverts: `spec` with `params` at the tick period, less the
 /// effects the registry leaves to feedback (`Inverse::LeftToFeedback`: the amplifier, as the
-/// current loop is the amplifier; the mechanics and the sensor delay, which the PID handles). `firmware/build.rs` builds it too, so that a bad parameter set fails the
-/// build.
+/// current loop is the amplifier; the mechanics and the sensor delay, which the PID handles).
+/// `firmware/build.rs` and `gma drive load` build it too, so that a set the board would refuse
+/// fails the build or is never sent.
 pub fn compensator_model(
     spec: ModelSpec,
     params: &ActuatorParams,
     tick_s: f32,
-) -> Result<Actuator, ParamError> {
-    let spec = spec.for_compensator();
+) -> Result<Actuator, CompensatorError> {
+    let (spec, p) = compensator_spec(spec, params, tick_s)?;
+    Actuator::new(spec, &p).map_err(CompensatorError::Parameters)
+}
+
+/// [`compensator_model`]'s structure and parameters, its law checked (not yet built: the
+/// controller builds the model where it keeps it).
+fn compensator_spec(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    tick_s: f32,
+) -> Result<(ModelSpec, ActuatorParams), CompensatorError> {
+    let law = spec.law();
+    if !law_runs_in_the_tick(law) {
+        return Err(CompensatorError::TooSlowForTheTick(law));
+    }
     let mut p = *params;
     p.dt_s = tick_s;
-    Actuator::new(spec, &p)
+    Ok((spec.for_compensator(), p))
+}
+
+/// Whether the inverse of a model of `law` fits in the 10 kHz tick (17 000 cycles at 170 MHz,
+/// the whole interrupt's budget 2 500 instructions on average, 4 000 at worst). Measured under
+/// QEMU (`scripts/fw bench inverse inverse-preisach`, instructions per tick at 10 ± 10 µm and
+/// 100 Hz): the J–A inverse 647 on average; the Preisach inverse 65 000 (each of its field
+/// iterations sums the relay plane's staircase, up to 48 turning points). The linear and
+/// anhysteretic laws cost less than J–A.
+fn law_runs_in_the_tick(law: MagnetizationLaw) -> bool {
+    match law {
+        MagnetizationLaw::Linear | MagnetizationLaw::Anhysteretic | MagnetizationLaw::JilesAtherton => true,
+        MagnetizationLaw::Preisach => false,
+    }
+}
+
+/// Why the board will not build a compensator.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CompensatorError {
+    /// A parameter out of range (model-core's checks, named).
+    Parameters(ParamError),
+    /// The law's inverse does not fit in the control tick ([`compensator_model`]).
+    TooSlowForTheTick(MagnetizationLaw),
+}
+
+impl core::fmt::Display for CompensatorError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            CompensatorError::Parameters(e) => write!(f, "{e}"),
+            CompensatorError::TooSlowForTheTick(law) => write!(
+                f,
+                "the {law:?} law's inverse does not fit in the board's 10 kHz control tick (about \
+                 65 000 instructions per tick against 17 000 cycles); fit a `ja` model for the board"
+            ),
+        }
+    }
 }
 
 #[cfg(test)]

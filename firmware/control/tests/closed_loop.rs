@@ -482,6 +482,34 @@ fn a_corrupt_parameter_set_never_enables_the_bridge_until_a_valid_one_is_loaded(
     assert_eq!(ctl.command(0, &load(ActuatorParams::TERFENOL_DEMO)).outcome, Err(Refusal::InvalidParameters));
 }
 
+/// A Preisach set validates but its inverse does not fit in the tick (`compensator_model`):
+/// refused at boot (PARAMETERS_INVALID, never switching) and by command with its own reason,
+/// the compensator before kept.
+#[test]
+fn a_law_too_slow_for_the_tick_is_refused_by_name() {
+    let preisach = spec("preisach+eddy+mech");
+    let p = ActuatorParams::TERFENOL_DEMO;
+    assert!(model_core::Actuator::new(preisach, &p).is_ok(), "the set itself is valid");
+    let tick_s = ControlConfig::REFERENCE.current_loop.tick_s;
+    assert_eq!(
+        gma_control::compensator_model(preisach, &p, tick_s).err(),
+        Some(gma_control::CompensatorError::TooSlowForTheTick(model_core::MagnetizationLaw::Preisach))
+    );
+    let mut rig = rig(spec("ja+eddy+mech"), &p);
+    let mut ctl = Controller::new(ControlConfig::REFERENCE, preisach, &p, ResetCause::PowerOn);
+    for _ in 0..ControlConfig::REFERENCE.offset_calibration_ticks {
+        let out = step(&mut ctl, &mut rig);
+        assert!(!out.bridge_enabled && FaultCode(out.frame.faults).contains(FaultCode::PARAMETERS_INVALID));
+    }
+    let model = spec("ja+eddy+mech");
+    let load = |spec| Command::LoadParameters { spec, params: p };
+    assert_eq!(ctl.command(0, &load(model)).outcome, Ok(()));
+    assert_eq!(ctl.command(0, &load(preisach)).outcome, Err(Refusal::CompensatorTooSlow));
+    assert!(ctl.faults().is_clear(), "{:?}", names(ctl.faults().0));
+    assert_eq!(ctl.command(0, &Command::Arm).outcome, Ok(()));
+    assert!(step(&mut ctl, &mut rig).bridge_enabled, "the J–A compensator stays and runs");
+}
+
 #[test]
 fn a_commanded_reference_is_validated_and_tracked() {
     use gma_control::command::{ReferenceCommand, Shape};

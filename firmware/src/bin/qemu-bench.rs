@@ -117,6 +117,15 @@ fn run(case: &str) -> Result<f32, &'static str> {
             let stride = if case == "inverse" { 1 } else { 4 };
             measure(|n| comp.step(black_box(&mut s), y0 + 10e-6 * (1.0 + w[n * stride / 4 % 25])))
         }
+        // The same inverse with the Preisach law: what a `load` of a Preisach set costs per tick.
+        "inverse-preisach" => {
+            let spec = ModelSpec::parse("amp+eddy+preisach").map_err(|_| "bad spec")?;
+            let model = Actuator::new(spec, &p).map_err(err)?;
+            let y0 = model.rest_state().mech.displacement_m;
+            let comp = Compensator::new(model);
+            let mut s = comp.rest_state();
+            measure(|n| comp.step(black_box(&mut s), y0 + 10e-6 * (1.0 + w[n % 25])))
+        }
         "preisach" => {
             let pr = Preisach::new(p.preisach).map_err(err)?;
             let mut s = pr.demagnetized();

@@ -233,7 +233,8 @@ impl Operator {
 /// while the current zero is calibrated → arm by a command frame → tracking, telemetry through
 /// the queue and the thread-mode encoder in order with cycle counts → a corrupt frame counted
 /// and ignored → a gate-driver fault on the break input: outputs off in its own tick, latched,
-/// visible in telemetry → disarm and clear by command → idle; then a bus over-voltage trip, the
+/// visible in telemetry → disarm and clear by command → idle → parameter sets loaded by command
+/// (J–A acknowledged, Preisach refused) → re-armed, a bus over-voltage trip; then the
 /// deadline latch, and a watchdog reset booting latched (an arm command refused).
 #[inline(never)]
 fn drive_loop() -> u32 {
@@ -428,6 +429,24 @@ fn drive_loop() -> u32 {
         check(
             acked(disarm) && acked(clear) && clear.is_some_and(|r| r.faults == 0 && !r.armed) && idle_again,
             "disarm and clear by command: faults cleared, idle (no switching without a new arm)",
+        );
+
+        // Parameter sets by command frame while disarmed: a J–A set acknowledged (the deepest
+        // stack path: the compensator's model built in place); a Preisach set refused by name
+        // (its inverse does not fit in the tick). Idle after both.
+        let Ok(preisach) = ModelSpec::parse("preisach+eddy+mech") else { return failures + 1 };
+        let load_ja = op.send(&mut drive, &Command::LoadParameters { spec, params: p });
+        let load_preisach = op.send(&mut drive, &Command::LoadParameters { spec: preisach, params: p });
+        let mut idle_after_load = true;
+        for _ in 0..50 {
+            let out = trigger(&mut drive, &mut rig_a);
+            idle_after_load &= !out.bridge_enabled && !drive.stage().outputs_enabled && out.frame.faults == 0;
+        }
+        check(
+            acked(load_ja)
+                && load_preisach.is_some_and(|r| r.outcome == Err(Refusal::CompensatorTooSlow) && !r.armed)
+                && idle_after_load,
+            "load parameters by command: a J–A set acknowledged, a Preisach set refused (compensator_too_slow), idle",
         );
 
         // Re-armed, the bus pumped over its limit: bus_overvoltage trips and the bridge goes off.

@@ -149,9 +149,33 @@ impl EverettTable {
     ) -> Result<Self, ParamError> {
         let h_max = positive("preisach.h_max_a_per_m", h_max_a_per_m)?;
         let total = positive("preisach.ms_a_per_m", total)?;
+        let table = Self::integrate(h_max, total, density);
+        if !(table.total.is_finite() && table.total > 0.0) {
+            return Err(ParamError::OutOfRange(
+                "preisach density",
+                "positive and finite somewhere in the relay plane",
+            ));
+        }
+        Ok(table)
+    }
+
+    /// [`Self::from_density`] for validated `h_max`, `total` (both > 0); `total` is not positive
+    /// and finite when μ is zero everywhere or not finite.
+    fn integrate(h_max: f32, total: f32, density: impl Fn(f32, f32) -> f32) -> Self {
+        let mut table = Self { h_max, root: [[0.0; PREISACH_LEVELS]; PREISACH_LEVELS], total: 0.0 };
+        table.fill(total, density);
+        table
+    }
+
+    /// Integrates the density into this table, in place: the table is 4 KB, and the firmware
+    /// builds one on its deepest stack path (a model constructed at boot or by a `load`
+    /// command), where each builder that returned a copy held one.
+    fn fill(&mut self, total: f32, density: impl Fn(f32, f32) -> f32) {
+        let h_max = self.h_max;
         let step = 2.0 * h_max / (PREISACH_LEVELS - 1) as f32;
         let level = |k: usize| -h_max + step * k as f32;
-        let mut e = [[0.0f32; PREISACH_LEVELS]; PREISACH_LEVELS];
+        // E first, in the array that then holds √E.
+        let e = &mut self.root;
         // E[i][j] = E[i−1][j] + E[i][j+1] − E[i−1][j+1] + w(cell α∈[h_{i−1},h_i], β∈[h_j,h_{j+1}]).
         for d in 1..PREISACH_LEVELS {
             for j in 0..PREISACH_LEVELS - d {
@@ -171,19 +195,14 @@ impl EverettTable {
                 e[i][j] = e[i - 1][j] + e[i][j + 1] - inner + w;
             }
         }
-        let raw = e[PREISACH_LEVELS - 1][0];
-        if !(raw.is_finite() && raw > 0.0) {
-            return Err(ParamError::OutOfRange(
-                "preisach density",
-                "positive and finite somewhere in the relay plane",
-            ));
-        }
+        // Every cell weight is ≥ 0, so the table needs none of `new`'s checks but the total's.
+        let scale = total / e[PREISACH_LEVELS - 1][0];
         for row in e.iter_mut() {
             for v in row.iter_mut() {
-                *v *= total / raw;
+                *v = crate::math::sqrt((*v * scale).max(0.0));
             }
         }
-        Self::new(h_max, e)
+        self.total = self.root[PREISACH_LEVELS - 1][0] * self.root[PREISACH_LEVELS - 1][0];
     }
 
     /// Field range ±H_max [A/m].
@@ -228,7 +247,41 @@ impl EverettTable {
     }
 }
 
+/// [`PreisachParams`] checked, before the table is built: the Lorentzian density of checked
+/// widths is positive everywhere, so building its table cannot fail.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct ValidPreisachParams {
+    ms: f32,
+    hc: f32,
+    sigma: f32,
+    interaction_spread: Option<f32>,
+    h_max: f32,
+    rho: f32,
+    h_r: f32,
+}
+
 impl PreisachParams {
+    /// Checks every parameter (names the first one out of range).
+    pub(crate) fn validated(&self) -> Result<ValidPreisachParams, ParamError> {
+        let ms = saturation("preisach.ms_a_per_m", self.ms_a_per_m)?;
+        let hc = field_scale("preisach.coercive_a_per_m", self.coercive_a_per_m)?;
+        let sigma = field_scale("preisach.spread_a_per_m", self.spread_a_per_m)?;
+        let h_max = field_scale("preisach.h_max_a_per_m", self.h_max_a_per_m)?;
+        if hc >= h_max {
+            return Err(ParamError::OutOfRange("preisach.coercive_a_per_m", "below preisach.h_max_a_per_m"));
+        }
+        let rho = self.reversible_fraction_or_default();
+        if !(rho.is_finite() && (0.0..0.95).contains(&rho)) {
+            return Err(ParamError::OutOfRange("preisach.reversible_fraction", "in [0, 0.95)"));
+        }
+        let h_r = field_scale("preisach.reversible_field_a_per_m", self.reversible_field_or_default())?;
+        let interaction_spread = match self.interaction_spread_a_per_m {
+            Some(su) => Some(field_scale("preisach.interaction_spread_a_per_m", su)?),
+            None => None,
+        };
+        Ok(ValidPreisachParams { ms, hc, sigma, interaction_spread, h_max, rho, h_r })
+    }
+
     /// ρ as the model uses it (0 when not given).
     pub fn reversible_fraction_or_default(&self) -> f32 {
         self.reversible_fraction.unwrap_or(0.0)
@@ -348,31 +401,27 @@ impl PreisachState {
 impl Preisach {
     /// From the parametric (Lorentzian) density of [`PreisachParams`].
     pub fn new(p: PreisachParams) -> Result<Self, ParamError> {
-        let ms = saturation("preisach.ms_a_per_m", p.ms_a_per_m)?;
-        let hc = field_scale("preisach.coercive_a_per_m", p.coercive_a_per_m)?;
-        let sigma = field_scale("preisach.spread_a_per_m", p.spread_a_per_m)?;
-        let h_max = field_scale("preisach.h_max_a_per_m", p.h_max_a_per_m)?;
-        if hc >= h_max {
-            return Err(ParamError::OutOfRange("preisach.coercive_a_per_m", "below preisach.h_max_a_per_m"));
-        }
-        let rho = p.reversible_fraction_or_default();
-        if !(rho.is_finite() && (0.0..0.95).contains(&rho)) {
-            return Err(ParamError::OutOfRange("preisach.reversible_fraction", "in [0, 0.95)"));
-        }
-        let h_r = field_scale("preisach.reversible_field_a_per_m", p.reversible_field_or_default())?;
-        let lorentz = |x: f32| 1.0 / (1.0 + x * x);
-        let table = match p.interaction_spread_a_per_m {
-            Some(su) => {
-                let su = field_scale("preisach.interaction_spread_a_per_m", su)?;
-                EverettTable::from_density(h_max, ms, |a, b| {
-                    lorentz((0.5 * (a - b) - hc) / sigma) * lorentz(0.5 * (a + b) / su)
-                })?
-            }
-            None => EverettTable::from_density(h_max, ms, |a, b| {
-                lorentz((a - hc) / sigma) * lorentz((b + hc) / sigma)
-            })?,
+        Ok(Self::lorentzian(&p.validated()?))
+    }
+
+    /// The model of validated parameters (infallible: built where it is returned, see
+    /// [`EverettTable::integrate`]).
+    pub(crate) fn lorentzian(v: &ValidPreisachParams) -> Self {
+        let ValidPreisachParams { ms, hc, sigma, interaction_spread, h_max, rho, h_r } = *v;
+        let mut model = Self {
+            table: EverettTable { h_max, root: [[0.0; PREISACH_LEVELS]; PREISACH_LEVELS], total: 0.0 },
+            relay_share: 1.0 - rho,
+            reversible_ms: rho * ms,
+            inv_reversible_field: 1.0 / h_r,
         };
-        Ok(Self { table, relay_share: 1.0 - rho, reversible_ms: rho * ms, inv_reversible_field: 1.0 / h_r })
+        let lorentz = |x: f32| 1.0 / (1.0 + x * x);
+        match interaction_spread {
+            Some(su) => model
+                .table
+                .fill(ms, |a, b| lorentz((0.5 * (a - b) - hc) / sigma) * lorentz(0.5 * (a + b) / su)),
+            None => model.table.fill(ms, |a, b| lorentz((a - hc) / sigma) * lorentz((b + hc) / sigma)),
+        }
+        model
     }
 
     /// From an Everett table (measured first-order reversal curves, or fitted), without a
@@ -806,6 +855,30 @@ mod tests {
             "{:.2} % M_s from the unbounded memory",
             100.0 * worst / P.ms_a_per_m
         );
+    }
+
+    /// A user's own density (here a Gaussian in coercivity and interaction): saturation at the
+    /// given total, a table `new` accepts as it stands, a zero or infinite density refused.
+    #[test]
+    fn a_table_from_any_density() {
+        let gauss = |a: f32, b: f32| {
+            let (h, u) = (0.5 * (a - b) - 3000.0, 0.5 * (a + b));
+            libm::expf(-(h * h) / (2.0 * 1500.0f32.powi(2)) - (u * u) / (2.0 * 20_000.0f32.powi(2)))
+        };
+        let t = EverettTable::from_density(8e4, 7.6e5, gauss).unwrap();
+        assert!((t.total() - 7.6e5).abs() < 1e-4 * 7.6e5, "total {}", t.total());
+        let revalidated = EverettTable::new(8e4, t.values()).unwrap();
+        for (i, j) in [(31, 0), (20, 10), (16, 15), (5, 2)] {
+            let (x, y) = (t.values()[i][j], revalidated.values()[i][j]);
+            assert!((x - y).abs() <= 1e-5 * 7.6e5, "E[{i}][{j}]: {x} vs {y}");
+        }
+        let refused = Err(ParamError::OutOfRange(
+            "preisach density",
+            "positive and finite somewhere in the relay plane",
+        ));
+        assert_eq!(EverettTable::from_density(8e4, 7.6e5, |_, _| 0.0), refused);
+        assert_eq!(EverettTable::from_density(8e4, 7.6e5, |_, _| f32::INFINITY), refused);
+        assert!(EverettTable::from_density(0.0, 7.6e5, gauss).is_err());
     }
 
     #[test]
