@@ -104,11 +104,17 @@ fn write_smoke_expected(out: &std::path::Path) {
          /// Compensator commands [V] the host computed.\n\
          pub const EXPECTED_COMMAND_V: [f32; {n}] = {:?};\n\
          /// Tracking RMS error [%] the host computed.\n\
-         pub const EXPECTED_TRACKING_RMS_PERCENT: f32 = {:?};\n",
+         pub const EXPECTED_TRACKING_RMS_PERCENT: f32 = {:?};\n\
+         /// Preisach compensated-chain displacements [µm] the host computed.\n\
+         pub const EXPECTED_PREISACH_UM: [f32; {n}] = {:?};\n\
+         /// Its tracking RMS error [%] the host computed.\n\
+         pub const EXPECTED_PREISACH_TRACKING_RMS_PERCENT: f32 = {:?};\n",
         r.mechanics_um,
         r.chain_um,
         r.command_v,
         r.tracking_rms_percent,
+        r.preisach_um,
+        r.preisach_tracking_rms_percent,
         n = r.chain_um.len(),
     );
     fs::write(out.join("smoke_expected.rs"), body).expect("write smoke_expected.rs");

@@ -20,6 +20,10 @@ pub struct SmokeResult {
     pub command_v: [f32; SMOKE_CHECKPOINTS],
     /// RMS tracking error of the compensated chain over the last 1000 samples [% of amplitude].
     pub tracking_rms_percent: f32,
+    /// Displacement of the preisach+eddy+amp plant driven by the Preisach compensator [µm].
+    pub preisach_um: [f32; SMOKE_CHECKPOINTS],
+    /// Its RMS tracking error over the last 1000 samples [% of amplitude].
+    pub preisach_tracking_rms_percent: f32,
 }
 
 /// Runs the workload.
@@ -27,6 +31,14 @@ pub fn smoke_workload() -> Result<SmokeResult, model_core::ParamError> {
     use model_core::mechanics::{MassSpringDamper, MechState, SecondOrderZoh};
     use model_core::{Actuator, ActuatorParams, Compensator, ModelSpec};
 
+    let mut r = SmokeResult {
+        mechanics_um: [0.0; SMOKE_CHECKPOINTS],
+        chain_um: [0.0; SMOKE_CHECKPOINTS],
+        command_v: [0.0; SMOKE_CHECKPOINTS],
+        tracking_rms_percent: 0.0,
+        preisach_um: [0.0; SMOKE_CHECKPOINTS],
+        preisach_tracking_rms_percent: 0.0,
+    };
     let heavy = SecondOrderZoh::new(
         MassSpringDamper { mass_kg: 0.1, damping_n_s_per_m: 3000.0, stiffness_n_per_m: 9.9e6 },
         1e-4,
@@ -36,28 +48,53 @@ pub fn smoke_workload() -> Result<SmokeResult, model_core::ParamError> {
         1e-4,
     )?;
     let (mut a, mut b) = (MechState::default(), MechState::default());
+    for n in 0..SMOKE_SAMPLES {
+        // A 50 Hz square force with a DC bias.
+        let force = if (n / 100) % 2 == 0 { 120.0 } else { -30.0 };
+        let y_mech = heavy.step(&mut a, force) + light.step(&mut b, force);
+        if n % SMOKE_STRIDE == SMOKE_STRIDE - 1 {
+            r.mechanics_um[n / SMOKE_STRIDE] = y_mech * 1e6;
+        }
+    }
 
     let p = ActuatorParams::TERFENOL_DEMO;
     let spec = |s| ModelSpec::parse(s).unwrap_or(ModelSpec::LINEAR);
     let plant = Actuator::new(spec("ja+eddy+amp+mech"), &p)?;
     let comp = Compensator::new(Actuator::new(spec("ja+eddy+amp"), &p)?);
-    let mut ps = plant.rest_state();
-    let mut cs = comp.rest_state();
-    let y0 = ps.mech.displacement_m;
+    r.tracking_rms_percent = compensated_sine(&plant, &comp, |k, y_um, u| {
+        r.chain_um[k] = y_um;
+        r.command_v[k] = u;
+    });
+    r.preisach_tracking_rms_percent = preisach_chain(&p, &mut r.preisach_um)?;
+    Ok(r)
+}
 
-    let mut r = SmokeResult {
-        mechanics_um: [0.0; SMOKE_CHECKPOINTS],
-        chain_um: [0.0; SMOKE_CHECKPOINTS],
-        command_v: [0.0; SMOKE_CHECKPOINTS],
-        tracking_rms_percent: 0.0,
-    };
+/// The Preisach law's compensated chain (static: no mechanics) on the same sine.
+#[inline(never)] // its two 4 KB tables live only while it runs
+fn preisach_chain(
+    p: &model_core::ActuatorParams,
+    displacement_um: &mut [f32; SMOKE_CHECKPOINTS],
+) -> Result<f32, model_core::ParamError> {
+    use model_core::{Actuator, Compensator, ModelSpec};
+    let spec = ModelSpec::parse("preisach+eddy+amp").unwrap_or(ModelSpec::LINEAR);
+    let plant = Actuator::new(spec, p)?;
+    let comp = Compensator::new(Actuator::new(spec, p)?);
+    Ok(compensated_sine(&plant, &comp, |k, y_um, _| displacement_um[k] = y_um))
+}
+
+/// `plant` driven by `comp` along a 20 µm peak-to-peak, 50 Hz sine above the rest position:
+/// `checkpoint(k, displacement from rest [µm], drive input)` every `SMOKE_STRIDE` samples;
+/// returns the RMS tracking error over the last 1000 samples [% of amplitude].
+fn compensated_sine(
+    plant: &model_core::Actuator,
+    comp: &model_core::Compensator,
+    mut checkpoint: impl FnMut(usize, f32, f32),
+) -> f32 {
+    let (mut ps, mut cs) = (plant.rest_state(), comp.rest_state());
+    let y0 = ps.mech.displacement_m;
     let amplitude = 10e-6;
     let mut err2 = 0.0f32;
     for n in 0..SMOKE_SAMPLES {
-        // A 50 Hz square force with a DC bias.
-        let force = if (n / 100) % 2 == 0 { 120.0 } else { -30.0 };
-        let y_mech = heavy.step(&mut a, force) + light.step(&mut b, force);
-        // A 20 µm peak-to-peak, 50 Hz sine above the rest position.
         let phase = 2.0 * core::f32::consts::PI * 50.0 * n as f32 * 1e-4;
         let y_ref = y0 + amplitude * (1.0 + model_core::math::sin_cos(phase).0);
         let u = comp.step(&mut cs, y_ref);
@@ -66,12 +103,8 @@ pub fn smoke_workload() -> Result<SmokeResult, model_core::ParamError> {
             err2 += (y - y_ref) * (y - y_ref);
         }
         if n % SMOKE_STRIDE == SMOKE_STRIDE - 1 {
-            let k = n / SMOKE_STRIDE;
-            r.mechanics_um[k] = y_mech * 1e6;
-            r.chain_um[k] = (y - y0) * 1e6;
-            r.command_v[k] = u;
+            checkpoint(n / SMOKE_STRIDE, (y - y0) * 1e6, u);
         }
     }
-    r.tracking_rms_percent = model_core::math::sqrt(err2 / 1000.0) / amplitude * 100.0;
-    Ok(r)
+    model_core::math::sqrt(err2 / 1000.0) / amplitude * 100.0
 }

@@ -142,24 +142,6 @@ fn bad_commands_are_refused_on_the_host_before_sending() {
         &["model spec `ja+bogus`: unknown effect `bogus`"],
         "bad spec",
     );
-    // A valid Preisach set: the board cannot run its inverse in the tick, so it is not sent.
-    let params = dir.path().join("preisach.toml");
-    std::fs::write(&params, host_sim::params::to_toml(&ActuatorParams::TERFENOL_DEMO, "# demo set").unwrap())
-        .unwrap();
-    refused(
-        &gma(&[
-            "drive",
-            "load",
-            "--params",
-            params.to_str().unwrap(),
-            "--model",
-            "preisach+mech",
-            "--out",
-            o,
-        ]),
-        &["preisach.toml: the board would refuse this parameter set", "10 kHz control tick", "`ja`"],
-        "a law too slow for the tick",
-    );
     assert!(!out.exists(), "nothing may be written for a refused command");
     // Line noise and a corrupted reply are skipped and counted, never a wrong reply.
     let noise = dir.path().join("noise.bin");

@@ -4,7 +4,8 @@
 //!
 //! - magnetostriction: closed form, on the magnetization branch of the bias field's sign;
 //! - magnetization: closed form for linear, safeguarded Newton for the Langevin curve, monotone
-//!   bisection on the compensator's own relay memory for Preisach, and for
+//!   secant search on the compensator's own relay memory for Preisach (from pair sums kept in
+//!   [`CompensatorState`], two Everett look-ups per evaluation), and for
 //!   Jiles–Atherton a bounded per-step solve (Newton on the model's own incremental
 //!   susceptibility, then two secant corrections on trial copies of the state) that advances
 //!   the compensator's own hysteresis state, so it follows the same branches as the plant;
@@ -14,7 +15,7 @@
 //! - sensor delay: not inverted (it is a measurement delay, not an actuator one).
 
 use crate::chain::{Actuator, ActuatorState, Magnetization, MAX_INPUT};
-use crate::magnetization::{JaState, JilesAtherton};
+use crate::magnetization::{InverseCache, JaState, JilesAtherton};
 use crate::math::{at_least, within};
 
 /// The compensator (immutable): the model it inverts.
@@ -28,6 +29,8 @@ pub struct Compensator {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CompensatorState {
     model: ActuatorState,
+    /// The Preisach staircase's pair sums (unused by the other laws).
+    preisach_cache: InverseCache,
     last_input: f32,
 }
 
@@ -45,7 +48,12 @@ impl Compensator {
 
     /// State matching the model's rest state.
     pub fn rest_state(&self) -> CompensatorState {
-        CompensatorState { model: self.model.rest_state(), last_input: 0.0 }
+        let model = self.model.rest_state();
+        let preisach_cache = match &self.model.magnetization {
+            Magnetization::Preisach(p) => p.inverse_cache(&model.preisach),
+            _ => InverseCache::default(),
+        };
+        CompensatorState { model, preisach_cache, last_input: 0.0 }
     }
 
     /// The drive input (command voltage [V] with an amplifier, else coil current [A]) that makes
@@ -57,6 +65,7 @@ impl Compensator {
         }
         let md = &self.model;
         let st = &mut s.model;
+        let preisach_cache = &mut s.preisach_cache;
         let thermal = md.thermal.as_ref().map_or(0.0, |th| th.elongation_m(st.rod_temperature_rise_c));
         let strain = (y_ref_m - thermal) / md.rod_length_m;
         let m_obs = md.magnetostriction.magnetization_for(strain, self.branch_sign);
@@ -72,7 +81,7 @@ impl Compensator {
             Magnetization::Linear(l) => l.field_for(m),
             Magnetization::Anhysteretic(a) => a.field_for(m),
             Magnetization::JilesAtherton(j) => ja_field_for(j, &mut st.ja, m),
-            Magnetization::Preisach(p) => p.field_for(&mut st.preisach, m),
+            Magnetization::Preisach(p) => p.field_for_with(&mut st.preisach, preisach_cache, m),
         };
         let h_coil = match &md.eddy {
             Some(lag) => {

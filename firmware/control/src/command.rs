@@ -225,9 +225,6 @@ pub enum Refusal {
     Malformed = 9,
     /// The opcode is not a command.
     UnknownCommand = 10,
-    /// The parameter set's magnetization law has an inverse too slow for the control tick
-    /// (`compensator_model`: the Preisach law); the compensator before stays.
-    CompensatorTooSlow = 11,
 }
 
 impl Refusal {
@@ -245,7 +242,6 @@ impl Refusal {
             UnsupportedVersion,
             Malformed,
             UnknownCommand,
-            CompensatorTooSlow,
         ]
         .into_iter()
         .find(|r| *r as u8 == c)
@@ -264,7 +260,6 @@ impl Refusal {
             Refusal::UnsupportedVersion => "unsupported_version",
             Refusal::Malformed => "malformed",
             Refusal::UnknownCommand => "unknown_command",
-            Refusal::CompensatorTooSlow => "compensator_too_slow",
         }
     }
 }

@@ -21,9 +21,7 @@ pub mod telemetry;
 pub mod tick;
 pub mod units;
 
-use model_core::{
-    Actuator, ActuatorParams, Compensator, CompensatorState, MagnetizationLaw, ModelSpec, ParamError,
-};
+use model_core::{Actuator, ActuatorParams, Compensator, CompensatorState, ModelSpec, ParamError};
 
 use crate::command::{Command, Refusal, Reply};
 use crate::current::{CurrentLoop, CurrentLoopParams};
@@ -193,8 +191,8 @@ pub struct Controller {
 
 impl Controller {
     /// Builds the controller for `spec` with the identified `params` (from `gma fit`); the
-    /// compensator inverts [`compensator_model`]. A rejected parameter set (a law too slow for the
-    /// tick included) or controller design (current loop, PID) latches `PARAMETERS_INVALID`; a watchdog `reset` latches
+    /// compensator inverts [`compensator_model`]. A rejected parameter set or controller design
+    /// (current loop, PID) latches `PARAMETERS_INVALID`; a watchdog `reset` latches
     /// `WATCHDOG_RESET`. Either way it starts disarmed.
     pub fn new(cfg: ControlConfig, spec: ModelSpec, params: &ActuatorParams, reset: ResetCause) -> Self {
         let mut faults = FaultMonitor::new(cfg.limits);
@@ -252,13 +250,8 @@ impl Controller {
     /// Builds the compensator for `spec` with `params` in place (the one before stays when the
     /// set is refused). In place: the model holds a Preisach table of 4 KB, and every layer that
     /// returned it by value kept a copy on the stack of a `load` command, the deepest path.
-    fn install_compensator(
-        &mut self,
-        spec: ModelSpec,
-        params: &ActuatorParams,
-    ) -> Result<(), CompensatorError> {
-        let (spec, p) = compensator_spec(spec, params, self.cfg.current_loop.tick_s)?;
-        let c = Compensator::new(Actuator::new(spec, &p).map_err(CompensatorError::Parameters)?);
+    fn install_compensator(&mut self, spec: ModelSpec, params: &ActuatorParams) -> Result<(), ParamError> {
+        let c = Compensator::new(compensator_model(spec, params, self.cfg.current_loop.tick_s)?);
         self.model_rest_m = c.model().rest_state().mech.displacement_m;
         let s = c.rest_state();
         self.compensator = Some((c, s));
@@ -387,10 +380,7 @@ impl Controller {
         if !self.design_valid {
             return Err(Refusal::InvalidParameters);
         }
-        self.install_compensator(spec, params).map_err(|e| match e {
-            CompensatorError::Parameters(_) => Refusal::InvalidParameters,
-            CompensatorError::TooSlowForTheTick(_) => Refusal::CompensatorTooSlow,
-        })?;
+        self.install_compensator(spec, params).map_err(|_| Refusal::InvalidParameters)?;
         self.faults.release(FaultCode::PARAMETERS_INVALID);
         Ok(())
     }
@@ -497,60 +487,10 @@ pub fn compensator_model(
     spec: ModelSpec,
     params: &ActuatorParams,
     tick_s: f32,
-) -> Result<Actuator, CompensatorError> {
-    let (spec, p) = compensator_spec(spec, params, tick_s)?;
-    Actuator::new(spec, &p).map_err(CompensatorError::Parameters)
-}
-
-/// [`compensator_model`]'s structure and parameters, its law checked (not yet built: the
-/// controller builds the model where it keeps it).
-fn compensator_spec(
-    spec: ModelSpec,
-    params: &ActuatorParams,
-    tick_s: f32,
-) -> Result<(ModelSpec, ActuatorParams), CompensatorError> {
-    let law = spec.law();
-    if !law_runs_in_the_tick(law) {
-        return Err(CompensatorError::TooSlowForTheTick(law));
-    }
+) -> Result<Actuator, ParamError> {
     let mut p = *params;
     p.dt_s = tick_s;
-    Ok((spec.for_compensator(), p))
-}
-
-/// Whether the inverse of a model of `law` fits in the 10 kHz tick (17 000 cycles at 170 MHz,
-/// the whole interrupt's budget 2 500 instructions on average, 4 000 at worst). Measured under
-/// QEMU (`scripts/fw bench inverse inverse-preisach`, instructions per tick at 10 ± 10 µm and
-/// 100 Hz): the J–A inverse 647 on average; the Preisach inverse 65 000 (each of its field
-/// iterations sums the relay plane's staircase, up to 48 turning points). The linear and
-/// anhysteretic laws cost less than J–A.
-fn law_runs_in_the_tick(law: MagnetizationLaw) -> bool {
-    match law {
-        MagnetizationLaw::Linear | MagnetizationLaw::Anhysteretic | MagnetizationLaw::JilesAtherton => true,
-        MagnetizationLaw::Preisach => false,
-    }
-}
-
-/// Why the board will not build a compensator.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum CompensatorError {
-    /// A parameter out of range (model-core's checks, named).
-    Parameters(ParamError),
-    /// The law's inverse does not fit in the control tick ([`compensator_model`]).
-    TooSlowForTheTick(MagnetizationLaw),
-}
-
-impl core::fmt::Display for CompensatorError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            CompensatorError::Parameters(e) => write!(f, "{e}"),
-            CompensatorError::TooSlowForTheTick(law) => write!(
-                f,
-                "the {law:?} law's inverse does not fit in the board's 10 kHz control tick (about \
-                 65 000 instructions per tick against 17 000 cycles); fit a `ja` model for the board"
-            ),
-        }
-    }
+    Actuator::new(spec.for_compensator(), &p)
 }
 
 #[cfg(test)]

@@ -101,7 +101,17 @@ fn tracking_rms_percent(
     plant_params: &ActuatorParams,
     resonant: Option<ResonantParams>,
 ) -> f32 {
-    let model = spec("ja+eddy+mech");
+    tracking_rms_percent_of("ja+eddy+mech", pid, plant_params, resonant)
+}
+
+/// [`tracking_rms_percent`] with `model` for the rig and the compensator.
+fn tracking_rms_percent_of(
+    model: &str,
+    pid: Option<PidParams>,
+    plant_params: &ActuatorParams,
+    resonant: Option<ResonantParams>,
+) -> f32 {
+    let model = spec(model);
     let mut rig = rig(model, plant_params);
     let cfg = ControlConfig { pid, resonant, ..ControlConfig::REFERENCE };
     let mut ctl = Controller::new(cfg, model, &ActuatorParams::TERFENOL_DEMO, ResetCause::PowerOn);
@@ -482,32 +492,31 @@ fn a_corrupt_parameter_set_never_enables_the_bridge_until_a_valid_one_is_loaded(
     assert_eq!(ctl.command(0, &load(ActuatorParams::TERFENOL_DEMO)).outcome, Err(Refusal::InvalidParameters));
 }
 
-/// A Preisach set validates but its inverse does not fit in the tick (`compensator_model`):
-/// refused at boot (PARAMETERS_INVALID, never switching) and by command with its own reason,
-/// the compensator before kept.
+/// The Preisach law on the board: its compensator (the inverse's field search, model-core's
+/// `Preisach::field_for_with`) on a Preisach rig meets the J–A compensator's bound above. The
+/// reference feedback, tuned on the J–A demo plant, does not improve it: measured 1.33 % alone,
+/// 2.25 % with the PID, 1.42 % with PID and harmonic rejection (the same with the PID gains
+/// scaled 0.25–0.75: 1.15–15 %). The Preisach plant's gain runs from 0 at a reversal to
+/// 37 µm/A (the J–A plant's 5–28), and the compensator's model never sees the feedback's
+/// current, so its memory and the rig's part at every minor loop the feedback adds. Asserted:
+/// alone within the J–A bound; with the feedback, not worse than that bound. A Preisach set
+/// loaded by command replaces a J–A one.
 #[test]
-fn a_law_too_slow_for_the_tick_is_refused_by_name() {
-    let preisach = spec("preisach+eddy+mech");
+fn a_preisach_compensator_tracks_a_100_hz_sine() {
     let p = ActuatorParams::TERFENOL_DEMO;
-    assert!(model_core::Actuator::new(preisach, &p).is_ok(), "the set itself is valid");
-    let tick_s = ControlConfig::REFERENCE.current_loop.tick_s;
-    assert_eq!(
-        gma_control::compensator_model(preisach, &p, tick_s).err(),
-        Some(gma_control::CompensatorError::TooSlowForTheTick(model_core::MagnetizationLaw::Preisach))
+    let cfg = ControlConfig::REFERENCE;
+    let open = tracking_rms_percent_of("preisach+eddy+mech", None, &p, None);
+    let pid_only = tracking_rms_percent_of("preisach+eddy+mech", cfg.pid, &p, None);
+    let closed = tracking_rms_percent_of("preisach+eddy+mech", cfg.pid, &p, cfg.resonant);
+    println!(
+        "Preisach, 25 µm p-p, 100 Hz: compensator alone {open:.2} %, + PID {pid_only:.2} %, \
+         + PID + harmonic rejection {closed:.2} %"
     );
-    let mut rig = rig(spec("ja+eddy+mech"), &p);
-    let mut ctl = Controller::new(ControlConfig::REFERENCE, preisach, &p, ResetCause::PowerOn);
-    for _ in 0..ControlConfig::REFERENCE.offset_calibration_ticks {
-        let out = step(&mut ctl, &mut rig);
-        assert!(!out.bridge_enabled && FaultCode(out.frame.faults).contains(FaultCode::PARAMETERS_INVALID));
-    }
-    let model = spec("ja+eddy+mech");
-    let load = |spec| Command::LoadParameters { spec, params: p };
-    assert_eq!(ctl.command(0, &load(model)).outcome, Ok(()));
-    assert_eq!(ctl.command(0, &load(preisach)).outcome, Err(Refusal::CompensatorTooSlow));
-    assert!(ctl.faults().is_clear(), "{:?}", names(ctl.faults().0));
-    assert_eq!(ctl.command(0, &Command::Arm).outcome, Ok(()));
-    assert!(step(&mut ctl, &mut rig).bridge_enabled, "the J–A compensator stays and runs");
+    assert!(open <= 5.0, "compensator alone: {open:.2} % RMS");
+    assert!(pid_only <= 5.0 && closed <= 5.0, "with feedback: {pid_only:.2} %, {closed:.2} % RMS");
+    let mut ctl = controller(spec("ja+eddy+mech"));
+    let load = Command::LoadParameters { spec: spec("preisach+eddy+mech"), params: p };
+    assert_eq!(ctl.command(0, &load).outcome, Ok(()));
 }
 
 #[test]

@@ -124,7 +124,7 @@ fn run(case: &str) -> Result<f32, &'static str> {
             let y0 = model.rest_state().mech.displacement_m;
             let comp = Compensator::new(model);
             let mut s = comp.rest_state();
-            measure(|n| comp.step(black_box(&mut s), y0 + 10e-6 * (1.0 + w[n % 25])))
+            measure(|n| comp.step(black_box(&mut s), y0 + 10e-6 * (1.0 + w[n / 4 % 25])))
         }
         "preisach" => {
             let pr = Preisach::new(p.preisach).map_err(err)?;
@@ -178,7 +178,7 @@ fn run(case: &str) -> Result<f32, &'static str> {
         // telemetry record into the queue. Booted through the offset calibration and armed by an
         // encoded command frame through the command port; the rig, the keep-alive and the
         // thread-mode encoder run outside the markers.
-        "isr" | "isr-square" | "telemetry-encode" => {
+        "isr" | "isr-square" | "isr-preisach" | "isr-preisach-square" | "telemetry-encode" => {
             use firmware::drive::{
                 bus_code, control_config, encode_queued, execute, quiet_window_max_duty, BridgeTiming,
                 CommandPort, DriveCounters, DriveLoop, MemoryStage, ReplyQueue, Slot, TelemetryQueue,
@@ -190,7 +190,8 @@ fn run(case: &str) -> Result<f32, &'static str> {
             static QUEUE: Slot<TelemetryQueue> = Slot::new();
             static REPLIES: Slot<ReplyQueue> = Slot::new();
             static COUNTERS: DriveCounters = DriveCounters::new();
-            let spec = ModelSpec::parse("ja+eddy+mech").map_err(|_| "bad spec")?;
+            let model = if case.starts_with("isr-preisach") { "preisach+eddy+mech" } else { "ja+eddy+mech" };
+            let spec = ModelSpec::parse(model).map_err(|_| "bad spec")?;
             let mut rig = Rig::new(CoilActuator::new(spec, &p, 1e-4).map_err(err)?, 1);
             // SAFETY: the only write to QUEUE.
             #[allow(unsafe_code)]
@@ -224,7 +225,7 @@ fn run(case: &str) -> Result<f32, &'static str> {
             while consumer.dequeue().is_some() {}
             send(&mut drive, &Command::Arm)?;
             let in_isr = case != "telemetry-encode";
-            if case == "isr-square" {
+            if case.ends_with("-square") {
                 // 25 µm steps every 5 ms: the compensator's worst ticks (many J–A sub-steps).
                 let square = command::ReferenceCommand {
                     shape: command::Shape::Square,

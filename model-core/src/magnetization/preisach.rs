@@ -228,8 +228,19 @@ impl EverettTable {
         }
         let scale = (PREISACH_LEVELS - 1) as f32 / (2.0 * self.h_max);
         let top = (PREISACH_LEVELS - 1) as f32;
-        let ua = ((alpha + self.h_max) * scale).clamp(0.0, top);
-        let ub = ((beta + self.h_max) * scale).clamp(0.0, top);
+        // Compare-and-select, not `f32::clamp`: a library call on the M4F (no VMAXNM), and this
+        // runs twice per evaluation of the inverse's search.
+        let on_grid = |u: f32| {
+            if u < 0.0 {
+                0.0
+            } else if u > top {
+                top
+            } else {
+                u
+            }
+        };
+        let ua = on_grid((alpha + self.h_max) * scale);
+        let ub = on_grid((beta + self.h_max) * scale);
         // Cell indices (the last level belongs to the cell below it).
         let ia = (ua as usize).min(PREISACH_LEVELS - 2);
         let ib = (ub as usize).min(PREISACH_LEVELS - 2);
@@ -237,7 +248,7 @@ impl EverettTable {
         let r = &self.root;
         let root_e = if ia == ib {
             // Diagonal cell: linear on the triangle (ib, ib)–(ib+1, ib)–(ib+1, ib+1).
-            r[ia + 1][ib] * (fa - fb).max(0.0)
+            r[ia + 1][ib] * crate::math::at_least(fa - fb, 0.0)
         } else {
             let low = r[ia][ib] + (r[ia][ib + 1] - r[ia][ib]) * fb;
             let high = r[ia + 1][ib] + (r[ia + 1][ib + 1] - r[ia + 1][ib]) * fb;
@@ -322,6 +333,49 @@ impl Default for PreisachState {
     }
 }
 
+/// What the inverse keeps between samples for one state sequence. The running sums of the relay
+/// plane's completed (maximum, minimum) pairs: `sum[q]` is the sum of pair 0..q's terms in
+/// [`Preisach::output`]'s order, so an output is `sum[q] +` its last pair's term, the same
+/// additions in the same order, bit for bit; a field iteration then costs two Everett look-ups
+/// instead of the whole staircase. And the last solve's slope dM/dH, the first secant step's.
+/// (`CompensatorState` holds one; `scripts/fw bench inverse-preisach`: 65 000 instructions per
+/// compensator step on the M4F with a copy of the state per iteration and 24 halvings.)
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InverseCache {
+    /// One more than a full memory's pairs: a trial may count one more turning point.
+    sum: [f32; PREISACH_MEMORY / 2 + 1],
+    /// `sum[..=valid]` hold for the state they follow.
+    valid: u8,
+    /// dM/dH over the last solve's step [1]; 0 before the first.
+    slope: f32,
+}
+
+impl Default for InverseCache {
+    fn default() -> Self {
+        Self { sum: [0.0; PREISACH_MEMORY / 2 + 1], valid: 0, slope: 0.0 }
+    }
+}
+
+impl InverseCache {
+    /// The state's point `lowest` and those after it changed: drop the sums that used them
+    /// (`sum[q]` uses the points below index 2q).
+    fn changed_from(&mut self, lowest: usize) {
+        self.valid = self.valid.min((lowest / 2) as u8);
+    }
+
+    /// `sum[q]` for the points `pts` (pairs below q complete in `pts`).
+    fn up_to(&mut self, t: &EverettTable, pts: &[f32], q: usize) -> f32 {
+        while (self.valid as usize) < q {
+            let p = self.valid as usize;
+            let m_prev = if p == 0 { -t.h_max } else { pts[2 * p - 1] };
+            let max = pts[2 * p];
+            self.sum[p + 1] = self.sum[p] + (t.everett(max, m_prev) - t.everett(max, pts[2 * p + 1]));
+            self.valid += 1;
+        }
+        self.sum[q]
+    }
+}
+
 impl PreisachState {
     /// The stored turning points, oldest first (maxima at even positions); the last is the
     /// current input.
@@ -329,12 +383,16 @@ impl PreisachState {
         &self.turning[..self.len as usize]
     }
 
-    fn push(&mut self, h: f32, h_max: f32) {
-        if self.len as usize == PREISACH_MEMORY {
-            self.merge_closest_pair(h_max);
-        }
+    /// Appends `h`; returns the lowest index whose point changed (the merge's, when full).
+    fn push(&mut self, h: f32, h_max: f32) -> usize {
+        let lowest = if self.len as usize == PREISACH_MEMORY {
+            self.merge_closest_pair(h_max)
+        } else {
+            self.len as usize
+        };
         self.turning[self.len as usize] = h;
         self.len += 1;
+        lowest
     }
 
     /// Full memory: drops the two adjacent turning points whose removal moves the staircase
@@ -346,7 +404,7 @@ impl PreisachState {
     /// jump at every reversal once the memory was full: a forcing at twice the drive frequency
     /// that rang a 1 kHz actuator mode during a 550 Hz chirp segment forty times above the
     /// measured response.
-    fn merge_closest_pair(&mut self, h_max: f32) {
+    fn merge_closest_pair(&mut self, h_max: f32) -> usize {
         let n = self.len as usize;
         let t = &self.turning;
         let mut best = (f32::INFINITY, n - 3);
@@ -360,24 +418,27 @@ impl PreisachState {
         let j = best.1;
         self.turning.copy_within(j + 2..n, j);
         self.len -= 2;
+        j
     }
 
-    /// Moves the input to `h` (already clamped to ±H_max), applying the wiping-out rule.
-    fn apply(&mut self, h: f32, h_max: f32) {
+    /// Moves the input to `h` (already clamped to ±H_max), applying the wiping-out rule. Returns
+    /// the lowest index whose point changed or went (for [`InverseCache`]).
+    fn apply(&mut self, h: f32, h_max: f32) -> usize {
         let n = self.len as usize;
         if n == 0 {
             if h > -h_max {
                 self.push(h, h_max);
             }
-            return;
+            return 0;
         }
         let rising = n % 2 == 1; // the last stored point is a maximum
         let last = self.turning[n - 1];
-        if (rising && h >= last) || (!rising && h <= last) {
+        let mut lowest = if (rising && h >= last) || (!rising && h <= last) {
             self.turning[n - 1] = h;
+            n - 1
         } else {
-            self.push(h, h_max);
-        }
+            self.push(h, h_max)
+        };
         loop {
             let n = self.len as usize;
             if n >= 3 {
@@ -387,14 +448,17 @@ impl PreisachState {
                     // The input passed an older extremum of its kind: wipe it and its partner.
                     self.turning[n - 3] = cur;
                     self.len -= 2;
+                    lowest = lowest.min(n - 3);
                     continue;
                 }
             }
             if n == 2 && self.turning[1] <= -h_max {
                 self.len = 0; // back to negative saturation
+                lowest = 0;
             }
             break;
         }
+        lowest
     }
 }
 
@@ -483,34 +547,181 @@ impl Preisach {
     #[inline]
     pub fn step(&self, s: &mut PreisachState, h: f32) -> f32 {
         if h.is_finite() {
-            s.apply(h.clamp(-self.table.h_max, self.table.h_max), self.table.h_max);
+            s.apply(crate::math::within(h, self.table.h_max), self.table.h_max);
             s.h = h;
         }
         self.output(s)
     }
 
-    /// The field that gives magnetization `m` from state `s` (monotone bisection, 24 halvings of
-    /// ±H_max, widened by 4 h_r when there is a reversible part, which goes on rising past
-    /// H_max), applied to `s`. A target beyond what the branch reaches gives the range's end.
+    /// The field that gives magnetization `m` from state `s`, applied to `s`. The output is
+    /// monotone in the field from any state, so a safeguarded secant search: from the present
+    /// input and a probe towards the target, secant steps kept inside the bracket found so far
+    /// (else halving it), to 10⁻⁶ M_s or 2⁻²³ of the range ±H_max (widened by 4 h_r with a
+    /// reversible part, which goes on rising past H_max). A target beyond what the branch
+    /// reaches gives the range's end.
     pub fn field_for(&self, s: &mut PreisachState, m: f32) -> f32 {
+        self.field_for_with(s, &mut InverseCache::default(), m)
+    }
+
+    /// The inverse's cache for `s` with its pair sums filled (their cost, one pass over the
+    /// staircase, is paid here rather than in the first solve: from the demagnetised state,
+    /// 46 Everett look-ups).
+    pub fn inverse_cache(&self, s: &PreisachState) -> InverseCache {
+        let mut cache = InverseCache::default();
+        let n = s.len as usize;
+        if n > 0 {
+            cache.up_to(&self.table, &s.turning, (n - 1) / 2);
+        }
+        cache
+    }
+
+    /// [`Self::field_for`] with the state's pair sums kept between calls (`sums` must have
+    /// followed `s` since both were new): each evaluation costs two Everett look-ups, not the
+    /// whole staircase ([`Self::trial_output`]).
+    pub fn field_for_with(&self, s: &mut PreisachState, sums: &mut InverseCache, m: f32) -> f32 {
+        let h = self.solve_field(s, sums, m);
+        let lowest = s.apply(crate::math::within(h, self.table.h_max), self.table.h_max);
+        s.h = h;
+        sums.changed_from(lowest);
+        h
+    }
+
+    fn solve_field(&self, s: &PreisachState, sums: &mut InverseCache, m: f32) -> f32 {
         let range = if self.reversible_ms > 0.0 {
             self.table.h_max + 4.0 / self.inv_reversible_field
         } else {
             self.table.h_max
         };
-        let (mut lo, mut hi) = (-range, range);
-        for _ in 0..24 {
-            let mid = 0.5 * (lo + hi);
-            let mut trial = *s;
-            if self.step(&mut trial, mid) < m {
-                lo = mid;
+        let kept = sums.slope;
+        let mut eval = |h: f32| self.trial_output(s, sums, h).0 - m;
+        let tol_m = 1e-6 * self.table.total;
+        let tol_h = range * (1.0 / 8_388_608.0);
+        // The bracket [lo, hi] and whether each end was evaluated (f < 0 at lo, > 0 at hi).
+        let (mut lo, mut hi, mut lo_seen, mut hi_seen) = (-range, range, false, false);
+        let x0 = if s.h.is_finite() { crate::math::within(s.h, range) } else { 0.0 };
+        let (mut x, mut f) = (x0, eval(x0));
+        let f0 = f;
+        // Reversing (the target lies against the present branch): the new branch starts flat,
+        // M − M(x0) ≈ 2 E(x, x0) ∝ (x − x0)² (003 §3), so the secant runs on the signed square
+        // root of that change, which is close to linear in x; along the branch, on M itself.
+        let rising = s.len % 2 == 1;
+        let reversing = (f0 < 0.0) != rising;
+        let root_f0 = crate::math::sqrt(f0.abs()).copysign(-f0);
+        let straighten = |f: f32| {
+            if reversing {
+                let d = f - f0;
+                crate::math::sqrt(d.abs()).copysign(d) - root_f0
             } else {
-                hi = mid;
+                f
+            }
+        };
+        let mut y = straighten(f);
+        // The first step along the last solve's slope, else a probe of 10⁻³ of the range.
+        let mut next = if kept > 0.0 && kept.is_finite() && !reversing {
+            x - f / kept
+        } else {
+            x - f.signum() * 1e-3 * range
+        };
+        let (mut x_prev, mut y_prev);
+        let h = 'search: {
+            for _ in 0..40 {
+                if f.abs() <= tol_m {
+                    break 'search x;
+                }
+                if f < 0.0 {
+                    (lo, lo_seen) = (x, true);
+                } else {
+                    (hi, hi_seen) = (x, true);
+                }
+                if hi - lo <= tol_h {
+                    break;
+                }
+                if next <= lo || next >= hi || !next.is_finite() {
+                    // Outside the bracket: its end when that was never evaluated (an end the
+                    // target lies beyond is the answer), else its middle.
+                    next = if next >= hi && !hi_seen {
+                        hi
+                    } else if next <= lo && !lo_seen {
+                        lo
+                    } else {
+                        0.5 * (lo + hi)
+                    };
+                }
+                (x_prev, y_prev) = (x, y);
+                x = next;
+                f = eval(x);
+                y = straighten(f);
+                if (x == range && f < 0.0) || (x == -range && f > 0.0) {
+                    break 'search x;
+                }
+                let slope = (y - y_prev) / (x - x_prev);
+                next = if slope > 0.0 { x - y / slope } else { 0.5 * (lo + hi) };
+            }
+            0.5 * (lo + hi)
+        };
+        // The step's own slope dM/dH, for the next solve's first step.
+        let slope = (f - f0) / (x - x0);
+        sums.slope = if slope > 0.0 && slope.is_finite() { slope } else { 0.0 };
+        h
+    }
+
+    /// What [`Self::step`] to the finite `h` would return from `s`, without changing `s`, and
+    /// whether exactly: not when the step would merge two turning points first (a full memory,
+    /// a change of second order, see `merge_closest_pair`); this then counts as if the memory
+    /// had room for one more.
+    fn trial_output(&self, s: &PreisachState, sums: &mut InverseCache, h: f32) -> (f32, bool) {
+        let t = &self.table;
+        let h_max = t.h_max;
+        let hc = crate::math::within(h, h_max);
+        let pts = &s.turning;
+        let n = s.len as usize;
+        // The staircase `apply` would leave: pts[..len − 1], then hc (the wiping-out rule as in
+        // `apply`; the points it compares with are never the ones it changed).
+        let mut len = if n == 0 {
+            usize::from(hc > -h_max)
+        } else {
+            let rising = n % 2 == 1;
+            if (rising && hc >= pts[n - 1]) || (!rising && hc <= pts[n - 1]) {
+                n
+            } else {
+                n + 1
+            }
+        };
+        let exact = len <= PREISACH_MEMORY;
+        if n > 0 {
+            loop {
+                if len >= 3 {
+                    let is_max = len % 2 == 1;
+                    let older = pts[len - 3];
+                    if (is_max && hc >= older) || (!is_max && hc <= older) {
+                        len -= 2;
+                        continue;
+                    }
+                }
+                if len == 2 && hc <= -h_max {
+                    len = 0;
+                }
+                break;
             }
         }
-        let h = 0.5 * (lo + hi);
-        self.step(s, h);
-        h
+        let relay = if len == 0 {
+            2.0 * 0.0 - t.total()
+        } else {
+            let q = (len - 1) / 2;
+            let m_prev = if q == 0 { -h_max } else { pts[2 * q - 1] };
+            let last = if len % 2 == 1 {
+                t.everett(hc, m_prev) // − E(hc, hc), which is 0
+            } else {
+                t.everett(pts[2 * q], m_prev) - t.everett(pts[2 * q], hc)
+            };
+            2.0 * (sums.up_to(t, pts, q) + last) - t.total()
+        };
+        let reversible = if self.reversible_ms > 0.0 {
+            self.reversible_ms * crate::math::tanh(h * self.inv_reversible_field)
+        } else {
+            0.0
+        };
+        (self.relay_share * relay + reversible, exact)
     }
 }
 
@@ -939,9 +1150,64 @@ mod tests {
         }
     }
 
+    /// The evaluation the inverse uses instead of stepping a copy of the state gives the copy's
+    /// output bit for bit, but when the step would merge turning points (a full memory), and
+    /// then within the merge's own error; the pair sums kept between samples solve exactly as
+    /// sums made afresh from the points do. Along a decaying oscillation about a bias that fills
+    /// the memory, with saturation both ways (the resets), with and without the reversible
+    /// part. Every target the branch can reach is met to 10⁻⁶ M_s (to the merge's error in
+    /// the steps that merge).
+    #[test]
+    fn the_inverse_evaluates_as_a_step_would() {
+        for params in [P, P_REV] {
+            let p = Preisach::new(params).unwrap();
+            let ms = params.ms_a_per_m;
+            let (mut kept, mut fresh) = (p.demagnetized(), p.demagnetized());
+            let (mut sums, mut fresh_sums) = (InverseCache::default(), InverseCache::default());
+            let (mut merged, mut exact, mut worst_merged) = (0, 0, 0.0f32);
+            let range = if params.reversible_fraction.is_some() { 6e4 + 4.0 * 2e4 } else { 6e4 };
+            for n in 0..3000 {
+                let target = if n % 700 == 650 {
+                    let side = if n % 1400 == 650 { 1.2 } else { -1.2 };
+                    side * ms
+                } else {
+                    let decay = libm::expf(-(n % 700) as f32 / 250.0);
+                    ms * (0.15 + 0.8 * decay * libm::sinf(0.37 * n as f32))
+                };
+                let near = crate::math::within(kept.h, 1e5);
+                for h in [-9e4, -2e4, -1.0, 0.0, 3e3, 1.7e4, 5.9e4, 9e4].map(|d: f32| d + 0.25 * near) {
+                    let (v, is_exact) = p.trial_output(&kept, &mut sums, h);
+                    let stepped = p.step(&mut { kept }, h);
+                    if is_exact {
+                        assert_eq!(v.to_bits(), stepped.to_bits(), "sample {n}, field {h}");
+                        exact += 1;
+                    } else {
+                        worst_merged = worst_merged.max((v - stepped).abs());
+                        merged += 1;
+                    }
+                }
+                let before = (kept, sums);
+                fresh_sums.valid = 0; // the sums again from the points, the slope kept
+                let a = p.field_for_with(&mut kept, &mut sums, target);
+                let b = p.field_for_with(&mut fresh, &mut fresh_sums, target);
+                assert_eq!(a.to_bits(), b.to_bits(), "sample {n}: field {a} vs {b}");
+                assert_eq!(kept, fresh, "sample {n}");
+                let got = p.output(&kept);
+                let merging = !p.trial_output(&before.0, &mut { before.1 }, a).1;
+                let tol = if merging { 3e-3 * ms } else { 1e-6 * ms };
+                assert!(
+                    (got - target).abs() <= tol || a.abs() == range,
+                    "sample {n}: target {target}, got {got} at {a} A/m"
+                );
+            }
+            assert!(merged > 100 && exact > 10_000, "{merged} merging trials, {exact} exact");
+            assert!(worst_merged <= 3e-3 * ms, "a merge moved the output {worst_merged} A/m");
+        }
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(200))]
-        /// Output bounded by ±M_s, finite, and the bisection inverse finds the field again, with
+        /// Output bounded by ±M_s, finite, and the inverse finds the field again, with
         /// and without the reversible part.
         #[test]
         fn bounded_and_invertible(
