@@ -247,9 +247,10 @@ impl Controller {
         c
     }
 
-    /// Builds the compensator for `spec` with `params` in place (the one before stays when the
-    /// set is refused). In place: the model holds a Preisach table of 4 KB, and every layer that
-    /// returned it by value kept a copy on the stack of a `load` command, the deepest path.
+    /// Builds the compensator for `spec` with `params` and moves it into the controller (the one
+    /// before stays when the set is refused). One layer: the model holds a Preisach table of
+    /// 4 KB, and every layer that returned it by value kept a copy on the stack of a `load`
+    /// command, the deepest path.
     fn install_compensator(&mut self, spec: ModelSpec, params: &ActuatorParams) -> Result<(), ParamError> {
         let c = Compensator::new(compensator_model(spec, params, self.cfg.current_loop.tick_s)?);
         self.model_rest_m = c.model().rest_state().mech.displacement_m;

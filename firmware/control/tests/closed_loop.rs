@@ -495,12 +495,12 @@ fn a_corrupt_parameter_set_never_enables_the_bridge_until_a_valid_one_is_loaded(
 /// The Preisach law on the board: its compensator (the inverse's field search, model-core's
 /// `Preisach::field_for_with`) on a Preisach rig meets the J–A compensator's bound above. The
 /// reference feedback, tuned on the J–A demo plant, does not improve it: measured 1.33 % alone,
-/// 2.25 % with the PID, 1.42 % with PID and harmonic rejection (the same with the PID gains
-/// scaled 0.25–0.75: 1.15–15 %). The Preisach plant's gain runs from 0 at a reversal to
+/// 2.25 % with the PID, 1.43 % with PID and harmonic rejection (with the PID gains scaled by
+/// 0.25–0.75, 1.15–15 %, measured once by hand). The Preisach plant's gain runs from 0 at a reversal to
 /// 37 µm/A (the J–A plant's 5–28), and the compensator's model never sees the feedback's
 /// current, so its memory and the rig's part at every minor loop the feedback adds. Asserted:
 /// alone within the J–A bound; with the feedback, not worse than that bound. A Preisach set
-/// loaded by command replaces a J–A one.
+/// is accepted by command over a J–A one.
 #[test]
 fn a_preisach_compensator_tracks_a_100_hz_sine() {
     let p = ActuatorParams::TERFENOL_DEMO;
