@@ -149,7 +149,8 @@ impl EverettTable {
     ) -> Result<Self, ParamError> {
         let h_max = positive("preisach.h_max_a_per_m", h_max_a_per_m)?;
         let total = positive("preisach.ms_a_per_m", total)?;
-        let table = Self::integrate(h_max, total, density);
+        let mut table = Self::unfilled(h_max);
+        table.fill(total, density);
         if !(table.total.is_finite() && table.total > 0.0) {
             return Err(ParamError::OutOfRange(
                 "preisach density",
@@ -159,15 +160,13 @@ impl EverettTable {
         Ok(table)
     }
 
-    /// [`Self::from_density`] for validated `h_max`, `total` (both > 0); `total` is not positive
-    /// and finite when μ is zero everywhere or not finite.
-    fn integrate(h_max: f32, total: f32, density: impl Fn(f32, f32) -> f32) -> Self {
-        let mut table = Self { h_max, root: [[0.0; PREISACH_LEVELS]; PREISACH_LEVELS], total: 0.0 };
-        table.fill(total, density);
-        table
+    /// A table over ±`h_max` (> 0) to [`Self::fill`]: zero everywhere.
+    fn unfilled(h_max: f32) -> Self {
+        Self { h_max, root: [[0.0; PREISACH_LEVELS]; PREISACH_LEVELS], total: 0.0 }
     }
 
-    /// Integrates the density into this table, in place: the table is 4 KB, and the firmware
+    /// Integrates the density into this table (`total` > 0; the table's total is not positive
+    /// and finite when μ is zero everywhere or not finite), in place: the table is 4 KB, and the firmware
     /// builds one on its deepest stack path (a model constructed at boot or by a `load`
     /// command), where each builder that returned a copy held one.
     fn fill(&mut self, total: f32, density: impl Fn(f32, f32) -> f32) {
@@ -218,6 +217,14 @@ impl EverettTable {
     /// The grid values E (row α index, column β index), as stored: the squares of √E.
     pub fn values(&self) -> [[f32; PREISACH_LEVELS]; PREISACH_LEVELS] {
         self.root.map(|row| row.map(|r| r * r))
+    }
+
+    /// One (maximum, minimum) pair's share of the relay output's sum, E(M_k, m_{k−1}) −
+    /// E(M_k, m_k): the forward output, the inverse's pair sums and its trial evaluations all
+    /// add it so, in the same order, bit for bit.
+    #[inline]
+    fn pair_term(&self, max: f32, m_prev: f32, m_next: f32) -> f32 {
+        self.everett(max, m_prev) - self.everett(max, m_next)
     }
 
     /// E(α, β) for α ≥ β (clamped to the grid); 0 when α ≤ β.
@@ -375,7 +382,7 @@ impl InverseCache {
             let p = self.valid as usize;
             let m_prev = if p == 0 { -t.h_max } else { pts[2 * p - 1] };
             let max = pts[2 * p];
-            self.sum[p + 1] = self.sum[p] + (t.everett(max, m_prev) - t.everett(max, pts[2 * p + 1]));
+            self.sum[p + 1] = self.sum[p] + t.pair_term(max, m_prev, pts[2 * p + 1]);
             self.valid += 1;
         }
         self.sum[q]
@@ -479,7 +486,7 @@ impl Preisach {
     pub(crate) fn lorentzian(v: &ValidPreisachParams) -> Self {
         let ValidPreisachParams { ms, hc, sigma, interaction_spread, h_max, rho, h_r } = *v;
         let mut model = Self {
-            table: EverettTable { h_max, root: [[0.0; PREISACH_LEVELS]; PREISACH_LEVELS], total: 0.0 },
+            table: EverettTable::unfilled(h_max),
             relay_share: 1.0 - rho,
             reversible_ms: rho * ms,
             inv_reversible_field: 1.0 / h_r,
@@ -542,7 +549,7 @@ impl Preisach {
         while k < pts.len() {
             let max = pts[k];
             let m_next = if k + 1 < pts.len() { pts[k + 1] } else { max };
-            up += t.everett(max, m_prev) - t.everett(max, m_next);
+            up += t.pair_term(max, m_prev, m_next);
             m_prev = m_next;
             k += 2;
         }
@@ -553,10 +560,17 @@ impl Preisach {
     #[inline]
     pub fn step(&self, s: &mut PreisachState, h: f32) -> f32 {
         if h.is_finite() {
-            s.apply(crate::math::within(h, self.table.h_max), self.table.h_max);
-            s.h = h;
+            self.advance(s, h);
         }
         self.output(s)
+    }
+
+    /// Moves the state's input to the finite `h`; returns the lowest turning point it changed.
+    #[inline]
+    fn advance(&self, s: &mut PreisachState, h: f32) -> usize {
+        let lowest = s.apply(crate::math::within(h, self.table.h_max), self.table.h_max);
+        s.h = h;
+        lowest
     }
 
     /// The field that gives magnetization `m` from state `s`, applied to `s`. The output is
@@ -588,9 +602,7 @@ impl Preisach {
     /// whole staircase (`trial_output`).
     pub fn field_for_with(&self, s: &mut PreisachState, sums: &mut InverseCache, m: f32) -> f32 {
         let (h, _) = self.solve_field(s, sums, m);
-        let lowest = s.apply(crate::math::within(h, self.table.h_max), self.table.h_max);
-        s.h = h;
-        sums.changed_from(lowest);
+        sums.changed_from(self.advance(s, h));
         h
     }
 
@@ -743,11 +755,9 @@ impl Preisach {
         } else {
             let q = (len - 1) / 2;
             let m_prev = if q == 0 { -h_max } else { pts[2 * q - 1] };
-            let last = if len % 2 == 1 {
-                t.everett(hc, m_prev) // − E(hc, hc), which is 0
-            } else {
-                t.everett(pts[2 * q], m_prev) - t.everett(pts[2 * q], hc)
-            };
+            // The last pair: a maximum at hc (E(hc, hc) = 0 comes back at once), or one closed by hc.
+            let last =
+                if len % 2 == 1 { t.pair_term(hc, m_prev, hc) } else { t.pair_term(pts[2 * q], m_prev, hc) };
             2.0 * (sums.up_to(t, pts, q) + last) - t.total()
         };
         let reversible = if self.reversible_ms > 0.0 {
