@@ -82,6 +82,15 @@ pub enum Warning {
         /// The fit file with the same bytes.
         fit: String,
     },
+    /// The Preisach relay plane reaches far beyond the fields the recordings drive the rod to.
+    PreisachPlaneWide {
+        /// `preisach.h_max_a_per_m` as given [A/m].
+        h_max: f64,
+        /// The largest field the recordings reach [A/m].
+        reach: f64,
+        /// The extent advised [A/m].
+        advised: f64,
+    },
     /// `--time-limit` stopped the search: the best point so far.
     TimeLimit {
         /// The limit [s].
@@ -142,6 +151,15 @@ impl fmt::Display for Warning {
             Warning::ValidationIsFitFile { val, fit } => write!(
                 f,
                 "{val} is also a fit file (same content as {fit}): its validation figure is not independent"
+            ),
+            Warning::PreisachPlaneWide { h_max, reach, advised } => write!(
+                f,
+                "`preisach.h_max_a_per_m` = {h_max:.0} A/m is {:.1}× the largest field these recordings reach \
+                 ({reach:.0} A/m: coil.bias_a_per_m + coil.turns_per_m × the current): the relay plane's 32 \
+                 levels step {:.0} A/m, most of them beyond the data; set it near {advised:.0} A/m (1.25× \
+                 that field) in the parameter file, or take it from a loop fit of the rod, which identifies it",
+                h_max / reach,
+                2.0 * h_max / 31.0
             ),
             Warning::TimeLimit { seconds } => write!(
                 f,

@@ -237,6 +237,70 @@ fn a_validation_file_that_is_a_fit_file_is_said_not_independent() {
     }
 }
 
+/// A Preisach plane (the demo set's ±80 kA/m) far wider than the fields the recordings reach is
+/// said by fit (JSON and stderr) and diagnose, with the value to set; set so, nothing is said.
+#[test]
+fn a_preisach_plane_far_wider_than_the_data_is_said_with_the_value_to_set() {
+    let dir = tempfile::tempdir().unwrap();
+    let (fit, _, _) = rig(dir.path());
+    let params = dir.path().join("p.toml");
+    let o = gma(&[
+        "fit",
+        "--model",
+        "linear",
+        "--time-limit",
+        "2",
+        "--params-out",
+        params.to_str().unwrap(),
+        &fit,
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let fit_json = |p: &std::path::Path| {
+        json(&gma(&[
+            "fit",
+            "--model",
+            "preisach",
+            "--time-limit",
+            "2",
+            "--json",
+            "--params",
+            p.to_str().unwrap(),
+            &fit,
+        ]))
+    };
+    let plane_warnings = |j: &serde_json::Value| -> Vec<String> {
+        let all = j["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap().to_string());
+        all.filter(|w| w.starts_with("`preisach.h_max_a_per_m` = 80000 A/m") || w.contains("relay plane"))
+            .collect()
+    };
+    let said = plane_warnings(&fit_json(&params));
+    assert_eq!(said.len(), 1, "{said:?}");
+    let advised: f64 = said[0]
+        .split("set it near ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no value to set in: {}", said[0]));
+    assert!(advised > 1000.0 && advised < 0.8 * 80_000.0, "{advised}");
+    let o = gma(&[
+        "diagnose",
+        "--model",
+        "preisach",
+        "--time-limit",
+        "2",
+        "--params",
+        params.to_str().unwrap(),
+        &fit,
+    ]);
+    assert!(String::from_utf8_lossy(&o.stderr).contains("gma: warning: `preisach.h_max_a_per_m` = 80000 A/m"));
+    // The engineer sets it as advised: nothing more is said.
+    let text = std::fs::read_to_string(&params).unwrap();
+    let set = text.replace("h_max_a_per_m = 80000.0", &format!("h_max_a_per_m = {advised:.1}"));
+    assert_ne!(set, text, "the parameter file's plane");
+    std::fs::write(&params, set).unwrap();
+    assert_eq!(plane_warnings(&fit_json(&params)), Vec::<String>::new());
+}
+
 /// diagnose refuses loop files: its help says its files are recordings, while fit's and
 /// report's still name loop files.
 #[test]

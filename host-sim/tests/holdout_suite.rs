@@ -163,7 +163,8 @@ fn run_json(args: &[&str]) -> (bool, Value) {
 
 /// The engineer's parameter file: a quick linear fit on one recording gives a complete file
 /// (as `gma fit --params-out` writes it), then what the engineer knows of the rig is set in it:
-/// the coil's turns per metre, the bias field, the rod length, coil resistance and expansion.
+/// the coil's turns per metre, the bias field, the rod length, coil resistance and expansion
+/// (then the Preisach plane, [`plane_as_advised`]).
 fn engineer_params(sample: &Path, law: Law) -> PathBuf {
     let path = cache_dir().join(format!("{}-engineer.toml", law.name()));
     let start = cache_dir().join(format!("{}-start.toml", law.name()));
@@ -198,6 +199,23 @@ fn engineer_params(sample: &Path, law: Law) -> PathBuf {
     set(&mut doc, Some("thermal"), "expansion_per_c", known.expansion_per_c);
     fs::write(&path, toml::to_string(&doc).unwrap()).unwrap();
     path
+}
+
+/// The engineer sets the Preisach plane as `gma` advises from the fit files (a plane far wider
+/// than the fields they reach is said, with the value to set).
+fn plane_as_advised(params: &Path, fit_files: &[PathBuf]) {
+    let spec = host_sim::params::parse_spec("preisach").expect("spec");
+    let p = host_sim::params::load(Some(params), spec).expect("engineer's parameter file");
+    let recs: Vec<_> =
+        fit_files.iter().map(|f| host_sim::recording::Recording::read(f).expect("recording")).collect();
+    if let Some(host_sim::warning::Warning::PreisachPlaneWide { advised, .. }) =
+        host_sim::fit::preisach_plane_advice(spec, &p, &recs)
+    {
+        let mut doc: toml::Table = fs::read_to_string(params).unwrap().parse().expect("parameter TOML");
+        let table = doc.get_mut("preisach").and_then(|v| v.as_table_mut()).expect("[preisach]");
+        table.insert("h_max_a_per_m".to_string(), toml::Value::Float(advised));
+        fs::write(params, toml::to_string(&doc).unwrap()).unwrap();
+    }
 }
 
 fn number(v: &Value) -> f64 {
@@ -242,6 +260,7 @@ fn run_law(law: Law) -> Vec<Row> {
     };
     let (fit_full, _) = files(false);
     let params = engineer_params(&fit_full[0], law);
+    plane_as_advised(&params, &fit_full);
     let mut rows = Vec::new();
     for (hidden, model, anhysteretic) in cases(law) {
         if only.as_ref().is_some_and(|o| !o.iter().any(|c| c == hidden)) {

@@ -24,8 +24,9 @@
 use std::path::{Path, PathBuf};
 
 use host_sim::diagnose::diagnose;
-use host_sim::fit::FitOptions;
+use host_sim::fit::{preisach_plane_advice, FitOptions};
 use host_sim::recording::Recording;
+use host_sim::warning::Warning;
 use model_core::{ActuatorParams, Effect, ModelSpec};
 use rayon::prelude::*;
 use refrig::{Drive, JaVariant, Law, Rig, SearchCoil, Waveform};
@@ -352,6 +353,14 @@ fn hidden_effects_on_the_independent_rig() {
                 (fit, val)
             };
             let full_rig = files(true);
+            // The engineer sets the Preisach plane as `gma` advises from the fit files (a plane
+            // far wider than the fields they reach is said, with the value to set).
+            let mut init = init;
+            if let Some(Warning::PreisachPlaneWide { advised, .. }) =
+                preisach_plane_advice(complete(Effect::Preisach), &init, &full_rig.0)
+            {
+                init.preisach.h_max_a_per_m = advised as f32;
+            }
             // The engineer's first step on a J–A rig: which of our forms fits it
             // (`diagnose --ja-variants` on the complete structure, displacement only, as
             // documented); every case of this rig then uses the form it names.

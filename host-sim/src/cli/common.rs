@@ -130,7 +130,8 @@ pub struct Prepared {
     pub opts: FitOptions,
     /// Where the start values came from (a file or the built-in demo set).
     pub params_source: ParamSource,
-    /// Doubts about the inputs themselves: a `--val` file with a fit file's content.
+    /// Doubts about the inputs themselves: a `--val` file with a fit file's content, a Preisach
+    /// plane far wider than the fields the recordings reach.
     pub input_warnings: Vec<Warning>,
 }
 
@@ -165,11 +166,12 @@ impl ModelFiles {
         let all: Vec<_> = fit_in.iter().chain(&val_in).chain(params_input.as_ref()).map(Input::id).collect();
         check_outputs(outputs, &all)?;
         let (init, params_source) = params::load_input(params_input, spec, "start values")?;
-        let (data, input_warnings) = read_inputs(fit_in, val_in, self.read.max_samples, &read_opts)?;
+        let (data, mut input_warnings) = read_inputs(fit_in, val_in, self.read.max_samples, &read_opts)?;
         if let Data::Recordings(fit_files, val_files) = &data {
             for r in fit_files.iter().chain(val_files) {
                 fit::drive_for(spec, r)?;
             }
+            input_warnings.extend(fit::preisach_plane_advice(spec, &init, fit_files));
         }
         let deadline = time_limit.map(|t| Instant::now() + t);
         let opts = FitOptions { seed: self.seed, progress: true, effort: self.effort, deadline };
