@@ -82,6 +82,13 @@ pub enum Warning {
         /// The fit file with the same bytes.
         fit: String,
     },
+    /// A fit file typed right after a `--val` file: `--val` takes one file, so it is fitted.
+    FitFileAfterVal {
+        /// The `--val` file.
+        val: String,
+        /// The file after it, read as a fit file.
+        fit: String,
+    },
     /// The Preisach relay plane reaches far beyond the fields the recordings drive the rod to.
     PreisachPlaneWide {
         /// `preisach.h_max_a_per_m` as given [A/m].
@@ -151,6 +158,11 @@ impl fmt::Display for Warning {
             Warning::ValidationIsFitFile { val, fit } => write!(
                 f,
                 "{val} is also a fit file (same content as {fit}): its validation figure is not independent"
+            ),
+            Warning::FitFileAfterVal { val, fit } => write!(
+                f,
+                "{fit} follows `--val {val}` and is read as a fit file: `--val` takes one file; repeat it \
+                 (`--val {val} --val {fit}`) if {fit} is for validation"
             ),
             Warning::PreisachPlaneWide { h_max, reach, advised } => write!(
                 f,

@@ -237,6 +237,31 @@ fn a_validation_file_that_is_a_fit_file_is_said_not_independent() {
     }
 }
 
+/// `--val` takes one file: a fit file typed right after one (a shell glob `--val *val*.csv`) is
+/// said, and fitted as typed; repeated `--val`s are not.
+#[test]
+fn a_fit_file_typed_after_a_val_file_is_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let (fit, fit2, val) = rig(dir.path());
+    let said = format!("{fit2} follows `--val {val}` and is read as a fit file");
+    // (fit files as the fit read them, warnings)
+    let run = |args: &[&str]| -> (usize, Vec<String>) {
+        let j = json(&gma(&[&["fit", "--model", "linear", "--time-limit", "2", "--json"], args].concat()));
+        let splits = j["files"].as_array().unwrap().iter().map(|f| f["split"].as_str().unwrap().to_string());
+        let warnings = j["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap().to_string());
+        (splits.filter(|s| s == "fit").count(), warnings.collect())
+    };
+    let eq = format!("--val={val}");
+    for args in [vec![fit.as_str(), "--val", &val, &fit2], vec![fit.as_str(), &eq, &fit2]] {
+        let (fitted, w) = run(&args);
+        assert_eq!(fitted, 2, "{args:?}: fitted as typed");
+        assert!(w.iter().any(|w| w.starts_with(&said)), "{args:?}: {w:?}");
+    }
+    let (fitted, w) = run(&[&fit, "--val", &val, "--val", &fit2]);
+    assert_eq!(fitted, 1);
+    assert!(!w.iter().any(|w| w.contains("follows `--val")), "{w:?}");
+}
+
 /// A Preisach plane (the demo set's ±80 kA/m) far wider than the fields the recordings reach is
 /// said by fit (JSON and stderr) and diagnose, with the value to set; set so, nothing is said.
 #[test]

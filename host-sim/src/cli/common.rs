@@ -150,6 +150,30 @@ impl Prepared {
     }
 }
 
+/// The fit files typed right after a `--val` file (`--val a.csv b.csv`, as a shell glob writes
+/// it): `--val` takes one file, so `b.csv` is read as a fit file, which the user may not mean.
+fn fit_files_after_val(args: &[std::ffi::OsString], fit_files: &[PathBuf]) -> Vec<(PathBuf, PathBuf)> {
+    let mut found = Vec::new();
+    for (k, arg) in args.iter().enumerate() {
+        let text = arg.to_string_lossy();
+        let (val, next) = match text.strip_prefix("--val=") {
+            Some(v) => (PathBuf::from(v), k + 1),
+            None if text == "--val" => match args.get(k + 1) {
+                Some(v) => (PathBuf::from(v), k + 2),
+                None => continue,
+            },
+            None => continue,
+        };
+        if let Some(after) = args.get(next) {
+            let after = PathBuf::from(after);
+            if !after.to_string_lossy().starts_with('-') && fit_files.contains(&after) {
+                found.push((val, after));
+            }
+        }
+    }
+    found
+}
+
 impl ModelFiles {
     /// Parses the spec, opens every input once (files, `-`, pipes), checks the `outputs` (none
     /// may be an input, a link or a device; their folders must take files), then reads the data.
@@ -173,6 +197,10 @@ impl ModelFiles {
             }
             input_warnings.extend(fit::preisach_plane_advice(spec, &init, fit_files));
         }
+        let args: Vec<std::ffi::OsString> = std::env::args_os().collect();
+        input_warnings.extend(fit_files_after_val(&args, &self.files).into_iter().map(|(val, fit)| {
+            Warning::FitFileAfterVal { val: val.display().to_string(), fit: fit.display().to_string() }
+        }));
         let deadline = time_limit.map(|t| Instant::now() + t);
         let opts = FitOptions { seed: self.seed, progress: true, effort: self.effort, deadline };
         Ok(Prepared { spec, init, data, opts, params_source, input_warnings })
