@@ -164,15 +164,20 @@ impl fmt::Display for Warning {
                 "{fit} follows `--val {val}` and is read as a fit file: `--val` takes one file; repeat it \
                  (`--val {val} --val {fit}`) if {fit} is for validation"
             ),
-            Warning::PreisachPlaneWide { h_max, reach, advised } => write!(
-                f,
-                "`preisach.h_max_a_per_m` = {h_max:.0} A/m is {:.1}× the largest field these recordings reach \
-                 ({reach:.0} A/m: coil.bias_a_per_m + coil.turns_per_m × the current): the relay plane's 32 \
-                 levels step {:.0} A/m, most of them beyond the data; set it near {advised:.0} A/m (1.25× \
-                 that field) in the parameter file, or take it from a loop fit of the rod, which identifies it",
-                h_max / reach,
-                2.0 * h_max / 31.0
-            ),
+            Warning::PreisachPlaneWide { h_max, reach, advised } => {
+                let levels = model_core::magnetization::PREISACH_LEVELS;
+                write!(
+                    f,
+                    "`preisach.h_max_a_per_m` = {h_max:.0} A/m is {:.1}× the largest field these recordings reach \
+                     ({reach:.0} A/m: coil.bias_a_per_m + coil.turns_per_m × the current): the relay plane's \
+                     {levels} levels step {:.0} A/m, most of them beyond the data; set it near {advised:.0} A/m \
+                     ({:.2}× that field) in the parameter file, or take it from a loop fit of the rod, which \
+                     identifies it",
+                    h_max / reach,
+                    2.0 * h_max / (levels - 1) as f64,
+                    advised / reach
+                )
+            }
             Warning::TimeLimit { seconds } => write!(
                 f,
                 "--time-limit {seconds} s reached: the result is the best found so far, not a converged fit"

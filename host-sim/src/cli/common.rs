@@ -130,8 +130,8 @@ pub struct Prepared {
     pub opts: FitOptions,
     /// Where the start values came from (a file or the built-in demo set).
     pub params_source: ParamSource,
-    /// Doubts about the inputs themselves: a `--val` file with a fit file's content, a Preisach
-    /// plane far wider than the fields the recordings reach.
+    /// Doubts about the inputs themselves: a `--val` file with a fit file's content, a fit file
+    /// typed right after a `--val` file, a Preisach plane far wider than the fields reached.
     pub input_warnings: Vec<Warning>,
 }
 
