@@ -194,15 +194,36 @@ pub struct Diagnosis {
     pub laws: Option<Vec<LawScore>>,
 }
 
+/// The share of residual variance a signature must explain to be significant at 95 % with
+/// `n_eff` independent samples, in words; with too few samples no share can be, and that is said
+/// instead of a threshold above 100 %.
+fn significance_words(n_eff: f64) -> String {
+    let threshold = 100.0 * CHI2_1_95 / n_eff.max(1.0);
+    if threshold < 100.0 {
+        format!("significant above {threshold:.1} % at N_eff = {n_eff:.0}")
+    } else {
+        format!(
+            "not testable: the residual is so correlated that its {n_eff:.0} effective independent sample{} cannot \
+             show significance",
+            if n_eff.round() == 1.0 { "" } else { "s" }
+        )
+    }
+}
+
 /// The diagnosis in words (`--json` gives the same as one object).
 impl std::fmt::Display for Diagnosis {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         writeln!(
             f,
-            "model `{}`: fit NRMSE {:.3} %{}",
+            "model `{}`: fit NRMSE {:.3} % (whole files, as `gma fit`){}",
             self.model,
             self.nrmse_fit * 100.0,
-            self.nrmse_val.map(|v| format!(", validation {:.3} %", v * 100.0)).unwrap_or_default()
+            self.nrmse_val
+                .map(|v| format!(
+                    ", validation {:.3} % (after each file's burn-in, as every score below)",
+                    v * 100.0
+                ))
+                .unwrap_or_default()
         )?;
         for finding in &self.findings {
             writeln!(f, "  - {finding}")?;
@@ -1036,7 +1057,7 @@ pub fn diagnose(
             information_gain(&base_score_s, &after_score_s) - added as f64 * n_eff_scored.max(2.0).ln();
         let cut = if before_c > 0.0 && after_c > 0.0 { before_c / after_c } else { 1.0 };
         let evidence = format!(
-            "{} explains {:.0} % of the residual variance (significant above {:.1} % at N_eff = {:.0}); adding it and \
+            "{} explains {:.0} % of the residual variance ({}); adding it and \
              refitting takes the {} {channel} NRMSE from {:.2} % to {:.2} % ({:.1}× {}), lower on {files_improved} of {} \
              files ({files_improved_showing} of the {files_showing} it shows in); ΔBIC {:+.1}",
             match channel {
@@ -1046,8 +1067,7 @@ pub fn diagnose(
                 Channel::Displacement => signature_words(e.info().signature),
             },
             r2 * 100.0,
-            100.0 * CHI2_1_95 / n_eff.max(1.0),
-            n_eff,
+            significance_words(n_eff),
             if val_files.is_empty() { "fit" } else { "validation" },
             before_c * 100.0,
             after_c * 100.0,
@@ -1213,6 +1233,22 @@ pub fn diagnose(
         }
         _ => (spec, base.params, before),
     };
+    // A verdict judged on the current (or the flux) can leave the displacement worse for now:
+    // the refit spends its freedom on the channel the effect models. Said, never left to be
+    // found in the ladder.
+    if let Some(c) = candidates.first().filter(|c| Some(c.effect) == verdict && c.channel != "displacement") {
+        if final_val > before {
+            findings.push(format!(
+                "with `{}` added the displacement's validation NRMSE rises from {:.2} % to {:.2} %: `{}` is judged on \
+                 the {} it models (above), where the refit spent its freedom",
+                c.effect,
+                before * 100.0,
+                final_val * 100.0,
+                c.effect,
+                c.channel
+            ));
+        }
+    }
     let final_fit = displacement_scores(final_spec, &final_params, fit_files, &fit_skip)?;
     let white_final = whiteness(&final_fit.iter().map(|s| s.residual.as_slice()).collect::<Vec<_>>());
     let (structured, band) = structured_residual(white_final, final_fit.len());

@@ -677,6 +677,16 @@ pub fn evaluate_projected(
 /// The range the closed-form λ_s is clamped to (without `--bound`).
 pub const LAMBDA_RANGE: (f64, f64) = (1e-8, 1.0);
 
+/// A λ_s the fit identified outside the physical range (the registry's for it, narrower than
+/// [`LAMBDA_RANGE`], which only keeps the solve finite) is said: the strain scale is where a
+/// displacement in the wrong unit lands. Nothing when λ_s was held (`--fix`).
+pub fn strain_scale_doubt(params: &ActuatorParams, constraints: &Constraints) -> Option<Warning> {
+    let lambda_s = params.magnetostriction.lambda_s as f64;
+    let (lo, hi) = (STRAIN_SCALE.lo, STRAIN_SCALE.hi);
+    (!constraints.is_fixed(STRAIN_SCALE.key) && !(lo..=hi).contains(&lambda_s))
+        .then_some(Warning::StrainScaleUnlikely { lambda_s, lo, hi })
+}
+
 /// [`evaluate_projected`] with λ_s clamped to `lambda_range`.
 fn evaluate_projected_in(
     spec: ModelSpec,

@@ -54,6 +54,13 @@ pub struct Recording {
     pub header: Vec<String>,
 }
 
+/// " — `Time_S` differs from `time_s` only in case…" when a header is `name` but for its case.
+fn case_hint(headers: &csv::StringRecord, name: &str) -> Option<String> {
+    headers.iter().map(str::trim).find(|h| *h != name && h.eq_ignore_ascii_case(name)).map(|h| {
+        format!(" — `{h}` differs from `{name}` only in case: column names are case-sensitive (rename it, or map it with `--column {name}={h}`)")
+    })
+}
+
 impl Recording {
     /// An empty recording with only a time axis of `n` samples at `dt_s`.
     pub fn with_time(name: impl Into<String>, n: usize, dt_s: f64) -> Self {
@@ -141,7 +148,15 @@ impl Recording {
             Some(_) => format!("if `{header}` is the displacement, read it with "),
             None => "a displacement column of another name or unit is read with ".to_string(),
         };
-        hint.push_str(&format!("`--column displacement_um={header}:{}`", unit.unwrap_or("UNIT")));
+        let arg = format!("displacement_um={header}:{}", unit.unwrap_or("UNIT"));
+        // Quoted when a shell would split or expand it (`x [mm]`), so it pastes as is.
+        let arg =
+            if arg.chars().any(|c| !(c.is_alphanumeric() || "_=:.-/".contains(c))) && !arg.contains('\'') {
+                format!("'{arg}'")
+            } else {
+                arg
+            };
+        hint.push_str(&format!("`--column {arg}`"));
         if unit.is_none() {
             let names: Vec<&str> = units.iter().map(|u| u.name).collect();
             hint.push_str(&format!(" (UNIT: {})", names.join(", ")));
@@ -210,6 +225,7 @@ impl Recording {
                 .iter()
                 .find(|(c, _)| joined.contains(*c) && joined.contains("time_s"))
                 .map(|(_, name)| format!(" — the file seems to separate columns with {name}; measurement files are comma-separated"))
+                .or_else(|| case_hint(&headers, "time_s"))
                 .unwrap_or_default();
             located!(file, Some(1), None;
                 "no `time_s` column (header has: {}); recognised columns are {}{hint}; a time column of \
@@ -219,7 +235,10 @@ impl Recording {
             );
         }
         if index[1].is_none() && index[2].is_none() {
-            located!(file, Some(1), None; "needs a drive column: `current_A` or `command_V` (or one mapped with `--column current_A=HEADER[:UNIT]`)");
+            let hint = case_hint(&headers, "current_A")
+                .or_else(|| case_hint(&headers, "command_V"))
+                .unwrap_or_default();
+            located!(file, Some(1), None; "needs a drive column: `current_A` or `command_V` (or one mapped with `--column current_A=HEADER[:UNIT]`){hint}");
         }
         let time_col = index[0].unwrap_or(0) + 1;
         let mut cols: [Vec<f64>; COLUMNS.len()] = Default::default();
@@ -646,6 +665,14 @@ mod tests {
         assert!(e.contains("drive column"), "{e}");
         let e = err("time_s,current_A,current_A\n0,1,1\n");
         assert!(e.contains("appears twice"), "{e}");
+        // A header that is a column's name but for its case is named, with the mapping.
+        let e = err("Time_s,current_A\n0,1\n");
+        assert!(
+            e.contains("`Time_s` differs from `time_s` only in case") && e.contains("--column time_s=Time_s"),
+            "{e}"
+        );
+        let e = err("time_s,Command_v\n0,1\n");
+        assert!(e.contains("`Command_v` differs from `command_V` only in case"), "{e}");
     }
 
     #[test]

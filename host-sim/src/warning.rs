@@ -103,6 +103,16 @@ pub enum Warning {
         /// The limit [s].
         seconds: f64,
     },
+    /// The identified saturation magnetostriction lies outside the range of magnetostrictive
+    /// materials: most often a displacement in the wrong unit, or a wrong rod length.
+    StrainScaleUnlikely {
+        /// λ_s as identified.
+        lambda_s: f64,
+        /// The physical range (the registry's for `magnetostriction.lambda_s`).
+        lo: f64,
+        /// The physical range.
+        hi: f64,
+    },
 }
 
 impl Warning {
@@ -181,6 +191,12 @@ impl fmt::Display for Warning {
             Warning::TimeLimit { seconds } => write!(
                 f,
                 "--time-limit {seconds} s reached: the result is the best found so far, not a converged fit"
+            ),
+            Warning::StrainScaleUnlikely { lambda_s, lo, hi } => write!(
+                f,
+                "`magnetostriction.lambda_s` = {lambda_s:.2e} is outside [{lo:.0e}, {hi:.0e}], the range of \
+                 magnetostrictive materials (Terfenol-D ≈ 1e-3): is `displacement_um` in µm (`--column \
+                 displacement_um=NAME:mm` converts mm, `:nm` nm) and `rod_length_m` the rod's active length?"
             ),
         }
     }

@@ -64,6 +64,12 @@ fn bad_csvs() -> Vec<(&'static str, Vec<u8>, Vec<&'static str>)> {
             ],
         ),
         (
+            // A header with a space and brackets: the `--column` shown is quoted for the shell.
+            "spaced_displacement.csv",
+            csv("time_s,current_A,x [mm]", &good_rows()),
+            vec!["if `x [mm]` is the displacement, read it with `--column 'displacement_um=x [mm]:mm'`"],
+        ),
+        (
             "other_displacement.csv",
             csv("time_s,current_A,y", &good_rows()),
             vec![

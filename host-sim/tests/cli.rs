@@ -243,7 +243,10 @@ fn a_validation_file_that_is_a_fit_file_is_said_not_independent() {
 fn a_fit_file_typed_after_a_val_file_is_said() {
     let dir = tempfile::tempdir().unwrap();
     let (fit, fit2, val) = rig(dir.path());
-    let said = format!("{fit2} follows `--val {val}` and is read as a fit file");
+    // As `--val *val*.csv` expands: a second validation-named file after the first.
+    let val2 = dir.path().join("val2.csv").to_str().unwrap().to_string();
+    std::fs::copy(&fit2, &val2).unwrap();
+    let said = format!("{val2} follows `--val {val}` and is read as a fit file");
     // (fit files as the fit read them, warnings)
     let run = |args: &[&str]| -> (usize, Vec<String>) {
         let j = json(&gma(&[&["fit", "--model", "linear", "--time-limit", "2", "--json"], args].concat()));
@@ -252,14 +255,50 @@ fn a_fit_file_typed_after_a_val_file_is_said() {
         (splits.filter(|s| s == "fit").count(), warnings.collect())
     };
     let eq = format!("--val={val}");
-    for args in [vec![fit.as_str(), "--val", &val, &fit2], vec![fit.as_str(), &eq, &fit2]] {
+    for args in [vec![fit.as_str(), "--val", &val, &val2], vec![fit.as_str(), &eq, &val2]] {
         let (fitted, w) = run(&args);
         assert_eq!(fitted, 2, "{args:?}: fitted as typed");
         assert!(w.iter().any(|w| w.starts_with(&said)), "{args:?}: {w:?}");
     }
-    let (fitted, w) = run(&[&fit, "--val", &val, "--val", &fit2]);
-    assert_eq!(fitted, 1);
-    assert!(!w.iter().any(|w| w.contains("follows `--val")), "{w:?}");
+    // Repeated `--val`, or the README's form (fit files named otherwise after the one `--val`
+    // file): nothing is said.
+    for (args, fits) in
+        [(vec![fit.as_str(), "--val", &val, "--val", &val2], 1), (vec!["--val", &val, &fit, &fit2], 2)]
+    {
+        let (fitted, w) = run(&args);
+        assert_eq!(fitted, fits, "{args:?}");
+        assert!(!w.iter().any(|w| w.contains("follows `--val")), "{args:?}: {w:?}");
+    }
+}
+
+/// A displacement logged in mm under the `displacement_um` header fits (the shape is the same) but
+/// lands λ_s 1000× low, outside the materials' range: the fit says so and names the unit; the
+/// file as logged in µm is fitted without the doubt.
+#[test]
+fn a_displacement_in_the_wrong_unit_is_said_by_the_strain_scale() {
+    let dir = tempfile::tempdir().unwrap();
+    let (fit, _, _) = rig(dir.path());
+    let mm = dir.path().join("fit-mm.csv");
+    let text = std::fs::read_to_string(&fit).unwrap();
+    let mut lines = text.lines();
+    let mut out = format!("{}\n", lines.next().unwrap());
+    for line in lines {
+        let mut cells: Vec<String> = line.split(',').map(str::to_string).collect();
+        let um: f64 = cells[2].parse().unwrap();
+        cells[2] = format!("{}", um / 1000.0);
+        out += &format!("{}\n", cells.join(","));
+    }
+    std::fs::write(&mm, out).unwrap();
+    let warnings = |file: &str| -> Vec<String> {
+        let j = json(&gma(&["fit", "--model", "ja", "--time-limit", "5", "--json", file]));
+        j["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap().to_string()).collect()
+    };
+    let said =
+        |w: &[String]| w.iter().any(|w| w.contains("magnetostriction.lambda_s") && w.contains("in µm"));
+    let w = warnings(mm.to_str().unwrap());
+    assert!(said(&w), "{w:?}");
+    let w = warnings(&fit);
+    assert!(!said(&w), "{w:?}");
 }
 
 /// A Preisach plane (the demo set's ±80 kA/m) far wider than the fields the recordings reach is

@@ -291,6 +291,26 @@ fn two_percent_jitter_is_refused_unless_resampled_and_then_fits() {
     refused(&o, &["gap.csv:501:1:", "more than 5 median steps", "--resample does not bridge"], "gap");
 }
 
+/// Samples `--resample linear` fills in across a gap are said with their count; a file without
+/// gaps gets no such note.
+#[test]
+fn samples_filled_in_across_gaps_are_counted() {
+    let dir = tempfile::tempdir().unwrap();
+    let si = simulated(dir.path());
+    let gap = dir.path().join("gap.csv");
+    let mut r = rows(&si);
+    r.drain(101..104); // three samples missing (data rows 100–102)
+    write_rows(&gap, &r);
+    let note = |file: &Path| {
+        let o = gma(&["compare", "--model", "ja", "--json", "--resample", "linear", path(file)]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stderr).lines().find(|l| l.contains("filled in")).map(str::to_string)
+    };
+    let said = note(&gap).expect("a note for the gap");
+    assert!(said.contains("gap.csv") && said.contains(": 3 were filled in"), "{said}");
+    assert_eq!(note(&si), None);
+}
+
 #[test]
 fn trim_start_drops_the_start_as_cutting_the_rows_would() {
     let dir = tempfile::tempdir().unwrap();

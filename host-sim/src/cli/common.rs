@@ -150,8 +150,10 @@ impl Prepared {
     }
 }
 
-/// The fit files typed right after a `--val` file (`--val a.csv b.csv`, as a shell glob writes
-/// it): `--val` takes one file, so `b.csv` is read as a fit file, which the user may not mean.
+/// The fit files typed right after a `--val` file whose name looks like its sibling
+/// (`--val run-val1.csv run-val2.csv`, as the glob `--val *val*.csv` writes it): `--val` takes
+/// one file, so the second is read as a fit file, which the user may not mean. A differently
+/// named file there (`--val val.csv fit1.csv`, the documented form) is a fit file as typed.
 fn fit_files_after_val(args: &[std::ffi::OsString], fit_files: &[PathBuf]) -> Vec<(PathBuf, PathBuf)> {
     let mut found = Vec::new();
     for (k, arg) in args.iter().enumerate() {
@@ -166,12 +168,26 @@ fn fit_files_after_val(args: &[std::ffi::OsString], fit_files: &[PathBuf]) -> Ve
         };
         if let Some(after) = args.get(next) {
             let after = PathBuf::from(after);
-            if !after.to_string_lossy().starts_with('-') && fit_files.contains(&after) {
+            if !after.to_string_lossy().starts_with('-')
+                && fit_files.contains(&after)
+                && look_alike(&val, &after)
+            {
                 found.push((val, after));
             }
         }
     }
     found
+}
+
+/// Whether two file names look like one pattern's matches: their stems (names without the
+/// extension) share a start or an end of at least three characters (`run-val1`, `run-val2`;
+/// `sine_val`, `chirp_val`).
+fn look_alike(a: &Path, b: &Path) -> bool {
+    let stem = |p: &Path| p.file_stem().map(|s| s.to_string_lossy().chars().collect::<Vec<char>>());
+    let (Some(a), Some(b)) = (stem(a), stem(b)) else { return false };
+    let start = a.iter().zip(&b).take_while(|(x, y)| x == y).count();
+    let end = a.iter().rev().zip(b.iter().rev()).take_while(|(x, y)| x == y).count();
+    start.max(end) >= 3
 }
 
 impl ModelFiles {
@@ -304,12 +320,24 @@ pub fn read_recording(input: Input, max_samples: usize, opts: &ReadOptions) -> R
     let r = read.recording;
     if read.rows > read.kept as u64 {
         eprintln!(
-            "gma: warning: {}: {} samples{}; using the first {} ({:.1} s); raise --max-samples to use more",
+            "gma: warning: {}: {} samples{}; using the first {} ({:.3} s); raise --max-samples to use more",
             r.name,
             read.rows,
             if opts.trim_start_s.is_some() { " after --trim-start" } else { "" },
             read.kept,
             r.duration_s()
+        );
+    }
+    // Gaps bridged by `--resample linear` are data the rig did not record: said.
+    if opts.resample.is_some() && r.len() > read.kept {
+        eprintln!(
+            "gma: note: {}: --resample linear put {} samples onto {} at the median step {:.3e} s: {} were filled in \
+             across gaps by interpolation",
+            r.name,
+            read.kept,
+            r.len(),
+            r.dt_s(),
+            r.len() - read.kept
         );
     }
     Ok(r)

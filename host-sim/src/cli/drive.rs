@@ -85,7 +85,7 @@ pub struct ReferenceArgs {
     /// DC level [µm from rest].
     #[arg(long, default_value_t = 0.0)]
     pub bias_um: f32,
-    /// Frequency [Hz] (0 < f ≤ 1666 Hz at the 10 kHz tick; 0 for a constant).
+    /// Frequency [Hz] (0 < f ≤ 1666.7 Hz, a sixth of the 10 kHz tick; 0 for a constant).
     #[arg(long, default_value_t = 0.0)]
     pub freq_hz: f32,
     #[command(flatten)]
@@ -169,7 +169,7 @@ fn reference(r: &ReferenceArgs) -> Result<Command> {
     if cmd.waveform(cfg.max_reference_um, 1.0 / (6.0 * cfg.current_loop.tick_s)).is_err() {
         bail!(
             "reference --shape {} --amplitude-um {} --bias-um {} --freq-hz {}: out of range (finite, amplitude ≥ 0, \
-             |bias| + amplitude ≤ {} µm, 0 < frequency ≤ {:.0} Hz; a constant has amplitude and frequency 0)",
+             |bias| + amplitude ≤ {} µm, 0 < frequency ≤ {:.1} Hz (a sixth of the tick rate); a constant has amplitude and frequency 0)",
             shape_name(r.shape),
             r.amplitude_um,
             r.bias_um,

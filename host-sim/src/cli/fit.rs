@@ -130,6 +130,9 @@ pub(crate) fn fit_recordings(
     };
     // First the doubts about the inputs (a `--val` file that is a fit file), then the start's.
     warnings.splice(0..0, p.input_warnings.iter().chain(&res.start_moved).cloned());
+    if let Some(w) = fit::strain_scale_doubt(&res.params, constraints) {
+        warnings.push(w);
+    }
     let mut files = rows("fit", fit_files, &res.fit.files);
     let mut nrmse_val = None;
     if !val_files.is_empty() {
