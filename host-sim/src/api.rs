@@ -449,11 +449,13 @@ pub fn compare(
     }
     let (p, _) = params.load(spec)?;
     let (mut rows, mut predictions, mut total) = (Vec::new(), Vec::new(), 0.0);
+    let mut warnings = Vec::new();
     match read_sources(sources, &[], read)?.0 {
         Data::Recordings(recs, _) => {
             for r in &recs {
                 fit::drive_for(spec, r)?;
             }
+            warnings.extend(fit::unresolved_mode(spec, &p, &recs).map(|w| w.to_string()));
             for rec in &recs {
                 let mut sim = fit::simulate(spec, &p, rec)?;
                 let sc = fit::score(spec, rec, &sim);
@@ -491,8 +493,12 @@ pub fn compare(
             }
         }
     }
-    let summary =
-        CompareSummary { model: spec.to_string(), nrmse: total / sources.len() as f64, files: rows };
+    let summary = CompareSummary {
+        model: spec.to_string(),
+        nrmse: total / sources.len() as f64,
+        files: rows,
+        warnings,
+    };
     Ok((summary, predictions))
 }
 

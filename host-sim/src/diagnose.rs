@@ -1239,13 +1239,12 @@ pub fn diagnose(
     if let Some(c) = candidates.first().filter(|c| Some(c.effect) == verdict && c.channel != "displacement") {
         if final_val > before {
             findings.push(format!(
-                "with `{}` added the displacement's validation NRMSE rises from {:.2} % to {:.2} %: `{}` is judged on \
-                 the {} it models (above), where the refit spent its freedom",
-                c.effect,
-                before * 100.0,
-                final_val * 100.0,
-                c.effect,
-                c.channel
+                "with `{effect}` added the displacement's validation NRMSE rises from {before:.2} % to {after:.2} %: \
+                 `{effect}` is judged on the {channel} it models (above), where the refit spent its freedom",
+                effect = c.effect,
+                before = before * 100.0,
+                after = final_val * 100.0,
+                channel = c.channel
             ));
         }
     }

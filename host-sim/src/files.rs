@@ -299,11 +299,43 @@ pub fn check_outputs(outputs: &[&Path], inputs: &[InputId]) -> Result<()> {
     Ok(())
 }
 
-/// Creates `dir` (and its parents) for outputs, and checks that it takes new files.
-pub fn output_folder(dir: &Path) -> Result<()> {
+/// Creates `dir` (and its parents) for outputs, and checks that it takes new files. The folders
+/// it made are removed again, if still empty, unless [`OutputFolder::keep`] is called: a command
+/// that fails on its second input leaves no empty folder behind.
+pub fn output_folder(dir: &Path) -> Result<OutputFolder> {
+    let made: Vec<PathBuf> = dir
+        .ancestors()
+        .take_while(|d| !d.as_os_str().is_empty() && !d.exists())
+        .map(Path::to_path_buf)
+        .collect();
+    let folder = OutputFolder { made };
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create the folder {}", display(dir)))?;
     drop(partial_file(dir)?);
-    Ok(())
+    Ok(folder)
+}
+
+/// The folders [`output_folder`] made, innermost first; removed on drop while empty.
+#[must_use = "the folder is removed again when this is dropped without `keep`"]
+pub struct OutputFolder {
+    made: Vec<PathBuf>,
+}
+
+impl OutputFolder {
+    /// The command succeeded: the folder stays.
+    pub fn keep(mut self) {
+        self.made.clear();
+    }
+}
+
+impl Drop for OutputFolder {
+    fn drop(&mut self) {
+        for d in &self.made {
+            // Only an empty folder is removed; the first that is not ends the walk.
+            if std::fs::remove_dir(d).is_err() {
+                break;
+            }
+        }
+    }
 }
 
 /// Writes `bytes` to `path` through a temporary file and a rename, so that readers never see a

@@ -687,6 +687,41 @@ pub fn strain_scale_doubt(params: &ActuatorParams, constraints: &Constraints) ->
         .then_some(Warning::StrainScaleUnlikely { lambda_s, lo, hi })
 }
 
+/// A mechanical mode that none of `files` can show (above each one's Nyquist frequency) is said:
+/// the mechanics is then a static gain, and a time column in ms read as seconds lands there.
+pub fn unresolved_mode<'a>(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    files: impl IntoIterator<Item = &'a Recording>,
+) -> Option<Warning> {
+    if !spec.has(Effect::MechanicalDynamics) {
+        return None;
+    }
+    mode_above_nyquist(params.mech.natural_frequency_hz as f64, false, files)
+}
+
+/// As [`unresolved_mode`] for the lowest mode the search tries: none can show in `files`, so
+/// `diagnose` cannot judge mechanical dynamics there.
+pub fn unsearchable_mode<'a>(files: impl IntoIterator<Item = &'a Recording>) -> Option<Warning> {
+    let lowest = Effect::MechanicalDynamics.info().params.iter().find(|p| p.key == MODE_FREQUENCY)?.lo;
+    mode_above_nyquist(lowest, true, files)
+}
+
+fn mode_above_nyquist<'a>(
+    natural_frequency_hz: f64,
+    lowest_searched: bool,
+    files: impl IntoIterator<Item = &'a Recording>,
+) -> Option<Warning> {
+    let step_s = files.into_iter().map(Recording::dt_s).filter(|dt| *dt > 0.0).reduce(f64::min)?;
+    let nyquist_hz = 0.5 / step_s;
+    (natural_frequency_hz > nyquist_hz).then_some(Warning::ModeAboveNyquist {
+        natural_frequency_hz,
+        nyquist_hz,
+        step_s,
+        lowest_searched,
+    })
+}
+
 /// [`evaluate_projected`] with λ_s clamped to `lambda_range`.
 fn evaluate_projected_in(
     spec: ModelSpec,

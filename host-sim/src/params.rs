@@ -218,11 +218,44 @@ pub fn parse_file(file: &str, text: &str, spec: ModelSpec) -> Result<ParamFile> 
             })?
         }
     };
-    Actuator::new(spec, &params)
-        .map_err(|e| Located::file(file, format!("{e} (checked for model `{spec}`)")))?;
+    Actuator::new(spec, &params).map_err(|e| {
+        let what = format!("{e} (checked for model `{spec}`)");
+        match line_of(text, e.name()) {
+            Some((line, value)) => Located::at(file, line, None, format!("{what}; found `{}`", echo(value))),
+            // A table the file left out (the demo set's) or a combination of parameters.
+            None => Located::file(file, what),
+        }
+    })?;
     let used = tables_used(spec);
     let defaulted = missing.into_iter().filter(|t| used.contains(t)).collect();
     Ok(ParamFile { params, format_version, defaulted })
+}
+
+/// The line (1-based) and value text of parameter `name` in parameter-file text: `table.key`
+/// under `[table]`, a top-level `key`, or a table's `[name]` header (value empty).
+fn line_of<'t>(text: &'t str, name: &'static str) -> Option<(u64, &'t str)> {
+    // model-core names the second-order amplifier's table by its short name.
+    let table_name = |t: &'static str| if t == "amp2" { "amp_second_order" } else { t };
+    let (table, key) = match name.split_once('.') {
+        Some((t, k)) => (Some(table_name(t)), Some(k)),
+        None => (None, Some(table_name(name))),
+    };
+    let mut current: Option<&str> = None;
+    for (i, line) in text.lines().enumerate() {
+        let body = line.split('#').next().unwrap_or("").trim();
+        if let Some(header) = body.strip_prefix('[').and_then(|h| h.strip_suffix(']')) {
+            current = Some(header.trim());
+            if table.is_none() && current == key {
+                return Some((i as u64 + 1, ""));
+            }
+            continue;
+        }
+        let Some((k, v)) = body.split_once('=') else { continue };
+        if current == table && Some(k.trim()) == key {
+            return Some((i as u64 + 1, v.trim()));
+        }
+    }
+    None
 }
 
 /// `text` with its top-level `format_version` line blanked with spaces: every byte keeps its
@@ -329,6 +362,19 @@ mod tests {
     use super::*;
 
     const FORMAT_1: &str = include_str!("../tests/data/params-format-1.toml");
+
+    #[test]
+    fn a_parameter_is_found_by_its_table_and_key_or_its_header() {
+        let text = "delay_samples = 3\n[mech]\nmass_kg = 0.1 # kg\n\n[amp_second_order]\nk_u = -1.0\n[ja]\nc = 0.2\n";
+        assert_eq!(line_of(text, "delay_samples"), Some((1, "3")));
+        assert_eq!(line_of(text, "mech"), Some((2, "")));
+        assert_eq!(line_of(text, "mech.mass_kg"), Some((3, "0.1")));
+        assert_eq!(line_of(text, "amp2.k_u"), Some((6, "-1.0")));
+        assert_eq!(line_of(text, "ja.c"), Some((8, "0.2")));
+        // Another table's key of the same name, or a table the file left out: no line.
+        assert_eq!(line_of(text, "amp.k_u"), None);
+        assert_eq!(line_of(text, "thermal.tau_s"), None);
+    }
 
     fn spec(text: &str) -> ModelSpec {
         parse_spec(text).unwrap()

@@ -522,8 +522,9 @@ impl TimeCheck {
     fn settle(&mut self, file: &str, col: usize) -> Result<()> {
         let steps: Vec<f64> = self.pending.iter().map(|p| p.1).collect();
         let dt = median(steps);
-        let (lo, hi) = (model_core::DT_MIN_S as f64, model_core::DT_MAX_S as f64);
-        if !(lo..=hi).contains(&dt) {
+        // The model steps in f32: the range is checked, and shown, as model-core states it.
+        let (lo, hi) = (model_core::DT_MIN_S, model_core::DT_MAX_S);
+        if !(lo..=hi).contains(&(dt as f32)) {
             located!(file, self.pending.first().map(|p| p.0), Some(col as u64);
                 "sample period {dt:.3e} s is outside [{lo:e}, {hi:e}] s (is time_s in seconds? a time column \
                  in ms maps with `--column time_s=HEADER:ms`)");

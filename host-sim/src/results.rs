@@ -375,6 +375,8 @@ pub struct CompareSummary {
     pub nrmse: f64,
     /// Per file and channel.
     pub files: Vec<FileScoreRow>,
+    /// Doubts about the comparison (as `fit`'s, text; empty when none).
+    pub warnings: Vec<String>,
 }
 
 impl fmt::Display for CompareSummary {

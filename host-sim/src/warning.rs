@@ -113,7 +113,23 @@ pub enum Warning {
         /// The physical range.
         hi: f64,
     },
+    /// The mechanical mode lies above every recording's Nyquist frequency: no file can show it,
+    /// and the mechanics acts as a static gain (often a time column in ms read as seconds).
+    ModeAboveNyquist {
+        /// `mech.natural_frequency_hz`.
+        natural_frequency_hz: f64,
+        /// Half the fastest file's sample rate [Hz].
+        nyquist_hz: f64,
+        /// That file's sample period [s].
+        step_s: f64,
+        /// `natural_frequency_hz` is the lowest the search tries, not a result or a given value.
+        lowest_searched: bool,
+    },
 }
+
+/// Sample periods from which on a time column may well be in ms read as seconds: 10 ms is
+/// 100 Hz, where a rig logging an actuator's dynamics records at 1–100 kHz.
+const SLOW_STEP_S: f64 = 0.01;
 
 impl Warning {
     /// Whether the result is invalid (nothing may be written from it), not merely doubtful.
@@ -192,6 +208,32 @@ impl fmt::Display for Warning {
                 f,
                 "--time-limit {seconds} s reached: the result is the best found so far, not a converged fit"
             ),
+            Warning::ModeAboveNyquist { natural_frequency_hz, nyquist_hz, step_s, lowest_searched } => {
+                let at = format!("the recordings' Nyquist frequency ({nyquist_hz:.1} Hz, a sample every {step_s} s)");
+                if *lowest_searched {
+                    write!(
+                        f,
+                        "every mechanical mode the search tries (`mech.natural_frequency_hz` from \
+                         {natural_frequency_hz:.0} Hz) lies above {at}: no file can show one, so mechanical \
+                         dynamics cannot be judged"
+                    )?;
+                } else {
+                    write!(
+                        f,
+                        "`mech.natural_frequency_hz` = {natural_frequency_hz:.0} Hz lies above {at}: no file can \
+                         show the mode, so the mechanics acts as a static gain and its frequency and damping are \
+                         not measured"
+                    )?;
+                }
+                if *step_s >= SLOW_STEP_S {
+                    write!(
+                        f,
+                        "; a step this long is rare in an actuator recording: if `time_s` holds milliseconds, \
+                         read it as such (`--column time_s=time_s:ms`)"
+                    )?;
+                }
+                Ok(())
+            }
             Warning::StrainScaleUnlikely { lambda_s, lo, hi } => write!(
                 f,
                 "`magnetostriction.lambda_s` = {lambda_s:.2e} is outside [{lo:.0e}, {hi:.0e}], the range of \

@@ -91,6 +91,41 @@ fn a_failed_run_leaves_the_previous_parameter_file_and_report_alone() {
     assert_eq!(std::fs::read_to_string(&report).unwrap(), "<p>previous report</p>");
 }
 
+/// `compare` makes its `--out-dir` (with any missing parents) before it reads the inputs; when
+/// an input is bad it removes what it made and still empty, and keeps a folder that existed.
+#[test]
+fn a_failed_compare_leaves_no_empty_plot_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("good.csv");
+    let o = Command::new(GMA)
+        .args(["simulate", "--model", "ja", "--duration-s", "0.04", "--out", good.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(&bad, "time_s,current_A,displacement_um\n0,1,x\n").unwrap();
+    let existing = dir.path().join("existing");
+    std::fs::create_dir(&existing).unwrap();
+    let nested = dir.path().join("new").join("plots");
+    for out in [&nested, &existing] {
+        let o = Command::new(GMA)
+            .args(["compare", "--model", "ja", "--out-dir", out.to_str().unwrap()])
+            .args([good.to_str().unwrap(), bad.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(String::from_utf8_lossy(&o.stderr).contains("bad.csv:2:"));
+    }
+    assert!(!dir.path().join("new").exists(), "the folders compare made are left behind");
+    assert!(existing.is_dir() && std::fs::read_dir(&existing).unwrap().next().is_none());
+    let o = Command::new(GMA)
+        .args(["compare", "--model", "ja", "--out-dir", nested.to_str().unwrap(), good.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    assert!(nested.join("good-loop.svg").is_file());
+}
+
 /// Large files stream: reading is bounded by `--max-samples`, not by the file. A 60 MB CSV is
 /// read to its end with a small window; the old whole-file reader needed over 100 MB for it.
 /// (A 1.1 GB file: 31 MB with `--max-samples 200000`, 270 MB at the default 2 000 000, before

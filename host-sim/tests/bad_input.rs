@@ -267,6 +267,14 @@ fn replace_line(text: &str, key: &str, new: &str) -> String {
 fn bad_parameter_files_name_the_file_line_and_parameter_in_every_command() {
     let dir = tempfile::tempdir().unwrap();
     let good = write(dir.path(), "good.csv", &csv(HEADER, &good_rows()));
+    // A value out of range is pointed at by its line (the edits keep every line's number).
+    let demo = toml::to_string(&model_core::ActuatorParams::TERFENOL_DEMO).unwrap();
+    let at = |file: &str, key: &str| {
+        let line = demo.lines().position(|l| l.starts_with(&format!("{key} ="))).unwrap() + 1;
+        format!("{file}:{line}: ")
+    };
+    let (negative_at, ppm_at, nan_at) =
+        (at("negative.toml", "k_a_per_m"), at("ppm.toml", "lambda_s"), at("nan.toml", "alpha"));
     let cases: Vec<(String, Vec<&str>)> = vec![
         (
             params_with(dir.path(), "missing.toml", |t| replace_line(t, "k_a_per_m", "")),
@@ -274,15 +282,15 @@ fn bad_parameter_files_name_the_file_line_and_parameter_in_every_command() {
         ),
         (
             params_with(dir.path(), "negative.toml", |t| replace_line(t, "k_a_per_m", "k_a_per_m = -4000.0")),
-            vec!["negative.toml", "`ja.k_a_per_m` is out of range", "[1, 1e7]"],
+            vec![&negative_at, "`ja.k_a_per_m` is out of range", "[1, 1e7]", "found `-4000.0`"],
         ),
         (
             params_with(dir.path(), "ppm.toml", |t| replace_line(t, "lambda_s", "lambda_s = 1000.0")),
-            vec!["ppm.toml", "`magnetostriction.lambda_s` is out of range", "not ppm"],
+            vec![&ppm_at, "`magnetostriction.lambda_s` is out of range", "not ppm", "found `1000.0`"],
         ),
         (
             params_with(dir.path(), "nan.toml", |t| replace_line(t, "alpha", "alpha = nan")),
-            vec!["nan.toml", "`ja.alpha` is not a finite number"],
+            vec![&nan_at, "`ja.alpha` is not a finite number", "found `nan`"],
         ),
         (
             params_with(dir.path(), "text.toml", |t| replace_line(t, "c", "c = \"0.2\"")),

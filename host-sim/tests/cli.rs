@@ -301,6 +301,49 @@ fn a_displacement_in_the_wrong_unit_is_said_by_the_strain_scale() {
     assert!(!said(&w), "{w:?}");
 }
 
+/// A time column in ms read as seconds (a 10 kHz file becomes 10 Hz) puts the mechanical mode
+/// above every file's Nyquist frequency: compare and fit say so, with the `--column` that reads
+/// it right; read right, nothing is said.
+#[test]
+fn a_time_column_in_ms_is_said_by_the_mode_above_nyquist() {
+    let dir = tempfile::tempdir().unwrap();
+    let (fit, _, _) = rig(dir.path());
+    let ms = dir.path().join("fit-ms.csv");
+    let text = std::fs::read_to_string(&fit).unwrap();
+    let mut lines = text.lines();
+    let mut out = format!("{}\n", lines.next().unwrap());
+    for line in lines {
+        let (t, rest) = line.split_once(',').unwrap();
+        out += &format!("{},{rest}\n", t.parse::<f64>().unwrap() * 1000.0);
+    }
+    std::fs::write(&ms, out).unwrap();
+    let plots = dir.path().join("plots");
+    let warnings = |args: &[&str]| -> Vec<String> {
+        let j = json(&gma(args));
+        j["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap().to_string()).collect()
+    };
+    let said = |w: &[String]| {
+        w.iter().any(|w| {
+            w.contains("above the recordings' Nyquist frequency (5.0 Hz") && w.contains("time_s=time_s:ms")
+        })
+    };
+    let ms = ms.to_str().unwrap();
+    let compare = ["compare", "--model", "ja+mech", "--json", "--out-dir", plots.to_str().unwrap(), ms];
+    let w = warnings(&compare);
+    assert!(said(&w), "{w:?}");
+    let w = warnings(&["fit", "--model", "ja+mech", "--time-limit", "5", "--json", ms]);
+    assert!(said(&w), "{w:?}");
+    let w = warnings(&[&compare[..], &["--column", "time_s=time_s:ms"]].concat());
+    assert!(w.is_empty(), "{w:?}");
+    // diagnose tries the mechanics whatever the model: its first finding says it cannot judge it.
+    let j = json(&gma(&["diagnose", "--model", "ja", "--time-limit", "5", "--json", ms]));
+    let first = j["findings"][0].as_str().unwrap_or_default();
+    assert!(
+        first.contains("every mechanical mode the search tries") && first.contains("time_s=time_s:ms"),
+        "{j}"
+    );
+}
+
 /// A Preisach plane (the demo set's ±80 kA/m) far wider than the fields the recordings reach is
 /// said by fit (JSON and stderr) and diagnose, with the value to set; set so, nothing is said.
 #[test]

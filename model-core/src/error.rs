@@ -12,6 +12,15 @@ pub enum ParamError {
     OutOfRange(&'static str, &'static str),
 }
 
+impl ParamError {
+    /// The parameter (as in parameter files, e.g. `mech.damping_ratio`) or table (`mech`) at fault.
+    pub fn name(&self) -> &'static str {
+        match self {
+            ParamError::NonFinite(name) | ParamError::OutOfRange(name, _) => name,
+        }
+    }
+}
+
 impl fmt::Display for ParamError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {

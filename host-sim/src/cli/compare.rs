@@ -68,7 +68,7 @@ pub fn run(a: &CompareArgs) -> Result<()> {
     let inputs = open_all(&a.files)?;
     let ids: Vec<_> = inputs.iter().chain(params_input.as_ref()).map(Input::id).collect();
     let (p, source) = params::load_input(params_input, spec, "the compared parameters")?;
-    output_folder(&a.out_dir)?;
+    let folder = output_folder(&a.out_dir)?;
     let stems = unique_stems(&a.files);
     if a.max_lag == 0 || a.max_lag > analysis::MAX_LAG_LIMIT {
         anyhow::bail!(
@@ -96,6 +96,7 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         }
         Data::Recordings(files, _) => compare_recordings(a, spec, &p, &files, &stems)?,
     };
+    folder.keep();
     say!(a.json, "{summary}");
     if a.json {
         out!("{}", super::merged_json(&summary, &super::context_json(&source, &Provenance::now(None)))?);
@@ -184,7 +185,12 @@ fn compare_recordings(
         channels[0].analysis = summary;
         rows.extend(channels);
     }
-    let summary = CompareSummary { model: spec.to_string(), nrmse: total / recs.len() as f64, files: rows };
+    let warnings: Vec<String> = fit::unresolved_mode(spec, p, recs).iter().map(ToString::to_string).collect();
+    for w in &warnings {
+        eprintln!("gma: warning: {w}");
+    }
+    let summary =
+        CompareSummary { model: spec.to_string(), nrmse: total / recs.len() as f64, files: rows, warnings };
     let table = match (&a.out_csv, csv) {
         (Some(path), Some(w)) => Some((
             path.as_path(),
@@ -279,6 +285,11 @@ fn compare_loops(
         a,
         &charts,
         None,
-        CompareSummary { model: spec.to_string(), nrmse: total / files.len() as f64, files: rows },
+        CompareSummary {
+            model: spec.to_string(),
+            nrmse: total / files.len() as f64,
+            files: rows,
+            warnings: Vec::new(),
+        },
     )
 }

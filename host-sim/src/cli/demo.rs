@@ -29,7 +29,7 @@ pub fn run(a: &DemoArgs) -> Result<()> {
     let t = std::time::Instant::now();
     let j = a.json;
     let case = cases::demo();
-    output_folder(&a.out_dir)?;
+    let folder = output_folder(&a.out_dir)?;
     say!(
         j,
         "gma demo: a SIMULATED Terfenol-D rig with {}, unknown to the engineer, whose model is `{}`.",
@@ -137,5 +137,6 @@ pub fn run(a: &DemoArgs) -> Result<()> {
             })
         );
     }
+    folder.keep();
     Ok(())
 }

@@ -41,6 +41,10 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
         check_laws(p.spec)?;
     }
     let mut d = diagnose(p.spec, &p.init, fit_files, val_files, p.opts)?;
+    // Mechanics is always a candidate (or in the model): said first when no file can show it.
+    if let Some(w) = crate::fit::unsearchable_mode(fit_files.iter().chain(val_files)) {
+        d.findings.insert(0, w.to_string());
+    }
     if a.ja_variants {
         d.compare_ja_variants(p.spec, &p.init, fit_files, val_files, p.opts)?;
     }

@@ -133,6 +133,7 @@ pub(crate) fn fit_recordings(
     if let Some(w) = fit::strain_scale_doubt(&res.params, constraints) {
         warnings.push(w);
     }
+    warnings.extend(fit::unresolved_mode(p.spec, &res.params, fit_files.iter().chain(val_files)));
     let mut files = rows("fit", fit_files, &res.fit.files);
     let mut nrmse_val = None;
     if !val_files.is_empty() {
