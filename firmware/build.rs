@@ -45,7 +45,13 @@ fn write_drive_params(out: &std::path::Path) {
             let text = fs::read_to_string(&path).unwrap_or_else(|e| panic!("GMA_PARAMS={path}: {e}"));
             (format!("GMA_PARAMS={path}"), read_params(&path, &text))
         }
-        Err(_) => ("the demo parameter set".to_string(), model_core::ActuatorParams::TERFENOL_DEMO),
+        Err(_) => {
+            println!(
+                "cargo:warning=no GMA_PARAMS: the drive embeds the built-in demo set for `{spec}` (a simulated \
+                 Terfenol-D rod, not your actuator); GMA_PARAMS=$PWD/p.toml from `gma fit` (firmware/README.md)"
+            );
+            ("the demo parameter set".to_string(), model_core::ActuatorParams::TERFENOL_DEMO)
+        }
     };
     // Refused here rather than on the board (bridge never enabled): the set against its model,
     // and the compensator's model that gma-drive's controller builds from it.

@@ -109,6 +109,23 @@ pub struct FileAnalysis {
     pub dt_s: f64,
 }
 
+/// Pearson correlation of two equally long series (0 when either is constant).
+pub fn correlation(x: &[f64], y: &[f64]) -> f64 {
+    let n = x.len() as f64;
+    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
+    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+    for (a, b) in x.iter().zip(y) {
+        sxy += (a - mx) * (b - my);
+        sxx += (a - mx) * (a - mx);
+        syy += (b - my) * (b - my);
+    }
+    if sxx > 0.0 && syy > 0.0 {
+        (sxy / (sxx * syy).sqrt()).clamp(-1.0, 1.0)
+    } else {
+        0.0
+    }
+}
+
 fn rms(v: impl Iterator<Item = f64> + Clone) -> Option<f64> {
     let n = v.clone().count();
     (n > 0).then(|| (v.map(|x| x * x).sum::<f64>() / n as f64).sqrt())

@@ -368,19 +368,7 @@ fn joule_heat(current: &[f64], dt: f64) -> Vec<f64> {
 
 /// R² of the least-squares fit of `r` by `a·f + b` (one regressor and a constant).
 fn r2(r: &[f64], f: &[f64]) -> f64 {
-    let n = r.len() as f64;
-    let (mr, mf) = (r.iter().sum::<f64>() / n, f.iter().sum::<f64>() / n);
-    let (mut sff, mut srf, mut srr) = (0.0, 0.0, 0.0);
-    for (a, b) in r.iter().zip(f) {
-        sff += (b - mf) * (b - mf);
-        srf += (a - mr) * (b - mf);
-        srr += (a - mr) * (a - mr);
-    }
-    if sff <= 0.0 || srr <= 0.0 {
-        0.0
-    } else {
-        (srf * srf / (sff * srr)).clamp(0.0, 1.0)
-    }
+    crate::analysis::correlation(r, f).powi(2)
 }
 
 /// Pooled evidence R² of `effect`'s signature over the files (variance-weighted mean).
@@ -850,26 +838,18 @@ pub fn diagnose(
         let (f, a) = drive_stats(rec);
         per_file.push((f, a, rec.duration_s(), sc.nrmse));
     }
-    let trend = |key: fn(&(f64, f64, f64, f64)) -> f64, what: &str, unit: &str| -> Option<String> {
-        let mut v = per_file.clone();
-        v.sort_by(|a, b| key(a).total_cmp(&key(b)));
-        let (lo, hi) = (v.first()?, v.last()?);
-        if key(hi) <= 1.5 * key(lo) {
+    // The extreme files along each quantity, the error at each, and the quantity's values there.
+    let trend = |key: fn(&(f64, f64, f64, f64)) -> f64, what: &'static str, unit: &'static str| {
+        let mut order: Vec<usize> = (0..per_file.len()).collect();
+        order.sort_by(|&a, &b| key(&per_file[a]).total_cmp(&key(&per_file[b])));
+        let (lo, hi) = (*order.first()?, *order.last()?);
+        let (a, b) = (&per_file[lo], &per_file[hi]);
+        if key(b) <= 1.5 * key(a) {
             return None;
         }
-        let ratio = hi.3 / lo.3.max(1e-12);
-        (!(0.67..=1.5).contains(&ratio)).then(|| {
-            format!(
-                "error {} with {what}: {:.2} % at {:.3} {unit} → {:.2} % at {:.3} {unit}",
-                if ratio > 1.0 { "grows" } else { "falls" },
-                lo.3 * 100.0,
-                key(lo),
-                hi.3 * 100.0,
-                key(hi)
-            )
-        })
+        let ratio = b.3 / a.3.max(1e-12);
+        (!(0.67..=1.5).contains(&ratio)).then_some(Trend { lo, hi, what, unit, from: key(a), to: key(b) })
     };
-    findings.extend(trend(|r| r.0, "excitation frequency", "Hz"));
     // The amplitude is the current's where a file has one, else the command's.
     let drive_unit = match (
         all_files.iter().all(|r| r.current_a.is_some()),
@@ -879,8 +859,16 @@ pub fn diagnose(
         (_, true) => "V (command_V)",
         _ => "A (current_A) or V (command_V, files without a current)",
     };
-    findings.extend(trend(|r| r.1, "drive amplitude (rms)", drive_unit));
-    findings.extend(trend(|r| r.2, "record length", "s"));
+    let trends: Vec<Trend> = [
+        trend(|r| r.0, "excitation frequency", "Hz"),
+        trend(|r| r.1, "drive amplitude (rms)", drive_unit),
+        trend(|r| r.2, "record length", "s"),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    let names: Vec<&str> = all_files.iter().map(|r| r.name.as_str()).collect();
+    findings.extend(trend_findings(&trends, &per_file, &names));
     evidence_phase.finish();
 
     // Refit every candidate (in parallel), warm-started from the baseline.
@@ -1292,6 +1280,69 @@ pub fn diagnose(
     })
 }
 
+/// The files at the two ends of one quantity (frequency, amplitude, length) whose errors differ.
+struct Trend {
+    lo: usize,
+    hi: usize,
+    what: &'static str,
+    unit: &'static str,
+    from: f64,
+    to: f64,
+}
+
+/// One finding per pair of files: trends read from the same two files are one observation (the
+/// files differ in those quantities at once and cannot say which the error follows).
+fn trend_findings(trends: &[Trend], per_file: &[(f64, f64, f64, f64)], names: &[&str]) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut done = vec![false; trends.len()];
+    for (i, t) in trends.iter().enumerate() {
+        if done[i] {
+            continue;
+        }
+        let same: Vec<&Trend> = trends
+            .iter()
+            .enumerate()
+            .filter(|(_, u)| (u.lo, u.hi) == (t.lo, t.hi) || (u.lo, u.hi) == (t.hi, t.lo))
+            .map(|(j, u)| {
+                done[j] = true;
+                u
+            })
+            .collect();
+        let (a, b) = (per_file[t.lo].3, per_file[t.hi].3);
+        if let [only] = same.as_slice() {
+            out.push(format!(
+                "error {} with {}: {:.2} % at {:.3} {unit} → {:.2} % at {:.3} {unit}",
+                if b > a { "grows" } else { "falls" },
+                only.what,
+                a * 100.0,
+                only.from,
+                b * 100.0,
+                only.to,
+                unit = only.unit
+            ));
+        } else {
+            // Each quantity's values in the files' order (from the first file to the second).
+            let how: Vec<String> = same
+                .iter()
+                .map(|u| {
+                    let (x, y) = if u.lo == t.lo { (u.from, u.to) } else { (u.to, u.from) };
+                    format!("{} {x:.3} → {y:.3} {}", u.what, u.unit)
+                })
+                .collect();
+            out.push(format!(
+                "error {:.2} % in {} against {:.2} % in {}, files that differ in {} at once: they cannot say which \
+                 the error follows (a file that changes one of them alone can)",
+                a * 100.0,
+                names[t.lo],
+                b * 100.0,
+                names[t.hi],
+                how.join(", ")
+            ));
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1314,7 +1365,7 @@ mod tests {
             let mut rec = Recording::with_time(name, n, dt);
             let w = 2.0 * std::f64::consts::PI * f_hz * dt;
             rec.current_a = Some((0..n).map(|k| 0.3 + amp_a * (w * k as f64).sin()).collect());
-            let (sim, _) = fit::simulate_drive(heating, &p, &rec).unwrap();
+            let (sim, _) = fit::simulate_drive(heating, &p, &rec, fit::InitialState::Demagnetized).unwrap();
             // Uniform noise: 0.01 µm and 0.02 °C rms.
             let mut noisy = |v: f64, rms: f64| v + rng.random_range(-1.0..1.0) * rms * 3f64.sqrt();
             rec.displacement_um = Some(sim.displacement_um.iter().map(|y| noisy(y + 5.0, 0.01)).collect());

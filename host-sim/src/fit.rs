@@ -194,15 +194,11 @@ pub fn simulate_drive(
     spec: ModelSpec,
     params: &ActuatorParams,
     rec: &Recording,
+    initial: InitialState,
 ) -> Result<(Simulation, Drive)> {
-    // Nothing measured to estimate a pre-history from: the model's own rest state.
-    let prep = Prepared {
-        rec,
-        dt_s: rec.dt_s(),
-        drive: model_input(spec, rec)?,
-        initial: InitialState::Demagnetized,
-        memo: None,
-    };
+    // Nothing measured to estimate a pre-history from: the state given (compare's estimate), or
+    // the model's own rest state.
+    let prep = Prepared { rec, dt_s: rec.dt_s(), drive: model_input(spec, rec)?, initial, memo: None };
     // Every channel: `gma simulate` writes the field and magnetization as a search coil's flux.
     Ok((run_model(spec, params, &prep, true)?, prep.drive))
 }

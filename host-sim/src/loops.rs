@@ -104,6 +104,19 @@ fn unit_factor(header: &str) -> Option<(char, f64)> {
     Some((quantity, f))
 }
 
+/// For a header that is not a recording's: a hint when its cells name loop quantities (H, B, M
+/// with units, or the loop columns) in a layout a loop file does not have.
+pub(crate) fn loop_header_hint(headers: &csv::StringRecord) -> Option<String> {
+    let loop_like =
+        headers.iter().filter(|c| unit_factor(c).is_some() || c.trim() == "field_A_per_m").count();
+    (loop_like > 0).then(|| {
+        ": if this is a magnetization loop, a loop file has two columns, H then B or M (e.g. \
+         `H(A/m),B(T)`), or named columns `field_A_per_m` with `flux_density_T` or \
+         `magnetization_A_per_m` (docs/formats.md)"
+            .to_string()
+    })
+}
+
 /// The separator a loop file's first line uses: a tab, a comma, or (refused by [`parse`] with a
 /// hint, but still a loop file) a semicolon when the line has no comma.
 fn separator(first: &str) -> char {
@@ -181,6 +194,10 @@ pub fn parse(name: &str, text: &str) -> Result<LoopFile> {
         (0, 1, 1.0, 1.0, LoopChannel::FluxDensity)
     } else {
         lines.next();
+        if let Some((a, b)) = duplicate(&cells) {
+            located!(name, Some(1), Some(b as u64 + 1);
+                "column `{}` appears twice (columns {} and {})", echo(cells[a]), a + 1, b + 1);
+        }
         let find = |n: &str| cells.iter().position(|c| *c == n);
         if let Some(h) = find("field_A_per_m") {
             match (find("flux_density_T"), find("magnetization_A_per_m")) {
@@ -208,6 +225,10 @@ pub fn parse(name: &str, text: &str) -> Result<LoopFile> {
     };
     let ncols = cells.len();
     let (mut h, mut v) = (Vec::new(), Vec::new());
+    let what = match channel {
+        LoopChannel::FluxDensity => "B",
+        LoopChannel::Magnetization => "M",
+    };
     for (idx, line) in lines {
         let lineno = idx + 1;
         let f: Vec<&str> = line.split(sep).map(str::trim).collect();
@@ -224,13 +245,96 @@ pub fn parse(name: &str, text: &str) -> Result<LoopFile> {
             }
             Ok(x)
         };
-        h.push(num(hi)? * hf);
-        v.push(num(vi)? * vf);
+        let (hv, vv) = (num(hi)? * hf, num(vi)? * vf);
+        if let Err(why) = plausible_point(channel, hv, vv) {
+            located!(name, Some(lineno as u64), None; "{why}");
+        }
+        h.push(hv);
+        v.push(vv);
     }
     if h.len() < 5 {
         located!(name; "{} points; a loop fit needs at least 5", h.len());
     }
-    Ok(LoopFile { name: name.to_string(), h, value: v, channel })
+    let f = LoopFile { name: name.to_string(), h, value: v, channel };
+    let (lo, hi) =
+        f.value.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), x| (l.min(*x), u.max(*x)));
+    if hi - lo <= 1e-9 * lo.abs().max(hi.abs()) {
+        located!(name; "{what} does not vary (every point {lo:e}): a loop's {what} follows the field");
+    }
+    // A ferro- or ferrimagnet's magnetization rises with the field along a loop as a whole.
+    let rho = crate::analysis::correlation(&f.h, &f.magnetization());
+    if rho < -0.5 {
+        located!(name;
+            "M falls as H rises (correlation {rho:.2}): a magnetic material's magnetization follows the \
+             field; is the search coil or its integrator wired reversed, or the field's sign? negate {what} \
+             (or H) in the file");
+    }
+    Ok(f)
+}
+
+/// A loop driven symmetrically (H from −H_max to H_max within 5 %) whose magnetization is not
+/// (its centre over 5 % of its half-swing off zero): a ferromagnet's symmetric loop is centred,
+/// so it is most often a search coil integrator's offset, which the loop fit does not remove.
+fn off_centre(f: &LoopFile) -> Option<Warning> {
+    let span =
+        |v: &[f64]| v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), x| (l.min(*x), u.max(*x)));
+    let (h_lo, h_hi) = span(&f.h);
+    let (m_lo, m_hi) = span(&f.magnetization());
+    let symmetric_drive = (h_hi + h_lo).abs() <= 0.05 * (h_hi - h_lo);
+    let share = (m_hi + m_lo) / (m_hi - m_lo);
+    (symmetric_drive && share.abs() > 0.05).then(|| Warning::LoopOffCentre {
+        file: f.name.clone(),
+        centre_a_per_m: 0.5 * (m_hi + m_lo),
+        share,
+        flux_density: f.channel == LoopChannel::FluxDensity,
+    })
+}
+
+/// Largest plausible field magnitude [A/m] (the strongest pulsed lab fields, ≈ 100 T).
+const PLAUSIBLE_H: f64 = 1e8;
+/// Largest plausible flux density [T] (as for a recording's `flux_density_T`).
+const PLAUSIBLE_B: f64 = 1e2;
+/// Largest plausible magnetization [A/m]: no material saturates beyond ≈ 2e6 A/m (Fe–Co:
+/// μ0 M_s = 2.45 T), so five times that is a unit mistake.
+const PLAUSIBLE_M: f64 = 1e7;
+
+/// Whether one point (H [A/m] and the file's B [T] or M [A/m]) is physically plausible; the
+/// error says why not, and which unit mistake it looks like.
+fn plausible_point(channel: LoopChannel, h: f64, value: f64) -> std::result::Result<(), String> {
+    if h.abs() > PLAUSIBLE_H {
+        return Err(format!(
+            "H = {h:e} A/m is beyond ±{PLAUSIBLE_H:e} A/m, not a plausible field: is H in A/m (a header \
+             `H(kA/m)` or `H(Oe)` converts)?"
+        ));
+    }
+    let m = match channel {
+        LoopChannel::FluxDensity => {
+            if value.abs() > PLAUSIBLE_B {
+                return Err(format!(
+                    "B = {value:e} T is beyond ±{PLAUSIBLE_B:e} T, not a plausible flux density: is B in T (a \
+                     header `B(mT)` or `B(G)` converts)?"
+                ));
+            }
+            value / MU0 - h
+        }
+        LoopChannel::Magnetization => value,
+    };
+    if m.abs() > PLAUSIBLE_M {
+        let source = match channel {
+            LoopChannel::FluxDensity => format!("M = B/μ0 − H = {m:e} A/m"),
+            LoopChannel::Magnetization => format!("M = {m:e} A/m"),
+        };
+        return Err(format!(
+            "{source} is beyond ±{PLAUSIBLE_M:e} A/m, more than any material (Fe–Co saturates at 1.95e6 \
+             A/m): are B in T (or M in A/m) and H in A/m? (headers such as `B(mT)`, `M(kA/m)`, `H(Oe)` convert)"
+        ));
+    }
+    Ok(())
+}
+
+/// The first pair of equal header cells (their indices), if any.
+fn duplicate(cells: &[&str]) -> Option<(usize, usize)> {
+    (0..cells.len()).find_map(|b| (0..b).find(|&a| cells[a] == cells[b]).map(|a| (a, b)))
 }
 
 /// Coercivity, remanence and saturation read from a loop (NaN when the path does not show it).
@@ -604,6 +708,18 @@ pub fn fit(
     start: &ActuatorParams,
     opts: SearchOptions,
 ) -> Result<LoopFit> {
+    fit_shown(model, files, start, opts, false)
+}
+
+/// As [`fit`], showing its progress on stderr when `show` (a bar on a terminal, else a line
+/// every 5 s: a fit on a long loop takes minutes).
+pub fn fit_shown(
+    model: LoopModel,
+    files: &[LoopFile],
+    start: &ActuatorParams,
+    opts: SearchOptions,
+    show: bool,
+) -> Result<LoopFit> {
     let h_max = files.iter().flat_map(|f| f.h.iter()).fold(0.0f64, |a, v| a.max(v.abs()));
     let m_max = files.iter().flat_map(|f| f.magnetization()).fold(0.0f64, |a, v| a.max(v.abs()));
     if !(h_max > 0.0 && m_max > 0.0) {
@@ -643,7 +759,17 @@ pub fn fit(
         Err(_) => Vec::new(),
     };
     starts.extend(model.start_from_features(files).map(|values| Start::new(values, ())));
-    let found = minimize(&bounds, &cost, None, &(), &starts, &PLAN, opts, &Progress::new("", 0, false))?;
+    // The bar's length: both swarms, then each local search's simplex runs (at most).
+    let d = bounds.len() as u64;
+    let swarm_iters = ((PLAN.swarm_iters * opts.effort).round() as u64).max(2);
+    let simplex = ((PLAN.simplex_iters_per_dim * d as f64 * opts.effort).round() as u64).max(20);
+    let planned =
+        PLAN.swarms as u64 * (PLAN.particles.0 + PLAN.particles.1 * d as usize) as u64 * (swarm_iters + 1)
+            + PLAN.local_searches as u64 * PLAN.local.len() as u64 * simplex;
+    let points: usize = files.iter().map(|f| f.h.len()).sum();
+    let progress = Progress::new(&format!("loop fit ({points} points)"), planned, show);
+    let found = minimize(&bounds, &cost, None, &(), &starts, &PLAN, opts, &progress)?;
+    progress.finish_and_clear();
     let mut best = model.model_values(&found.best);
     let mut warnings = Vec::new();
     let mut per_file = Vec::new();
@@ -672,7 +798,9 @@ pub fn fit(
     if !kept {
         for (b, v) in bounds.iter().zip(&found.best) {
             if b.at_edge(*v) {
-                warnings.push(Warning::AtEdge { param: b.name, value: *v, lo: b.lo, hi: b.hi });
+                // The search's own coordinate for J–A's α, said as the ratio it is.
+                let param = if b.name == "mean_field_ratio" { "α·M_s/(3a)" } else { b.name };
+                warnings.push(Warning::AtEdge { param, value: *v, lo: b.lo, hi: b.hi });
                 if b.name == "mean_field_ratio" && *v > 0.0 {
                     warnings.push(Warning::SquarerThanJa { ratio: *v });
                 }
@@ -682,6 +810,8 @@ pub fn fit(
     if let Some(ratio) = multivalued(model, &best) {
         warnings.push(Warning::Multivalued { ratio });
     }
+    // First: an offset explains the edge and squareness warnings it causes.
+    warnings.splice(0..0, files.iter().filter_map(off_centre));
     let start = match start_score {
         Ok(e) => StartScore { nrmse: Some(mean(&e)), kept, refused: None, seen_mode: None },
         Err(why) => StartScore { nrmse: None, kept: false, refused: Some(why), seen_mode: None },
@@ -727,17 +857,29 @@ pub fn chart(f: &LoopFile, m: &[f64], label: &str) -> crate::plots::Chart {
 
 /// A self-contained HTML page for a loop fit: parameters, warnings, per-file error, loops
 /// overlaid, and coercivity, remanence and largest |M| side by side.
-pub fn html(spec: &str, fit: &LoopFit, files: &[LoopFile]) -> Result<String> {
+pub fn html(
+    spec: &str,
+    fit: &LoopFit,
+    files: &[LoopFile],
+    val_files: &[LoopFile],
+) -> Result<(String, Vec<f64>)> {
     use std::fmt::Write as _;
-    let h_max = files.iter().flat_map(|f| f.h.iter()).fold(0.0f64, |a, v| a.max(v.abs()));
+    let reach = |fs: &[&LoopFile]| fs.iter().flat_map(|f| f.h.iter()).fold(0.0f64, |a, v| a.max(v.abs()));
+    // As `gma fit` scores them: the fit files at their own reach, validation files at the reach
+    // of all files.
+    let h_fit = reach(&files.iter().collect::<Vec<_>>());
+    let h_all = reach(&files.iter().chain(val_files).collect::<Vec<_>>());
     let mut h = String::new();
     let _ = write!(
         h,
         "<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>gma loop fit — {spec}</title>\
          <style>body{{font-family:system-ui,sans-serif;max-width:1000px;margin:2em auto}}table{{border-collapse:collapse}}\
          td,th{{border:1px solid #ccc;padding:4px 8px;text-align:right}}td.l{{text-align:left}}.w{{color:#b00}}</style>\
-         </head><body><h1>Magnetization loop fit — <code>{spec}</code></h1><p>{} evaluations.</p><table><tr><th>parameter</th><th>value</th></tr>",
-        fit.evaluations
+         </head><body><h1>Magnetization loop fit — <code>{spec}</code></h1><p>{} evaluations; {} fit file(s), {} \
+         validation file(s) (scored, never fitted).</p><table><tr><th>parameter</th><th>value</th></tr>",
+        fit.evaluations,
+        files.len(),
+        val_files.len()
     );
     for (n, v) in &fit.params {
         let _ = write!(h, "<tr><td class=l>{n}</td><td>{v:.5e}</td></tr>");
@@ -746,13 +888,20 @@ pub fn html(spec: &str, fit: &LoopFit, files: &[LoopFile]) -> Result<String> {
     for w in &fit.warnings {
         let _ = write!(h, "<p class=w>warning: {}</p>", w.to_string().replace('<', "&lt;"));
     }
-    for (f, e) in files.iter().zip(&fit.nrmse) {
+    let mut val_nrmse = Vec::new();
+    let roles =
+        files.iter().map(|f| (f, "fit", h_fit)).chain(val_files.iter().map(|f| (f, "validation", h_all)));
+    for (f, role, h_max) in roles {
         let m =
             run(fit.model, &fit.values(), &f.h, h_max).map_err(|e| anyhow::anyhow!("{}: {}", f.name, e.0))?;
+        let e = nrmse(&f.value, &f.channel_from_m(&m));
+        if role == "validation" {
+            val_nrmse.push(e);
+        }
         let (a, b) = (features(&f.h, &f.magnetization()), features(&f.h, &m));
         let _ = write!(
             h,
-            "<h2>{}</h2><p>NRMSE {:.3} % ({})</p><table><tr><th></th><th>measured</th><th>model</th></tr>\
+            "<h2>{} ({role})</h2><p>NRMSE {:.3} % ({})</p><table><tr><th></th><th>measured</th><th>model</th></tr>\
              <tr><td class=l>coercivity H_c [A/m]</td><td>{:.4e}</td><td>{:.4e}</td></tr>\
              <tr><td class=l>remanence M_r [A/m]</td><td>{:.4e}</td><td>{:.4e}</td></tr>\
              <tr><td class=l>largest |M| [A/m]</td><td>{:.4e}</td><td>{:.4e}</td></tr></table>{}",
@@ -769,5 +918,5 @@ pub fn html(spec: &str, fit: &LoopFit, files: &[LoopFile]) -> Result<String> {
         );
     }
     h.push_str("</body></html>");
-    Ok(h)
+    Ok((h, val_nrmse))
 }

@@ -73,8 +73,9 @@ pub fn record(
     tick_s: f64,
     stop: Arc<AtomicBool>,
 ) -> Result<RecordSummary> {
-    let (lo, hi) = (model_core::DT_MIN_S as f64, model_core::DT_MAX_S as f64);
-    if !(tick_s.is_finite() && (lo..=hi).contains(&tick_s)) {
+    // Checked, and shown, as model-core states its range (f32).
+    let (lo, hi) = (model_core::DT_MIN_S, model_core::DT_MAX_S);
+    if !(tick_s.is_finite() && (lo..=hi).contains(&(tick_s as f32))) {
         bail!("--tick-s must be in [{lo:e}, {hi:e}] s, got {tick_s}");
     }
     let decimals = crate::recording::time_decimals(tick_s);
@@ -147,10 +148,15 @@ pub fn record(
     (sum.frames, sum.lost, sum.corrupt, sum.replies) = (d.frames, d.lost, d.corrupt, d.replies);
     if sum.files.is_empty() {
         bail!(
-            "no telemetry frames in the stream ({} frames, {} corrupt chunks, {} invalid frames){}; is it the drive's UART capture?",
+            "no recording in the stream: no run of 3 or more consecutive telemetry frames ({} valid frames, {} of \
+             them in runs too short, {} lost from the sequence, {} replies, {} invalid frames, {} corrupt chunks){}; \
+             is it the drive's UART capture, taken with the port raw (`stty -F PORT 4000000 raw -echo`)?",
             d.frames,
-            d.corrupt,
+            sum.short,
+            d.lost,
+            d.replies,
             sum.invalid,
+            d.corrupt,
             if sum.ending == Ending::Stopped { ", stopped by a signal" } else { "" }
         );
     }

@@ -227,6 +227,9 @@ impl Recording {
                 .map(|(_, name)| format!(" — the file seems to separate columns with {name}; measurement files are comma-separated"))
                 .or_else(|| case_hint(&headers, "time_s"))
                 .unwrap_or_default();
+            if let Some(loop_hint) = crate::loops::loop_header_hint(&headers) {
+                located!(file, Some(1), None; "no `time_s` column (header has: {}){loop_hint}", echo(&joined));
+            }
             located!(file, Some(1), None;
                 "no `time_s` column (header has: {}); recognised columns are {}{hint}; a time column of \
                  another name or unit can be mapped, e.g. `--column time_s=time_ms:ms`",

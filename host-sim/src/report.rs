@@ -399,7 +399,13 @@ pub fn provenance_html(p: &Provenance, params: &ParamSource) -> String {
         format!(" (demo values for: {})", esc(&params.parameters_defaulted.join(", ")))
     };
     row(&mut h, "start parameters", &format!("{}{defaulted}", esc(&params.parameters_source)));
-    h.push_str("</table><table><tr><th class=l>input</th><th>bytes</th><th class=l>SHA-256</th></tr>");
+    h.push_str("</table>");
+    if p.inputs.is_empty() {
+        // `gma demo` reads nothing: its recordings are simulated in the run (by the seed above).
+        h.push_str("<p>No input files: the recordings were SIMULATED in this run.</p>");
+        return h;
+    }
+    h.push_str("<table><tr><th class=l>input</th><th>bytes</th><th class=l>SHA-256</th></tr>");
     for i in &p.inputs {
         let _ = write!(
             h,

@@ -27,7 +27,8 @@
 //! directions are reported as not identifiable (no σ, no interval, no correlations).
 //!
 //! Intervals (95 %): θ ± 1.96 σ for linear parameters; θ·exp(±1.96 σ_ln) for log-scaled ones
-//! (log-normal; their `std` is the delta-method θ·σ_ln).
+//! (log-normal; their `std` is the delta-method θ·σ_ln); both clipped to the parameter's search
+//! range, its physical range.
 
 use anyhow::{bail, Result};
 use model_core::ModelSpec;
@@ -280,12 +281,17 @@ pub fn analyse(spec: ModelSpec, res: &FitResult, files: &[Recording]) -> Result<
             let value = res.identified.iter().find(|(n, _)| *n == f.name()).map_or((f.get)(&base), |x| x.1);
             let sd = cov[(k, k)].sqrt();
             let sd = (sd.is_finite()).then_some(sd);
+            // An interval never leaves the parameter's physical range (the search range): a
+            // ratio in [0, 1) at 0 ± 0.16 has the interval [0, 0.32], not [−0.32, 0.32].
+            let within = |(a, b): (f64, f64)| (a.max(f.bound.lo), b.min(f.bound.hi));
             let (std, std_ln, ci95) = match sd {
                 None => (None, None, None),
-                Some(s) if f.bound.log => {
-                    (Some(value * s), Some(s), Some((value * (-1.96 * s).exp(), value * (1.96 * s).exp())))
-                }
-                Some(s) => (Some(s), None, Some((value - 1.96 * s, value + 1.96 * s))),
+                Some(s) if f.bound.log => (
+                    Some(value * s),
+                    Some(s),
+                    Some(within((value * (-1.96 * s).exp(), value * (1.96 * s).exp()))),
+                ),
+                Some(s) => (Some(s), None, Some(within((value - 1.96 * s, value + 1.96 * s)))),
             };
             ParamUncertainty { bound: f.bound, value, std, std_ln, ci95 }
         })

@@ -125,6 +125,17 @@ pub enum Warning {
         /// `natural_frequency_hz` is the lowest the search tries, not a result or a given value.
         lowest_searched: bool,
     },
+    /// A loop driven symmetrically whose magnetization is not centred on zero.
+    LoopOffCentre {
+        /// The loop file.
+        file: String,
+        /// (max M + min M)/2 [A/m].
+        centre_a_per_m: f64,
+        /// That centre over the half-swing (max M − min M)/2.
+        share: f64,
+        /// The file gives B (the offset is then μ0 × the centre in B).
+        flux_density: bool,
+    },
 }
 
 /// Sample periods from which on a time column may well be in ms read as seconds: 10 ms is
@@ -168,6 +179,12 @@ impl fmt::Display for Warning {
                 "not identifiable from these files: {} (Jacobian condition {condition:.2e}); their \
                  values are one of many that fit equally well: --fix them or add data that excite them",
                 params.iter().map(|p| format!("`{p}`")).collect::<Vec<_>>().join(", ")
+            ),
+            Warning::StartKept { start_nrmse, found_nrmse } if !found_nrmse.is_finite() => write!(
+                f,
+                "the search ended where the model cannot be integrated along every file: the start values \
+                 ({:.3} % NRMSE) are returned",
+                start_nrmse * 100.0
             ),
             Warning::StartKept { start_nrmse, found_nrmse } => write!(
                 f,
@@ -233,6 +250,20 @@ impl fmt::Display for Warning {
                     )?;
                 }
                 Ok(())
+            }
+            Warning::LoopOffCentre { file, centre_a_per_m, share, flux_density } => {
+                let offset = if *flux_density {
+                    format!("B offset by {:.4} T", centre_a_per_m * 4e-7 * std::f64::consts::PI)
+                } else {
+                    format!("M offset by {centre_a_per_m:.4e} A/m")
+                };
+                write!(
+                    f,
+                    "{file}: the field is symmetric but the loop is not centred ({offset}: {:.0} % of its half-swing): \
+                     a ferromagnet's symmetric loop is, so it is most likely an integrator's offset or drift, which \
+                     the loop fit does not remove; subtract it from the file and fit again",
+                    share.abs() * 100.0
+                )
             }
             Warning::StrainScaleUnlikely { lambda_s, lo, hi } => write!(
                 f,

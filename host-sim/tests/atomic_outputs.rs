@@ -47,15 +47,21 @@ fn a_killed_simulate_never_leaves_a_truncated_csv() {
     }
 }
 
-#[test]
-fn a_failed_run_leaves_the_previous_parameter_file_and_report_alone() {
-    let dir = tempfile::tempdir().unwrap();
-    let good = dir.path().join("good.csv");
+/// A short SIMULATED recording `good.csv` in `dir`.
+fn simulated(dir: &std::path::Path) -> std::path::PathBuf {
+    let good = dir.join("good.csv");
     let o = Command::new(GMA)
         .args(["simulate", "--model", "ja", "--duration-s", "0.04", "--out", good.to_str().unwrap()])
         .output()
         .unwrap();
     assert!(o.status.success());
+    good
+}
+
+#[test]
+fn a_failed_run_leaves_the_previous_parameter_file_and_report_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = simulated(dir.path());
     let bad = dir.path().join("bad.csv");
     let mut text = std::fs::read_to_string(&good).unwrap();
     text.push_str("0.0400,abc,1\n");
@@ -96,12 +102,7 @@ fn a_failed_run_leaves_the_previous_parameter_file_and_report_alone() {
 #[test]
 fn a_failed_compare_leaves_no_empty_plot_folder() {
     let dir = tempfile::tempdir().unwrap();
-    let good = dir.path().join("good.csv");
-    let o = Command::new(GMA)
-        .args(["simulate", "--model", "ja", "--duration-s", "0.04", "--out", good.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(o.status.success());
+    let good = simulated(dir.path());
     let bad = dir.path().join("bad.csv");
     std::fs::write(&bad, "time_s,current_A,displacement_um\n0,1,x\n").unwrap();
     let existing = dir.path().join("existing");

@@ -501,6 +501,103 @@ fn malformed_loop_files_are_refused_with_their_line() {
     }
 }
 
+/// A symmetric loop whose B is offset (a search coil integrator's) is fitted with a warning that
+/// names the offset, first among the warnings; centred, nothing is said.
+#[test]
+fn an_off_centre_loop_is_said_with_its_offset() {
+    let dir = tempfile::tempdir().unwrap();
+    let loop_with = |offset_t: f64| -> String {
+        let mut s = String::from("H(A/m),B(T)\n");
+        for up in [true, false] {
+            for k in 0..60 {
+                let h = if up { -10e3 + 20e3 * k as f64 / 59.0 } else { 10e3 - 20e3 * k as f64 / 59.0 };
+                let b = 1.5 * ((h + if up { -800.0 } else { 800.0 }) / 2e3).tanh()
+                    + 4e-7 * std::f64::consts::PI * h;
+                s.push_str(&format!("{h},{}\n", b + offset_t));
+            }
+        }
+        s
+    };
+    let warnings = |name: &str, offset: f64| -> Vec<String> {
+        let p = write(dir.path(), name, loop_with(offset).as_bytes());
+        let o = gma(&["fit", "--model", "ja", "--time-limit", "3", "--json", &p]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        j["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap().to_string()).collect()
+    };
+    let w = warnings("offset.csv", 0.12);
+    assert!(w.first().is_some_and(|w| w.contains("not centred (B offset by 0.1200 T")), "{w:?}");
+    let w = warnings("centred.csv", 0.0);
+    assert!(!w.iter().any(|w| w.contains("not centred")), "{w:?}");
+}
+
+/// A loop in the wrong unit, without variation or with its sign reversed is refused by every
+/// command that reads it, with what looks wrong (never fitted to a NaN or a 1e13 % NRMSE).
+#[test]
+fn implausible_loop_files_are_refused_with_the_likely_mistake() {
+    let dir = tempfile::tempdir().unwrap();
+    // A steel-like loop: H ±10 kA/m, B = 1.5 tanh((H ∓ 500)/2000) T, 40 points a branch.
+    let branch = |up: bool| -> Vec<(f64, f64)> {
+        (0..40)
+            .map(|k| {
+                let h = if up { -10e3 + 20e3 * k as f64 / 39.0 } else { 10e3 - 20e3 * k as f64 / 39.0 };
+                (h, 1.5 * ((h + if up { -500.0 } else { 500.0 }) / 2e3).tanh())
+            })
+            .collect()
+    };
+    let points: Vec<(f64, f64)> = branch(true).into_iter().chain(branch(false)).collect();
+    let file = |header: &str, f: &dyn Fn(f64, f64) -> (f64, f64)| -> String {
+        let mut s = format!("{header}\n");
+        for &(h, b) in &points {
+            let (x, y) = f(h, b);
+            s.push_str(&format!("{x},{y}\n"));
+        }
+        s
+    };
+    let good = write(dir.path(), "good.csv", file("H(A/m),B(T)", &|h, b| (h, b)).as_bytes());
+    let o = gma(&["fit", "--model", "anhysteretic", "--time-limit", "5", &good]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = dir.path().join("plots");
+    for (name, text, expected) in [
+        (
+            "mT.csv",
+            file("H(A/m),B(T)", &|h, b| (h, b * 1e3)),
+            vec!["mT.csv:2:", "not a plausible flux density", "B(mT)"],
+        ),
+        (
+            "m_small_mT.csv",
+            file("field_A_per_m,flux_density_T", &|h, b| (h, b * 30.0)),
+            vec!["m_small_mT.csv:2:", "M = B/μ0 − H", "more than any material"],
+        ),
+        (
+            "h_in_ma.csv",
+            file("H(A/m),B(T)", &|h, b| (h * 1e5, b)),
+            vec!["h_in_ma.csv:2:", "not a plausible field"],
+        ),
+        ("flat.csv", file("H(A/m),B(T)", &|h, _| (h, 1.0)), vec!["flat.csv:", "B does not vary"]),
+        (
+            "reversed.csv",
+            file("H(A/m),B(T)", &|h, b| (h, -b)),
+            vec!["reversed.csv:", "M falls as H rises", "negate B"],
+        ),
+        (
+            "twice.csv",
+            file("field_A_per_m,field_A_per_m", &|h, b| (h, b)),
+            vec!["twice.csv:1:2:", "appears twice"],
+        ),
+        (
+            "three.csv",
+            file("H(A/m),B(T),T(C)", &|h, b| (h, b)),
+            vec!["three.csv:1:", "if this is a magnetization loop"],
+        ),
+        ("swapped.csv", file("B(T),H(A/m)", &|h, b| (b, h)), vec!["swapped.csv:1:", "H then B or M"]),
+    ] {
+        let p = write(dir.path(), name, text.as_bytes());
+        refused(&gma(&["fit", "--model", "ja", &p]), &expected, name);
+        refused(&gma(&["compare", "--model", "ja", "--out-dir", out.to_str().unwrap(), &p]), &expected, name);
+    }
+}
+
 fn frame_bytes(seq: u32, displacement_um: f32) -> Vec<u8> {
     use gma_control::telemetry::{Frame, MAX_ENCODED};
     let f = Frame { seq, reference_um: 1.0, command_v: 2.0, current_a: 0.5, displacement_um, faults: 0 };
@@ -565,7 +662,7 @@ fn record_counts_every_fault_in_the_stream_and_never_writes_a_bad_row() {
     // A stream without a single frame is an error, not an empty file.
     let junk = write(dir.path(), "junk.bin", &[0x55; 4000]);
     let o = gma(&["record", "--input", &junk, "--out", dir.path().join("none.csv").to_str().unwrap()]);
-    refused(&o, &["junk.bin", "no telemetry frames"], "record on junk");
+    refused(&o, &["junk.bin", "no recording in the stream"], "record on junk");
     assert!(!dir.path().join("none.csv").exists());
 }
 

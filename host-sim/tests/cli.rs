@@ -688,10 +688,24 @@ fn loop_files_fit_the_magnetization_stage_and_compare_reads_coercivity() {
     assert!(hm > 1000.0 && (hc / hm - 1.0).abs() < 0.05, "coercivity measured {hm} vs model {hc}");
     assert!(plots.join("rod-loop.svg").exists());
     let html = dir.path().join("loop.html");
-    let o = gma(&["report", "--model", "ja", "-o", html.to_str().unwrap(), path.to_str().unwrap()]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // A minor loop of the same rod validates: scored on the page and in the JSON as `fit` scores it.
+    let minor = dir.path().join("minor.csv");
+    let h_minor: Vec<f64> = h.iter().map(|h| 0.3 * h).collect();
+    let m_minor = loops::run(LoopModel::JilesAtherton(JaVariant::Bulk), &truth, &h_minor, 1.0e5).unwrap();
+    let mut text = String::from("H(A/m),M(A/m)\n");
+    for (h, m) in h_minor.iter().zip(&m_minor) {
+        text.push_str(&format!("{h},{m}\n"));
+    }
+    std::fs::write(&minor, text).unwrap();
+    let (fit_args, report_args) = (["fit", "--model", "ja", "--json"], ["report", "--model", "ja", "--json"]);
+    let tail = ["--val", minor.to_str().unwrap(), path.to_str().unwrap()];
+    let fitted = json(&gma(&[&fit_args[..], &tail].concat()));
+    let r = json(&gma(&[&report_args[..], &["-o", html.to_str().unwrap()], &tail].concat()));
+    let val = r["nrmse_val"][0].as_f64().unwrap();
+    assert!((val - fitted["nrmse_val"].as_f64().unwrap()).abs() < 1e-9 && val < 0.1, "{r}\n{fitted}");
     let page = std::fs::read_to_string(&html).unwrap();
     assert!(page.contains("coercivity") && page.contains("<svg"));
+    assert!(page.contains("minor.csv (validation)") && page.contains("rod.tsv (fit)"), "{page}");
     // The loop's parameters seed a displacement fit (`--init`).
     let o = gma(&["fit", "--help"]);
     assert!(String::from_utf8_lossy(&o.stdout).contains("--init"));

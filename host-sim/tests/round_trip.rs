@@ -59,7 +59,7 @@ proptest! {
         let args = SimulateArgs {
             model: model.into(), params: None, waveform, freq_hz, amplitude, bias, duration_s, noise_um,
             quantum_um, offset_um, oversample, eddy_model: EddyModel::Distributed, no_current: false,
-            search_coil, flux_noise_mt: 0.5, seed: 7, out: out.clone(), drive: None, json: false, read: ReadArgs::default(),
+            search_coil, flux_noise_mt: 0.5, seed: 7, out: out.clone(), drive: None, initial_excursion: None, json: false, read: ReadArgs::default(),
         };
         match run(&args) {
             Err(e) => {
@@ -97,7 +97,7 @@ proptest! {
         match host_sim::record::record(Box::new(std::io::Cursor::new(bytes)), &out, tick_s, stop) {
             Err(e) => {
                 let msg = format!("{e:#}");
-                prop_assert!(msg.contains("--tick-s") || msg.contains("no telemetry frames"), "{msg}");
+                prop_assert!(msg.contains("--tick-s") || msg.contains("no recording in the stream"), "{msg}");
             }
             Ok(sum) => {
                 let mut rows = 0;

@@ -113,6 +113,102 @@ fn a_drive_run_reproduces_the_plant_on_the_plants_own_drive() {
     assert!(rms / range < 0.01, "NRMSE {:.3} %", 100.0 * rms / range);
 }
 
+/// compare estimates each file's initial magnetic state; given that state, `simulate --drive`
+/// runs the model compare scored: the same NRMSE (offset removed as compare removes it), where
+/// the default demagnetised start differs.
+#[test]
+fn the_initial_state_compare_estimated_gives_the_run_compare_scored() {
+    let dir = tempfile::tempdir().unwrap();
+    // A rig that does not start where the model boots: a biased sine that starts at its top.
+    let rig = dir.path().join("rig.csv");
+    let o = gma(&[
+        "simulate",
+        "--model",
+        "ja",
+        "--freq-hz",
+        "30",
+        "--duration-s",
+        "0.1",
+        "--bias",
+        "1.5",
+        "--amplitude",
+        "1.2",
+        "--noise-um",
+        "0.05",
+        "--out",
+        rig.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", err(&o));
+    let mut params = model_core::ActuatorParams::TERFENOL_DEMO;
+    params.ja.k_a_per_m *= 1.5; // not the rig's set: the fit of the state matters
+    let p = dir.path().join("p.toml");
+    std::fs::write(&p, toml::to_string(&params).unwrap()).unwrap();
+    let plots = dir.path().join("plots");
+    let o = gma(&[
+        "compare",
+        "--model",
+        "ja",
+        "--params",
+        p.to_str().unwrap(),
+        "--json",
+        "--out-dir",
+        plots.to_str().unwrap(),
+        rig.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", err(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let (compared, excursion) = (
+        j["files"][0]["nrmse"].as_f64().unwrap(),
+        j["files"][0]["initial_excursion_a_per_m"].as_f64().unwrap(),
+    );
+    let nrmse_of = |extra: &[&str]| -> f64 {
+        let out = dir.path().join("run.csv");
+        let mut args = vec![
+            "simulate",
+            "--model",
+            "ja",
+            "--params",
+            p.to_str().unwrap(),
+            "--drive",
+            rig.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        args.extend(["--out", out.to_str().unwrap()]);
+        let o = gma(&args);
+        assert!(o.status.success(), "{}", err(&o));
+        let (measured, model) = (read_csv(&rig), read_csv(&out));
+        let (y, m) = (col(&measured, "displacement_um"), col(&model, "displacement_um"));
+        let offset = y.iter().zip(m).map(|(a, b)| a - b).sum::<f64>() / y.len() as f64;
+        let rms =
+            (y.iter().zip(m).map(|(a, b)| (a - b - offset).powi(2)).sum::<f64>() / y.len() as f64).sqrt();
+        rms / (y.iter().fold(f64::MIN, |a, &b| a.max(b)) - y.iter().fold(f64::MAX, |a, &b| a.min(b)))
+    };
+    let x = excursion.to_string();
+    let given = nrmse_of(&["--initial-excursion", &x]);
+    // The CSV rounds the model to f32: the same run to that precision.
+    assert!((given - compared).abs() <= 1e-4 * compared, "simulate {given} against compare {compared}");
+    let demagnetised = nrmse_of(&[]);
+    assert!(
+        (demagnetised - compared).abs() > 1e-3 * compared,
+        "the state made no difference: {demagnetised}"
+    );
+    refused(
+        &gma(&[
+            "simulate",
+            "--model",
+            "ja",
+            "--drive",
+            rig.to_str().unwrap(),
+            "--initial-excursion",
+            "nan",
+            "--out",
+            "x.csv",
+        ]),
+        &["--initial-excursion"],
+        "a NaN state",
+    );
+}
+
 #[test]
 fn mapped_columns_and_the_command_drive() {
     let dir = tempfile::tempdir().unwrap();

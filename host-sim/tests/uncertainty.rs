@@ -74,6 +74,11 @@ fn the_95_percent_intervals_cover_the_true_parameters() {
                     let free = host_sim::params::free_params(spec, host_sim::params::Given::default());
                     let true_value = (free.iter().find(|f| f.name() == p.bound.name).unwrap().get)(&t);
                     let (lo, hi) = p.ci95.expect("identifiable");
+                    assert!(
+                        lo >= p.bound.lo && hi <= p.bound.hi,
+                        "{}: [{lo}, {hi}] leaves its range",
+                        p.bound.name
+                    );
                     let sd = if p.bound.log { p.std_ln.unwrap() } else { p.std.unwrap() };
                     let err = if p.bound.log { (p.value / true_value).ln() } else { p.value - true_value };
                     (p.bound.name, lo <= true_value && true_value <= hi, err / sd)

@@ -24,8 +24,8 @@ pub struct DriveArgs {
 /// Where an encoded command goes.
 #[derive(Args)]
 pub struct Target {
-    /// Where the frame goes: a serial device already set up with `stty` (e.g. /dev/ttyACM0,
-    /// 115200 8N1 raw), a file (appended to, so a sequence of commands builds a script), or `-`
+    /// Where the frame goes: a serial device already set up with `stty` (the board's port:
+    /// `stty -F /dev/ttyACM0 4000000 raw -echo`, 4 Mbaud 8N1), a file (appended to, so a sequence of commands builds a script), or `-`
     /// for stdout.
     #[arg(long, short, default_value = "-")]
     pub out: PathBuf,
@@ -263,10 +263,15 @@ fn replies(r: &RepliesArgs) -> Result<()> {
             "armed": reply.armed,
         }));
     }
-    if d.corrupt + d.refused > 0 {
+    // A capture of the board's line holds its telemetry too: skipping those frames is normal.
+    if d.refused > 0 {
+        eprintln!("gma: note: {name}: {} frames that are not replies (telemetry) skipped", d.refused);
+    }
+    if d.corrupt > 0 {
         eprintln!(
-            "gma: warning: {name}: {} corrupt chunks and {} frames that are not replies skipped",
-            d.corrupt, d.refused
+            "gma: warning: {name}: {} corrupt chunks skipped (COBS, length or CRC failures: a noisy line, or a \
+             port not set raw)",
+            d.corrupt
         );
     }
     if r.json {

@@ -190,7 +190,7 @@ pub(crate) fn fit_loops(
         true,
         &format!("fitting the magnetization model `{spec}` to {} loop file(s)", fit_files.len()),
     );
-    let mut res = loops::fit(model, fit_files, &p.init, p.search_options())?;
+    let mut res = loops::fit_shown(model, fit_files, &p.init, p.search_options(), true)?;
     res.warnings.splice(0..0, p.input_warnings.iter().cloned());
     let mut files: Vec<FileScoreRow> = fit_files
         .iter()

@@ -12,7 +12,9 @@ use crate::record::{self, Ending};
 /// Options of `gma record`.
 #[derive(Args)]
 pub struct RecordArgs {
-    /// The captured byte stream (`-` for stdin), e.g. `cat /dev/ttyACM0 > stream.bin`.
+    /// The captured byte stream (`-` for stdin), e.g. `cat /dev/ttyACM0 > stream.bin` after
+    /// `stty -F /dev/ttyACM0 4000000 raw -echo` (a port left in its default mode rewrites and
+    /// echoes bytes).
     #[arg(long, short)]
     pub input: PathBuf,
     /// Output CSV (segments after gaps get `-2`, `-3`, … suffixes; each file appears only when

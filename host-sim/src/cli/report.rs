@@ -34,15 +34,20 @@ pub fn run(a: &ReportArgs) -> Result<()> {
     let provenance_section = report::provenance_html(&provenance, &p.params_source);
     let extra = super::context_json(&p.params_source, &provenance);
     match &p.data {
-        Data::Loops(files, _) => {
-            let res =
-                loops::fit(loops::LoopModel::from_spec(spec, &p.init)?, files, &p.init, p.search_options())?;
-            let page = loops::html(&spec.to_string(), &res, files)?;
+        Data::Loops(files, val_files) => {
+            let res = loops::fit_shown(
+                loops::LoopModel::from_spec(spec, &p.init)?,
+                files,
+                &p.init,
+                p.search_options(),
+                true,
+            )?;
+            let (page, nrmse_val) = loops::html(&spec.to_string(), &res, files, val_files)?;
             write_atomic(&a.out, report::with_sections(page, &provenance_section).as_bytes())?;
             a.mf.warn_if_time_limited(res.time_limited);
             say!(j, "loop report written to {}", display(&a.out));
             if j {
-                let result = json!({"report": display(&a.out), "nrmse": res.nrmse, "warnings": p.input_warnings.iter().chain(&res.warnings).map(|w| w.to_string()).collect::<Vec<_>>(),
+                let result = json!({"report": display(&a.out), "nrmse": res.nrmse, "nrmse_val": nrmse_val, "warnings": p.input_warnings.iter().chain(&res.warnings).map(|w| w.to_string()).collect::<Vec<_>>(),
                            "time_limit_reached": res.time_limited});
                 out!("{}", super::merged_json(&result, &extra)?);
             }

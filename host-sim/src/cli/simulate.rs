@@ -64,13 +64,19 @@ pub struct SimulateArgs {
     /// lag). Excludes the waveform options; the reading options below apply to this file.
     #[arg(long, value_name = "FILE", conflicts_with_all = DRIVE_EXCLUDES)]
     pub drive: Option<PathBuf>,
+    /// With `--drive`: the rod's initial magnetic state, as the pre-history excursion above the
+    /// bias field [A/m] — the value `gma compare --json` reports for the file
+    /// (`files[].initial_excursion_a_per_m`), so that the run is the one compare scored. Default:
+    /// demagnetised (hysteretic laws only; other models have no magnetic memory).
+    #[arg(long, value_name = "A_PER_M", requires = "drive", allow_negative_numbers = true)]
+    pub initial_excursion: Option<f64>,
     /// Excitation waveform.
     #[arg(long, value_enum, default_value = "sine")]
     pub waveform: Waveform,
     /// Excitation frequency [Hz] (end frequency of a chirp, highest tone of a multisine).
     #[arg(long, default_value_t = 50.0)]
     pub freq_hz: f64,
-    /// Amplitude: coil current [A], or command [V] when the model has `amp`.
+    /// Amplitude (≥ 0): coil current [A], or command [V] when the model has `amp`.
     #[arg(long, default_value_t = 1.0)]
     pub amplitude: f64,
     /// DC bias added to the excitation [A] or [V].
@@ -118,6 +124,9 @@ pub struct SimulateArgs {
     #[command(flatten)]
     pub read: ReadArgs,
 }
+
+/// Largest `--initial-excursion` accepted [A/m] (the loop files' plausible field).
+const MAX_EXCURSION_A_PER_M: f64 = 1e8;
 
 /// The options that make the waveform, which `--drive` replaces.
 const DRIVE_EXCLUDES: [&str; 7] =
@@ -231,7 +240,12 @@ fn run_on_drive(
     measured: &Recording,
     name: &str,
 ) -> Result<(Recording, Drive)> {
-    let (sim, drive) = fit::simulate_drive(spec, p, measured)?;
+    let initial = match a.initial_excursion {
+        None => fit::InitialState::Demagnetized,
+        Some(x) if x.is_finite() && x.abs() <= MAX_EXCURSION_A_PER_M => fit::InitialState::Excursion(x),
+        Some(x) => bail!("--initial-excursion {x}: give a field in A/m within ±{MAX_EXCURSION_A_PER_M:e}"),
+    };
+    let (sim, drive) = fit::simulate_drive(spec, p, measured, initial)?;
     let current = match drive {
         Drive::Current => measured.current_a.clone(),
         Drive::CommandIdeal | Drive::CommandDynamic => Some(sim.current_a),
@@ -296,10 +310,15 @@ fn run_waveform(
     if a.freq_hz < MIN_FREQ_HZ {
         bail!("--freq-hz must be at least {MIN_FREQ_HZ} Hz (one cycle in 1000 s), got {}", a.freq_hz);
     }
-    for (name, v) in [("--amplitude", a.amplitude), ("--bias", a.bias)] {
-        if !(v.is_finite() && v.abs() <= MAX_DRIVE) {
-            bail!("{name} must be within ±{MAX_DRIVE:e} (A, or V with `amp`), got {v}");
-        }
+    if !(a.amplitude.is_finite() && (0.0..=MAX_DRIVE).contains(&a.amplitude)) {
+        bail!(
+            "--amplitude must be in [0, {MAX_DRIVE:e}] (A, or V with `amp`), got {}: a magnitude (a waveform's sign \
+             is its phase)",
+            a.amplitude
+        );
+    }
+    if !(a.bias.is_finite() && a.bias.abs() <= MAX_DRIVE) {
+        bail!("--bias must be within ±{MAX_DRIVE:e} (A, or V with `amp`), got {}", a.bias);
     }
     if a.freq_hz > 0.5 / dt {
         bail!(
