@@ -40,7 +40,7 @@ pub struct FitArgs {
 pub fn run(a: &FitArgs) -> Result<()> {
     let outputs: Vec<&std::path::Path> = a.params_out.as_deref().into_iter().collect();
     let mut p = a.mf.prepare(&outputs)?;
-    let (summary, params, warnings) = match &p.data {
+    let (mut summary, params, mut warnings) = match &p.data {
         Data::Loops(fit_files, val_files) => {
             if !(a.fix.is_empty() && a.bound.is_empty()) {
                 bail!(
@@ -55,12 +55,17 @@ pub fn run(a: &FitArgs) -> Result<()> {
             fit_recordings(&p, fit_files, val_files, &c)?
         }
     };
+    // The time limit is a doubt like the others: on stderr and in the JSON's `warnings` too.
+    if summary.time_limit_reached {
+        let w = Warning::TimeLimit { seconds: a.mf.time_limit.unwrap_or(f64::NAN) };
+        summary.warnings.get_or_insert_with(Vec::new).push(w.to_string());
+        warnings.push(w);
+    }
     let j = a.mf.json;
     say!(j, "{summary}");
     for w in &warnings {
         eprintln!("gma: warning: {w}");
     }
-    a.mf.warn_if_time_limited(summary.time_limit_reached);
     // An invalid result is an error: nothing is written, and --json gets the error object.
     let invalid: Vec<String> = warnings.iter().filter(|w| w.invalidates()).map(|w| w.to_string()).collect();
     if !invalid.is_empty() {
