@@ -271,6 +271,26 @@ fn a_fit_file_typed_after_a_val_file_is_said() {
     }
 }
 
+/// `file` written to `out` with column `col` multiplied by `factor` (a unit mistake), as a path.
+fn with_column_scaled(file: &str, out: std::path::PathBuf, col: usize, factor: f64) -> String {
+    let text = std::fs::read_to_string(file).unwrap();
+    let mut lines = text.lines();
+    let mut scaled = format!("{}\n", lines.next().unwrap());
+    for line in lines {
+        let mut cells: Vec<String> = line.split(',').map(str::to_string).collect();
+        cells[col] = format!("{}", cells[col].parse::<f64>().unwrap() * factor);
+        scaled += &format!("{}\n", cells.join(","));
+    }
+    std::fs::write(&out, scaled).unwrap();
+    out.to_str().unwrap().to_string()
+}
+
+/// The `warnings` of a command's JSON.
+fn warnings_of(args: &[&str]) -> Vec<String> {
+    let j = json(&gma(args));
+    j["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap().to_string()).collect()
+}
+
 /// A displacement logged in mm under the `displacement_um` header fits (the shape is the same) but
 /// lands λ_s 1000× low, outside the materials' range: the fit says so and names the unit; the
 /// file as logged in µm is fitted without the doubt.
@@ -278,24 +298,11 @@ fn a_fit_file_typed_after_a_val_file_is_said() {
 fn a_displacement_in_the_wrong_unit_is_said_by_the_strain_scale() {
     let dir = tempfile::tempdir().unwrap();
     let (fit, _, _) = rig(dir.path());
-    let mm = dir.path().join("fit-mm.csv");
-    let text = std::fs::read_to_string(&fit).unwrap();
-    let mut lines = text.lines();
-    let mut out = format!("{}\n", lines.next().unwrap());
-    for line in lines {
-        let mut cells: Vec<String> = line.split(',').map(str::to_string).collect();
-        let um: f64 = cells[2].parse().unwrap();
-        cells[2] = format!("{}", um / 1000.0);
-        out += &format!("{}\n", cells.join(","));
-    }
-    std::fs::write(&mm, out).unwrap();
-    let warnings = |file: &str| -> Vec<String> {
-        let j = json(&gma(&["fit", "--model", "ja", "--time-limit", "5", "--json", file]));
-        j["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap().to_string()).collect()
-    };
+    let mm = with_column_scaled(&fit, dir.path().join("fit-mm.csv"), 2, 1e-3);
+    let warnings = |file: &str| warnings_of(&["fit", "--model", "ja", "--time-limit", "5", "--json", file]);
     let said =
         |w: &[String]| w.iter().any(|w| w.contains("magnetostriction.lambda_s") && w.contains("in µm"));
-    let w = warnings(mm.to_str().unwrap());
+    let w = warnings(&mm);
     assert!(said(&w), "{w:?}");
     let w = warnings(&fit);
     assert!(!said(&w), "{w:?}");
@@ -308,26 +315,15 @@ fn a_displacement_in_the_wrong_unit_is_said_by_the_strain_scale() {
 fn a_time_column_in_ms_is_said_by_the_mode_above_nyquist() {
     let dir = tempfile::tempdir().unwrap();
     let (fit, _, _) = rig(dir.path());
-    let ms = dir.path().join("fit-ms.csv");
-    let text = std::fs::read_to_string(&fit).unwrap();
-    let mut lines = text.lines();
-    let mut out = format!("{}\n", lines.next().unwrap());
-    for line in lines {
-        let (t, rest) = line.split_once(',').unwrap();
-        out += &format!("{},{rest}\n", t.parse::<f64>().unwrap() * 1000.0);
-    }
-    std::fs::write(&ms, out).unwrap();
+    let ms = with_column_scaled(&fit, dir.path().join("fit-ms.csv"), 0, 1e3);
     let plots = dir.path().join("plots");
-    let warnings = |args: &[&str]| -> Vec<String> {
-        let j = json(&gma(args));
-        j["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap().to_string()).collect()
-    };
+    let warnings = warnings_of;
     let said = |w: &[String]| {
         w.iter().any(|w| {
             w.contains("above the recordings' Nyquist frequency (5.0 Hz") && w.contains("time_s=time_s:ms")
         })
     };
-    let ms = ms.to_str().unwrap();
+    let ms = ms.as_str();
     let compare = ["compare", "--model", "ja+mech", "--json", "--out-dir", plots.to_str().unwrap(), ms];
     let w = warnings(&compare);
     assert!(said(&w), "{w:?}");
