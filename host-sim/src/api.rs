@@ -237,13 +237,24 @@ impl ReadSettings {
 /// Reads one measurement CSV as the CLI does.
 pub fn read_recording(path: PathBuf, read: &ReadSettings) -> Result<Recording> {
     let opts = read.options()?;
-    common::read_recording(Input::open(&path)?, read.max_samples, &opts)
+    let (rec, cut) = common::read_recording(Input::open(&path)?, read.max_samples, &opts)?;
+    warn(cut);
+    Ok(rec)
+}
+
+/// Says on stderr that `--max-samples` cut a file short (readers without a warnings list).
+fn warn(cut: Option<Warning>) {
+    if let Some(w) = cut {
+        eprintln!("gma: warning: {w}");
+    }
 }
 
 /// Reads one magnetization-loop file as the CLI does.
 pub fn read_loop(path: PathBuf, read: &ReadSettings) -> Result<LoopFile> {
     read.options()?;
-    loops::read_input(Input::open(&path)?, read.max_samples)
+    let (f, cut) = loops::read_input(Input::open(&path)?, read.max_samples)?;
+    warn(cut);
+    Ok(f)
 }
 
 /// Reads fit and validation sources: files as the CLI reads them (recordings or loops, never a

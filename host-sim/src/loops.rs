@@ -150,23 +150,25 @@ const MAX_LOOP_BYTES: u64 = 256 << 20;
 
 /// Reads a loop file (`-` is standard input); errors name the file and line.
 pub fn read(path: &Path) -> Result<LoopFile> {
-    read_input(Input::open(path)?, usize::MAX)
+    Ok(read_input(Input::open(path)?, usize::MAX)?.0)
 }
 
-/// Reads an opened loop file, keeping at most `max_points` points (with a warning).
-pub fn read_input(input: Input, max_points: usize) -> Result<LoopFile> {
+/// Reads an opened loop file, keeping at most `max_points` points (and saying so in the
+/// warning returned).
+pub fn read_input(input: Input, max_points: usize) -> Result<(LoopFile, Option<Warning>)> {
     let name = input.name.clone();
     let text = input.into_text(MAX_LOOP_BYTES)?;
     let mut f = parse(&name, &text)?;
-    if f.h.len() > max_points {
-        eprintln!(
-            "gma: warning: {name}: {} points; using the first {max_points} (raise --max-samples to use more)",
-            f.h.len()
-        );
-        f.h.truncate(max_points);
-        f.value.truncate(max_points);
-    }
-    Ok(f)
+    let cut = (f.h.len() > max_points).then_some(Warning::Truncated {
+        file: name,
+        found: f.h.len() as u64,
+        kept: max_points,
+        kept_s: None,
+        after_trim_start: false,
+    });
+    f.h.truncate(max_points);
+    f.value.truncate(max_points);
+    Ok((f, cut))
 }
 
 /// Parses loop text.

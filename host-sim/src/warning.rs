@@ -125,6 +125,19 @@ pub enum Warning {
         /// `natural_frequency_hz` is the lowest the search tries, not a result or a given value.
         lowest_searched: bool,
     },
+    /// `--max-samples` cut an input short: the result rests on its first part only.
+    Truncated {
+        /// The input.
+        file: String,
+        /// Samples (recordings) or points (loop files) it holds.
+        found: u64,
+        /// How many were kept.
+        kept: usize,
+        /// The kept part's duration [s] (recordings).
+        kept_s: Option<f64>,
+        /// The count is after `--trim-start`.
+        after_trim_start: bool,
+    },
     /// A loop driven symmetrically whose magnetization is not centred on zero.
     LoopOffCentre {
         /// The loop file.
@@ -250,6 +263,14 @@ impl fmt::Display for Warning {
                     )?;
                 }
                 Ok(())
+            }
+            Warning::Truncated { file, found, kept, kept_s, after_trim_start } => {
+                let trimmed = if *after_trim_start { " after --trim-start" } else { "" };
+                match kept_s {
+                    Some(s) => write!(f, "{file}: {found} samples{trimmed}; using the first {kept} ({s:.3} s)"),
+                    None => write!(f, "{file}: {found} points; using the first {kept}"),
+                }?;
+                write!(f, "; raise --max-samples to use more")
             }
             Warning::LoopOffCentre { file, centre_a_per_m, share, flux_density } => {
                 let offset = if *flux_density {

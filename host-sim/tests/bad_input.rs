@@ -451,7 +451,22 @@ fn a_file_longer_than_max_samples_is_checked_to_the_end_and_the_cut_is_announced
         &long,
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(stderr(&o).contains("long.csv: 400 samples; using the first 250"), "{}", stderr(&o));
+    let cut = "long.csv: 400 samples; using the first 250";
+    assert!(stderr(&o).contains(cut), "{}", stderr(&o));
+    // Scripts read it in the JSON too, with the other doubts about a result, in both commands
+    // that list them; said once on stderr.
+    for command in [
+        &["compare", "--model", "ja", "--out-dir", dir.path().join("q").to_str().unwrap()][..],
+        &["fit", "--model", "linear"],
+    ] {
+        let o = gma(&[command, &["--json", "--max-samples", "250", &long]].concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let listed =
+            j["warnings"].as_array().unwrap().iter().filter(|w| w.as_str().unwrap().contains(cut)).count();
+        assert_eq!(listed, 1, "{command:?}: {}", j["warnings"]);
+        assert_eq!(stderr(&o).matches(cut).count(), 1, "{command:?}: {}", stderr(&o));
+    }
     // A bad row beyond the window is still found.
     let bad = write(dir.path(), "bad_tail.csv", &csv(HEADER, &with_row(390, "0.0390,1.0,xyz")));
     let o = gma(&[

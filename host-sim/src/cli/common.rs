@@ -263,28 +263,26 @@ pub fn read_inputs(
     let digests =
         |inputs: &[Input]| -> Vec<_> { inputs.iter().map(|i| (i.name.clone(), i.digest())).collect() };
     let (fit_digests, val_digests) = (digests(&fit_in), digests(&val_in));
-    let data = read_data(fit_in, val_in, max_samples, opts)?;
+    let (data, mut warnings) = read_data(fit_in, val_in, max_samples, opts)?;
     // Every input has been read to its end: the digests are final.
     let fit_sha: Vec<(String, String)> = fit_digests.into_iter().map(|(n, d)| (n, d.sha256())).collect();
-    let warnings = val_digests
-        .into_iter()
-        .filter_map(|(val, d)| {
-            let sha = d.sha256();
-            let (fit, _) = fit_sha.iter().find(|(_, s)| *s == sha)?;
-            Some(Warning::ValidationIsFitFile { val, fit: fit.clone() })
-        })
-        .collect();
+    warnings.extend(val_digests.into_iter().filter_map(|(val, d)| {
+        let sha = d.sha256();
+        let (fit, _) = fit_sha.iter().find(|(_, s)| *s == sha)?;
+        Some(Warning::ValidationIsFitFile { val, fit: fit.clone() })
+    }));
     Ok((data, warnings))
 }
 
 /// Reads opened inputs: all recordings or all loop files (decided by each first line; a first
-/// line with a `--column` header is a recording's). `opts` applies to recordings only.
+/// line with a `--column` header is a recording's). `opts` applies to recordings only. The
+/// warnings say which inputs `max_samples` cut short.
 pub fn read_data(
     fit_in: Vec<Input>,
     val_in: Vec<Input>,
     max_samples: usize,
     opts: &ReadOptions,
-) -> Result<Data> {
+) -> Result<(Data, Vec<Warning>)> {
     let is_loop =
         |line: &str| loops::looks_like_loop(line) && !line.split([',', '\t']).any(|h| opts.claims(h.trim()));
     let kinds: Vec<bool> = fit_in.iter().chain(&val_in).map(|i| is_loop(&i.first_line())).collect();
@@ -294,40 +292,51 @@ pub fn read_data(
              (a loop fit's --params-out can seed the displacement fit via --params)"
         );
     }
-    if kinds.first().copied().unwrap_or(false) {
+    let mut cut = Vec::new();
+    let data = if kinds.first().copied().unwrap_or(false) {
         if !opts.is_default() {
             bail!(
                 "--column, --resample and --trim-start apply to measurement recordings, not to \
                  magnetization-loop files"
             );
         }
-        let read = |v: Vec<Input>| {
-            v.into_iter().map(|i| loops::read_input(i, max_samples)).collect::<Result<Vec<_>>>()
+        let mut read = |v: Vec<Input>| -> Result<Vec<_>> {
+            v.into_iter().map(|i| loops::read_input(i, max_samples).map(|r| kept(&mut cut, r))).collect()
         };
-        Ok(Data::Loops(read(fit_in)?, read(val_in)?))
+        let fit = read(fit_in)?;
+        Data::Loops(fit, read(val_in)?)
     } else {
-        let read = |v: Vec<Input>| {
-            v.into_iter().map(|i| read_recording(i, max_samples, opts)).collect::<Result<Vec<_>>>()
+        let mut read = |v: Vec<Input>| -> Result<Vec<_>> {
+            v.into_iter().map(|i| read_recording(i, max_samples, opts).map(|r| kept(&mut cut, r))).collect()
         };
-        Ok(Data::Recordings(read(fit_in)?, read(val_in)?))
-    }
+        let fit = read(fit_in)?;
+        Data::Recordings(fit, read(val_in)?)
+    };
+    Ok((data, cut))
+}
+
+/// What was read, its warning (if any) set aside in `cut`.
+fn kept<T>(cut: &mut Vec<Warning>, (read, warning): (T, Option<Warning>)) -> T {
+    cut.extend(warning);
+    read
 }
 
 /// Reads one recording as a stream (mapped, trimmed and resampled as `opts` say), keeping at
-/// most `max_samples` and saying so.
-pub fn read_recording(input: Input, max_samples: usize, opts: &ReadOptions) -> Result<Recording> {
+/// most `max_samples` (the warning says when it cut the file short).
+pub fn read_recording(
+    input: Input,
+    max_samples: usize,
+    opts: &ReadOptions,
+) -> Result<(Recording, Option<Warning>)> {
     let read = Recording::read_input_with(input, max_samples, opts)?;
     let r = read.recording;
-    if read.rows > read.kept as u64 {
-        eprintln!(
-            "gma: warning: {}: {} samples{}; using the first {} ({:.3} s); raise --max-samples to use more",
-            r.name,
-            read.rows,
-            if opts.trim_start_s.is_some() { " after --trim-start" } else { "" },
-            read.kept,
-            r.duration_s()
-        );
-    }
+    let cut = (read.rows > read.kept as u64).then(|| Warning::Truncated {
+        file: r.name.clone(),
+        found: read.rows,
+        kept: read.kept,
+        kept_s: Some(r.duration_s()),
+        after_trim_start: opts.trim_start_s.is_some(),
+    });
     // Gaps bridged by `--resample linear` are data the rig did not record: said.
     if opts.resample.is_some() && r.len() > read.kept {
         eprintln!(
@@ -340,5 +349,5 @@ pub fn read_recording(input: Input, max_samples: usize, opts: &ReadOptions) -> R
             r.len() - read.kept
         );
     }
-    Ok(r)
+    Ok((r, cut))
 }

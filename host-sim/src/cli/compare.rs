@@ -83,7 +83,11 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         .chain(a.out_csv.iter().cloned())
         .collect();
     check_outputs(&planned.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &ids)?;
-    let summary = match read_data(inputs, Vec::new(), a.read.max_samples, &read_opts)? {
+    let (data, cut) = read_data(inputs, Vec::new(), a.read.max_samples, &read_opts)?;
+    for w in &cut {
+        eprintln!("gma: warning: {w}");
+    }
+    let mut summary = match data {
         Data::Loops(files, _) => {
             if let Some(csv) = &a.out_csv {
                 anyhow::bail!(
@@ -96,6 +100,7 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         }
         Data::Recordings(files, _) => compare_recordings(a, spec, &p, &files, &stems)?,
     };
+    summary.warnings.splice(0..0, cut.iter().map(ToString::to_string));
     folder.keep();
     say!(a.json, "{summary}");
     if a.json {

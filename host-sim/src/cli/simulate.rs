@@ -163,7 +163,10 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     let name = display(&a.out);
     let (rec, what, drive) = match drive_input {
         Some(input) => {
-            let measured = read_recording(input, a.read.max_samples, &read_opts)?;
+            let (measured, cut) = read_recording(input, a.read.max_samples, &read_opts)?;
+            if let Some(w) = cut {
+                eprintln!("gma: warning: {w}");
+            }
             let (rec, drive) = run_on_drive(a, spec, &p, &measured, &name)?;
             let what = format!(
                 "model `{spec}` driven by {}'s measured `{}` on its own time base",
