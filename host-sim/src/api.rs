@@ -9,14 +9,14 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::Parser;
-use model_core::{ActuatorParams, Effect, ModelSpec};
+use model_core::{ActuatorParams, ModelSpec};
 
 use crate::cli::common::{self, Data, Prepared};
 use crate::cli::simulate::SimulateArgs;
 use crate::columns::ReadOptions;
 use crate::diagnose::Diagnosis;
 use crate::files::{names, open_all, Input};
-use crate::fit::{self, Drive, FitOptions, Simulation};
+use crate::fit::{self, FitOptions, Simulation};
 use crate::loops::{self, LoopFile};
 use crate::params::ParamSource;
 use crate::recording::{self, Recording, COLUMNS};
@@ -228,33 +228,37 @@ impl Default for ReadSettings {
 }
 
 impl ReadSettings {
+    /// The settings that differ from the default, by their keyword names.
+    fn set(&self) -> Vec<&'static str> {
+        let d = ReadSettings::default();
+        [
+            (self.max_samples != d.max_samples, "max_samples"),
+            (!self.columns.is_empty(), "columns"),
+            (self.resample.is_some(), "resample"),
+            (self.trim_start_s.is_some(), "trim_start_s"),
+        ]
+        .into_iter()
+        .filter_map(|(set, name)| set.then_some(name))
+        .collect()
+    }
+
     fn options(&self) -> Result<ReadOptions> {
         common::check_max_samples(self.max_samples)?;
         ReadOptions::new(&self.columns, self.resample.as_deref(), self.trim_start_s)
     }
 }
 
-/// Reads one measurement CSV as the CLI does.
-pub fn read_recording(path: PathBuf, read: &ReadSettings) -> Result<Recording> {
+/// Reads one measurement CSV as the CLI does; the warning says when `max_samples` cut it short.
+pub fn read_recording(path: PathBuf, read: &ReadSettings) -> Result<(Recording, Option<Warning>)> {
     let opts = read.options()?;
-    let (rec, cut) = common::read_recording(Input::open(&path)?, read.max_samples, &opts)?;
-    warn(cut);
-    Ok(rec)
+    common::read_recording(Input::open(&path)?, read.max_samples, &opts)
 }
 
-/// Says on stderr that `--max-samples` cut a file short (readers without a warnings list).
-fn warn(cut: Option<Warning>) {
-    if let Some(w) = cut {
-        eprintln!("gma: warning: {w}");
-    }
-}
-
-/// Reads one magnetization-loop file as the CLI does.
-pub fn read_loop(path: PathBuf, read: &ReadSettings) -> Result<LoopFile> {
+/// Reads one magnetization-loop file as the CLI does; the warning says when `max_samples` cut
+/// it short.
+pub fn read_loop(path: PathBuf, read: &ReadSettings) -> Result<(LoopFile, Option<Warning>)> {
     read.options()?;
-    let (f, cut) = loops::read_input(Input::open(&path)?, read.max_samples)?;
-    warn(cut);
-    Ok(f)
+    loops::read_input(Input::open(&path)?, read.max_samples)
 }
 
 /// Reads fit and validation sources: files as the CLI reads them (recordings or loops, never a
@@ -262,6 +266,17 @@ pub fn read_loop(path: PathBuf, read: &ReadSettings) -> Result<LoopFile> {
 /// Also says which validation file has a fit file's content (files only: arrays are not hashed).
 fn read_sources(fit_src: &[Source], val_src: &[Source], read: &ReadSettings) -> Result<(Data, Vec<Warning>)> {
     let opts = read.options()?;
+    // They say how a file is read: applied to arrays they would change data the caller holds.
+    let set = read.set();
+    if let Some(k) = fit_src.iter().chain(val_src).position(|s| matches!(s, Source::Arrays(_))) {
+        if !set.is_empty() {
+            bail!(
+                "{} applies to files read from disk, and input {k} is given as arrays: slice, scale or \
+                 resample the arrays before the call, or pass the file's path",
+                set.join(", ")
+            );
+        }
+    }
     let paths = |v: &[Source]| -> Vec<PathBuf> {
         v.iter().filter_map(|s| if let Source::File(p) = s { Some(p.clone()) } else { None }).collect()
     };
@@ -419,6 +434,7 @@ pub fn diagnose(
     let Data::Recordings(fit_files, val_files) = &p.data else {
         bail!("diagnose works on displacement recordings; for magnetization loops use `gma fit` and `gma compare`");
     };
+    p.warn_about_inputs();
     crate::diagnose::diagnose(p.spec, &p.init, fit_files, val_files, p.opts)
 }
 
@@ -460,8 +476,9 @@ pub fn compare(
     }
     let (p, _) = params.load(spec)?;
     let (mut rows, mut predictions, mut total) = (Vec::new(), Vec::new(), 0.0);
-    let mut warnings = Vec::new();
-    match read_sources(sources, &[], read)?.0 {
+    let (data, read_warnings) = read_sources(sources, &[], read)?;
+    let mut warnings: Vec<String> = read_warnings.iter().map(ToString::to_string).collect();
+    match data {
         Data::Recordings(recs, _) => {
             for r in &recs {
                 fit::drive_for(spec, r)?;
@@ -525,28 +542,12 @@ pub fn model_response(
 ) -> Result<Simulation> {
     let spec = crate::params::parse_spec(model)?;
     let (p, _) = params.load(spec)?;
-    let drive_kind = if spec.has(Effect::AmplifierDynamics) {
-        if drive.command_v.is_none() {
-            bail!("{}: the model has amplifier_dynamics, which needs a `command_V` array", drive.name);
-        }
-        Drive::CommandDynamic
-    } else if drive.current_a.is_some() {
-        Drive::Current
-    } else {
-        Drive::CommandIdeal
+    let initial = match initial_excursion_a_per_m {
+        Some(x) if x.is_finite() => fit::InitialState::Excursion(x),
+        Some(x) => bail!("initial_excursion_A_per_m must be finite, got {x}"),
+        None => fit::InitialState::Demagnetized,
     };
-    let prep = fit::Prepared {
-        rec: drive,
-        dt_s: drive.dt_s(),
-        drive: drive_kind,
-        initial: match initial_excursion_a_per_m {
-            Some(x) if x.is_finite() => fit::InitialState::Excursion(x),
-            Some(x) => bail!("initial_excursion_A_per_m must be finite, got {x}"),
-            None => fit::InitialState::Demagnetized,
-        },
-        memo: None,
-    };
-    fit::run_model(spec, &p, &prep, true)
+    Ok(fit::simulate_drive(spec, &p, drive, initial)?.0)
 }
 
 /// `gma simulate` with `options` as on its command line (`("--freq-hz", Some("80"))`,
@@ -581,7 +582,8 @@ pub fn simulate_rig(
         argv.extend(value.iter().map(Into::into));
     }
     let mut args = SimulateCli::try_parse_from(argv).map_err(|e| usage_error(&e))?.args;
-    // Checked here first, so that problems are reported under the names given, not the temporary files'.
+    args.quiet = true; // the file is temporary
+                       // Checked here first, so that problems are reported under the names given, not the temporary files'.
     params.load(crate::params::parse_spec(&args.model)?)?;
     args.params = match params {
         ParamsSource::Demo => None,
@@ -602,7 +604,9 @@ pub fn simulate_rig(
 /// pointer to `--help` (there is no command line to ask).
 fn usage_error(e: &clap::Error) -> anyhow::Error {
     let text = e.to_string();
+    // The usage line lists the command line's flags, which a library call does not have.
     let text = text.split("\n\nFor more information").next().unwrap_or_default();
+    let text = text.split("\n\nUsage:").next().unwrap_or_default();
     let words: Vec<&str> = text.trim_start_matches("error: ").split_whitespace().collect();
     anyhow::anyhow!("{}", words.join(" "))
 }

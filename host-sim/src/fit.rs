@@ -893,8 +893,12 @@ impl Default for FitOptions {
     }
 }
 
-/// Time left before `deadline` (none: unbounded); zero once it has passed.
+/// Time left before `deadline` (none: unbounded); zero once it has passed, or once the embedding
+/// program asked the searches to stop ([`crate::search::request_stop`]).
 pub fn time_left(deadline: Option<Instant>) -> Option<Duration> {
+    if crate::search::stop_requested() {
+        return Some(Duration::ZERO);
+    }
     deadline.map(|d| d.saturating_duration_since(Instant::now()))
 }
 

@@ -219,6 +219,10 @@ impl<C> Unit<'_, C> {
 
     /// The cost at the clamped point, plus a pull back inside the cube.
     fn eval(&self, u: &[f64]) -> f64 {
+        if stop_requested() {
+            // The solvers run out their iterations at no cost; the result is discarded.
+            return f64::MAX;
+        }
         self.evals.fetch_add(1, Ordering::Relaxed);
         self.progress.inc(1);
         let outside: f64 = u.iter().map(|x| (x - x.clamp(0.0, 1.0)).powi(2)).sum();
@@ -261,7 +265,34 @@ pub fn bounded<O, S: argmin::core::Solver<O, I>, I: State>(
 }
 
 fn passed(deadline: Option<Instant>) -> bool {
-    deadline.is_some_and(|d| Instant::now() >= d)
+    stop_requested() || deadline.is_some_and(|d| Instant::now() >= d)
+}
+
+/// Set by a program that embeds the workbench (the Python package, on Ctrl-C) to end every
+/// running search at its next evaluation, as a reached deadline does; the caller then discards
+/// what the searches return. Process-wide, as the interrupt is.
+static STOP: AtomicBool = AtomicBool::new(false);
+
+/// How many stops were requested: a call that saw this change while it ran was cut short,
+/// whoever asked.
+static STOPS: AtomicUsize = AtomicUsize::new(0);
+
+/// Asks every running search to stop (`true`), or lets searches run again (`false`).
+pub fn request_stop(stop: bool) {
+    if stop {
+        STOPS.fetch_add(1, Ordering::Relaxed);
+    }
+    STOP.store(stop, Ordering::Relaxed);
+}
+
+/// How many stops have been requested so far.
+pub fn stops_requested() -> usize {
+    STOPS.load(Ordering::Relaxed)
+}
+
+/// Whether [`request_stop`] asked the searches to stop.
+pub fn stop_requested() -> bool {
+    STOP.load(Ordering::Relaxed)
 }
 
 /// Minimises `cost` over `bounds`: `plan.swarms` swarms (in `swarm_context`) and the `starts`

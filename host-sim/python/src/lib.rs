@@ -58,9 +58,64 @@ fn opt<'py, T: IntoPyObject<'py>>(py: Python<'py>, v: Option<T>) -> Py<PyAny> {
     v.and_then(|v| v.into_pyobject(py).ok()).map(|o| o.into_any().unbind()).unwrap_or_else(|| py.None())
 }
 
-/// Runs `f` without holding the GIL and maps its error to `gma.GmaError`.
+/// A doubt about what was read (`max_samples` cut the file short) as a Python `UserWarning`,
+/// which `warnings.catch_warnings` and notebooks see (stderr they may not).
+fn warn(py: Python<'_>, w: Option<host_sim::warning::Warning>) -> PyResult<()> {
+    match w {
+        Some(w) => {
+            let text = std::ffi::CString::new(escape_control(&w.to_string())).unwrap_or_default();
+            PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &text, 1)
+        }
+        None => Ok(()),
+    }
+}
+
+/// How often a running call looks for Ctrl-C.
+const SIGNAL_POLL: std::time::Duration = std::time::Duration::from_millis(50);
+
+/// Runs `f` without holding the GIL and maps its error to `gma.GmaError`. Ctrl-C (any signal
+/// whose Python handler raises) stops it: `f` runs on a worker thread while this one, the
+/// caller's, checks for signals; on one, every search is asked to stop
+/// ([`host_sim::search::request_stop`]), the worker's result is discarded and the handler's
+/// exception (`KeyboardInterrupt`) is raised. A call in another thread that the stop cut short
+/// raises `GmaError` rather than return a truncated search.
 fn run<T: Send>(py: Python<'_>, f: impl FnOnce() -> anyhow::Result<T> + Send) -> PyResult<T> {
-    py.detach(f).map_err(|e| to_py_err(py, e))
+    let stops_before = host_sim::search::stops_requested();
+    let outcome = py.detach(|| {
+        std::thread::scope(|scope| {
+            let caller = std::thread::current();
+            let worker = scope.spawn(move || {
+                let result = f();
+                caller.unpark(); // done: no need to wait out the poll
+                result
+            });
+            let mut interrupt = None;
+            while !worker.is_finished() {
+                std::thread::park_timeout(SIGNAL_POLL);
+                if interrupt.is_none() {
+                    if let Err(e) = Python::attach(|py| py.check_signals()) {
+                        host_sim::search::request_stop(true);
+                        interrupt = Some(e);
+                    }
+                }
+            }
+            let result = worker.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+            host_sim::search::request_stop(false);
+            match interrupt {
+                Some(e) => Err(e),
+                None => Ok(result),
+            }
+        })
+    });
+    let result = outcome?;
+    if host_sim::search::stops_requested() != stops_before {
+        // Another thread's Ctrl-C stopped this call's searches too: its result is not a fit.
+        return Err(to_py_err(
+            py,
+            anyhow::anyhow!("stopped: an interrupt in another thread stopped every running search"),
+        ));
+    }
+    result.map_err(|e| to_py_err(py, e))
 }
 
 /// An array-like as a 1-D float64 vector, or a `GmaError` naming it.
@@ -69,10 +124,19 @@ fn float_vec(py: Python<'_>, name: &str, array: &str, v: &Bound<'_, PyAny>) -> P
         to_py_err(py, ArrayError { file: name.into(), array: array.into(), index: None, message: why }.into())
     };
     let np = py.import("numpy")?;
+    let as_given =
+        np.call_method1("asarray", (v,)).map_err(|e| bad(format!("not an array of numbers ({e})")))?;
+    // Integers and floats only: NumPy would turn booleans into 0/1, drop an imaginary part and
+    // parse strings, each a different signal from the one meant.
+    let dtype = as_given.getattr("dtype")?;
+    let kind: String = dtype.getattr("kind")?.extract()?;
+    if !matches!(kind.as_str(), "i" | "u" | "f") {
+        return Err(bad(format!("not an array of real numbers (dtype {})", dtype.str()?)));
+    }
     let kwargs = PyDict::new(py);
     kwargs.set_item("dtype", np.getattr("float64")?)?;
     let converted = np
-        .call_method("asarray", (v,), Some(&kwargs))
+        .call_method("asarray", (as_given,), Some(&kwargs))
         .map_err(|e| bad(format!("not an array of numbers ({e})")))?;
     let arr: PyReadonlyArray1<'_, f64> = converted
         .extract()
@@ -94,6 +158,15 @@ fn recording_from_mapping(
         Ok(n) => n.extract::<String>()?,
         Err(_) => default_name.to_string(),
     };
+    if m.contains("field_A_per_m")? {
+        return Err(to_py_err(
+            py,
+            anyhow::anyhow!(
+                "{name}: a magnetization loop given as arrays: loop files are fitted and compared from their \
+                 paths only (pass the file's path; `read_loop`'s dict is for plotting)"
+            ),
+        ));
+    }
     let mut arrays = Vec::new();
     for item in m.items()?.iter() {
         let (key, value): (String, Bound<'_, PyAny>) = item.extract()?;
@@ -214,8 +287,8 @@ fn fit_settings(
 }
 
 /// Reads a measurement CSV (docs/formats.md) as the CLI does: a dict with `name` and one
-/// float64 array per column present (`time_s` [s], `command_V`, `current_A` [A],
-/// `displacement_um` [µm], `force_N`, `temperature_C`). `columns`, `resample`, `trim_start_s`
+/// float64 array per column present (`time_s` [s], `command_V` [V], `current_A` [A],
+/// `displacement_um` [µm], `force_N` [N], `temperature_C` [°C], `flux_density_T` [T]). `columns`, `resample`, `trim_start_s`
 /// and `max_samples` are the CLI's `--column`, `--resample`, `--trim-start`, `--max-samples`.
 #[pyfunction]
 #[pyo3(signature = (path, *, columns=Vec::new(), resample=None, trim_start_s=None, max_samples=None))]
@@ -228,7 +301,8 @@ fn read_recording<'py>(
     max_samples: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let read = read_settings(max_samples, columns, resample, trim_start_s);
-    let r = run(py, || api::read_recording(path, &read))?;
+    let (r, cut) = run(py, || api::read_recording(path, &read))?;
+    warn(py, cut)?;
     recording_dict(py, &r)
 }
 
@@ -243,7 +317,8 @@ fn read_loop<'py>(
     max_samples: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let read = read_settings(max_samples, Vec::new(), None, None);
-    let f = run(py, || api::read_loop(path, &read))?;
+    let (f, cut) = run(py, || api::read_loop(path, &read))?;
+    warn(py, cut)?;
     loop_dict(py, &f)
 }
 
@@ -460,7 +535,10 @@ fn model_response<'py>(
     Ok(d)
 }
 
-/// The module `gma`.
+/// The gma workbench for giant-magnetostrictive (Terfenol-D) actuators, with NumPy arrays in and
+/// out: `read_recording`, `read_loop`, `fit`, `compare`, `diagnose`, `simulate` (SIMULATED data)
+/// and `model_response`, each the `gma` CLI's command with its checks, messages and result
+/// fields (`help(gma.fit)`; the project's docs/cli.md). A refusal raises `GmaError`.
 #[pymodule]
 fn gma(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("GmaError", m.py().get_type::<GmaError>())?;

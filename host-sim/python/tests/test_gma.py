@@ -237,12 +237,68 @@ def test_arrays_are_checked_as_the_csv_reader_checks_a_file():
         ({"time_s": t, "curent_A": i}, "curent_A", None, "not a recognised column"),
         ({"time_s": t}, "current_A", None, "needs a drive"),
         ({"time_s": np.ones((2, 50)), "current_A": i}, "time_s", None, "one-dimensional"),
+        # NumPy would make these numbers (0/1, the real part, parsed text): refused by dtype.
+        ({"time_s": t, "current_A": i > 0}, "current_A", None, "dtype bool"),
+        ({"time_s": t, "current_A": i + 0j}, "current_A", None, "dtype complex128"),
+        ({"time_s": t, "current_A": i.astype(str)}, "current_A", None, "not an array of real numbers"),
     ]
     for arrays, array, index, fragment in cases:
         with pytest.raises(gma.GmaError) as e:
             gma.model_response("ja", arrays)
         assert (e.value.array, e.value.index) == (array, index), str(e.value)
         assert fragment in str(e.value)
+
+
+def test_read_options_are_refused_for_arrays_not_ignored():
+    rec = gma.read_recording(VAL_CSV)
+    for option in [{"trim_start_s": 0.1}, {"max_samples": 500}, {"columns": ["current_A=current_A:mA"]}]:
+        with pytest.raises(gma.GmaError) as e:
+            gma.compare("ja", [FIT_CSV, rec], **option)
+        assert f"{next(iter(option))} applies to files read from disk, and input 1 is given as arrays" in str(e.value)
+    # From the path they apply, as in the CLI.
+    whole = gma.compare("ja", VAL_CSV)
+    trimmed = gma.compare("ja", VAL_CSV, trim_start_s=0.1)
+    assert trimmed["nrmse"] != whole["nrmse"]
+
+
+def test_a_file_cut_short_by_max_samples_is_a_python_warning():
+    with pytest.warns(UserWarning, match=r"2000 samples; using the first 10 .*raise --max-samples"):
+        rec = gma.read_recording(VAL_CSV, max_samples=10)
+    assert len(rec["time_s"]) == 10
+    with pytest.warns(UserWarning, match=r"points; using the first 5"):
+        gma.read_loop(CORPUS / "loop_units.csv", max_samples=5)
+    # And in the result's warnings where it has them, as the CLI's JSON.
+    c = gma.compare("ja", VAL_CSV, max_samples=500)
+    assert any("using the first 500" in w for w in c["warnings"]), c["warnings"]
+
+
+def test_a_loop_given_as_arrays_is_told_to_pass_its_path():
+    lp = gma.read_loop(CORPUS / "loop_units.csv")
+    with pytest.raises(gma.GmaError) as e:
+        gma.fit("ja", lp)
+    assert "loop files are fitted and compared from their paths only" in str(e.value)
+
+
+def test_ctrl_c_stops_a_running_fit():
+    # SIGINT half a second into a diagnosis that runs for about two minutes uninterrupted (20 s
+    # of our own SIMULATED multisine, effort 20): before, the interrupt was lost or raised only
+    # when the work had finished.
+    import signal
+    import threading
+    import time
+
+    long = gma.simulate("eddy+ja+mech", waveform="multisine", freq_hz=300, duration_s=20)
+    timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
+    start = time.monotonic()
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            gma.diagnose("ja", [long], effort=20)
+    finally:
+        timer.cancel()
+    assert time.monotonic() - start < 10.0
+    # The next call runs in full: the stop request was withdrawn.
+    assert gma.fit("ja+mech", [FIT_CSV], **QUICK)["nrmse_fit"] < 0.2
 
 
 def test_wrong_model_spec_is_the_clis_error():
@@ -262,6 +318,10 @@ def test_bad_option_values_are_the_clis_errors():
     with pytest.raises(gma.GmaError) as e:
         gma.simulate("ja", waveform="triangle")
     assert "'triangle'" in str(e.value) and "multisine" in str(e.value)
+    # What is missing, without the command line's usage line (a call has no `--out`).
+    with pytest.raises(gma.GmaError) as e:
+        gma.simulate("ja", flux_noise_mt=0.1)
+    assert "--search-coil" in str(e.value) and "Usage" not in str(e.value) and "--out" not in str(e.value)
 
 
 def test_simulate_takes_the_clis_defaults():

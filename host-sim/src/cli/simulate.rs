@@ -123,6 +123,9 @@ pub struct SimulateArgs {
     /// How the `--drive` recording is read (see `gma fit --help`).
     #[command(flatten)]
     pub read: ReadArgs,
+    /// No "wrote … to FILE" line: set by callers that read the file back and remove it.
+    #[arg(skip)]
+    pub quiet: bool,
 }
 
 /// Largest `--initial-excursion` accepted [A/m] (the loop files' plausible field).
@@ -187,7 +190,9 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         "the simulated rig left the plausible range (lower --amplitude or --bias?)"
     })?;
     rec.write(&a.out).with_context(|| format!("writing {name}"))?;
-    eprintln!("gma: wrote {} samples of SIMULATED data ({what}) to {name}", rec.len());
+    if !a.quiet {
+        eprintln!("gma: wrote {} samples of SIMULATED data ({what}) to {name}", rec.len());
+    }
     if a.json {
         // The sample period as the parameter file states it (1e-4, not its f32 image
         // 9.9999997e-5), or a measured drive's own.
