@@ -36,7 +36,9 @@ fn to_py_err(py: Python<'_>, e: anyhow::Error) -> PyErr {
     let array = e.chain().find_map(|c| c.downcast_ref::<ArrayError>());
     let err = GmaError::new_err(message.clone());
     let value = err.value(py);
-    let file = located.map(|l| l.file.clone()).or_else(|| array.map(|a| a.file.clone()));
+    // An array's fault points into the caller's arrays, not a file (even when the dict came
+    // from `read_recording` and carries the file's name).
+    let file = located.map(|l| l.file.clone());
     let attrs: [(&str, Py<PyAny>); 7] = [
         ("message", opt(py, Some(message))),
         ("file", opt(py, file.map(|f| escape_control(&f)))),

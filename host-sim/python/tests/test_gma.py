@@ -222,7 +222,8 @@ def test_nan_in_an_array_names_the_array_and_index():
     rec["current_A"][17] = np.nan
     with pytest.raises(gma.GmaError) as e:
         gma.fit("ja+mech", rec)
-    assert (e.value.array, e.value.index, e.value.line) == ("current_A", 17, None)
+    # The dict came from a file, but the fault is in the arrays: `file` stays None.
+    assert (e.value.array, e.value.index, e.value.file, e.value.line) == ("current_A", 17, None, None)
     assert "current_A" in str(e.value) and "17" in str(e.value) and "not a finite number" in str(e.value)
 
 
