@@ -265,27 +265,44 @@ fn loop_dict<'py>(py: Python<'py>, f: &LoopFile) -> PyResult<Bound<'py, PyDict>>
     Ok(d)
 }
 
+/// A whole-number keyword as the type the workbench takes, or a `GmaError` naming it (Python's
+/// own conversion would raise `OverflowError` without the name).
+fn whole<T: TryFrom<i128>>(py: Python<'_>, name: &str, v: Option<i128>, range: &str) -> PyResult<Option<T>> {
+    v.map(|v| T::try_from(v).map_err(|_| to_py_err(py, anyhow::anyhow!("{name} must be {range}, got {v}"))))
+        .transpose()
+}
+
 /// The read options; None is the CLI's default.
 fn read_settings(
-    max_samples: Option<usize>,
+    py: Python<'_>,
+    max_samples: Option<i128>,
     columns: Vec<String>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
-) -> ReadSettings {
+) -> PyResult<ReadSettings> {
     let d = ReadSettings::default();
-    ReadSettings { max_samples: max_samples.unwrap_or(d.max_samples), columns, resample, trim_start_s }
+    let max_samples = whole(py, "max_samples", max_samples, "a whole number of at least 5")?;
+    Ok(ReadSettings { max_samples: max_samples.unwrap_or(d.max_samples), columns, resample, trim_start_s })
 }
 
 /// The search options; None is the CLI's default.
 fn fit_settings(
-    seed: Option<u64>,
+    py: Python<'_>,
+    seed: Option<i128>,
     effort: Option<f64>,
     time_limit_s: Option<f64>,
     fix: Vec<String>,
     bound: Vec<String>,
-) -> FitSettings {
+) -> PyResult<FitSettings> {
     let d = FitSettings::default();
-    FitSettings { seed: seed.unwrap_or(d.seed), effort: effort.unwrap_or(d.effort), time_limit_s, fix, bound }
+    let seed = whole(py, "seed", seed, "a whole number in [0, 2^64)")?;
+    Ok(FitSettings {
+        seed: seed.unwrap_or(d.seed),
+        effort: effort.unwrap_or(d.effort),
+        time_limit_s,
+        fix,
+        bound,
+    })
 }
 
 /// Reads a measurement CSV (docs/formats.md) as the CLI does: a dict with `name` and one
@@ -300,9 +317,9 @@ fn read_recording<'py>(
     columns: Vec<String>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
-    max_samples: Option<usize>,
+    max_samples: Option<i128>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let read = read_settings(max_samples, columns, resample, trim_start_s);
+    let read = read_settings(py, max_samples, columns, resample, trim_start_s)?;
     let (r, cut) = run(py, || api::read_recording(path, &read))?;
     warn(py, cut)?;
     recording_dict(py, &r)
@@ -313,12 +330,8 @@ fn read_recording<'py>(
 /// `magnetization_A_per_m` (SI units, converted from the file's).
 #[pyfunction]
 #[pyo3(signature = (path, *, max_samples=None))]
-fn read_loop<'py>(
-    py: Python<'py>,
-    path: PathBuf,
-    max_samples: Option<usize>,
-) -> PyResult<Bound<'py, PyDict>> {
-    let read = read_settings(max_samples, Vec::new(), None, None);
+fn read_loop<'py>(py: Python<'py>, path: PathBuf, max_samples: Option<i128>) -> PyResult<Bound<'py, PyDict>> {
+    let read = read_settings(py, max_samples, Vec::new(), None, None)?;
     let (f, cut) = run(py, || api::read_loop(path, &read))?;
     warn(py, cut)?;
     loop_dict(py, &f)
@@ -338,7 +351,7 @@ fn fit<'py>(
     files: &Bound<'py, PyAny>,
     val: Option<&Bound<'py, PyAny>>,
     params: Option<&Bound<'py, PyAny>>,
-    seed: Option<u64>,
+    seed: Option<i128>,
     effort: Option<f64>,
     time_limit_s: Option<f64>,
     fix: Vec<String>,
@@ -346,7 +359,7 @@ fn fit<'py>(
     columns: Vec<String>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
-    max_samples: Option<usize>,
+    max_samples: Option<i128>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let fit_src = sources(py, files, 0)?;
     let val_src = match val {
@@ -354,8 +367,8 @@ fn fit<'py>(
         _ => Vec::new(),
     };
     let ps = params_source(py, params)?;
-    let settings = fit_settings(seed, effort, time_limit_s, fix, bound);
-    let read = read_settings(max_samples, columns, resample, trim_start_s);
+    let settings = fit_settings(py, seed, effort, time_limit_s, fix, bound)?;
+    let read = read_settings(py, max_samples, columns, resample, trim_start_s)?;
     let out = run(py, || api::fit(&model, &fit_src, &val_src, &ps, &settings, &read))?;
     let d = json_to_py(py, &out.summary)?;
     d.set_item("params_toml", out.params_toml)?;
@@ -378,11 +391,11 @@ fn compare<'py>(
     columns: Vec<String>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
-    max_samples: Option<usize>,
+    max_samples: Option<i128>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let src = sources(py, files, 0)?;
     let ps = params_source(py, params)?;
-    let read = read_settings(max_samples, columns, resample, trim_start_s);
+    let read = read_settings(py, max_samples, columns, resample, trim_start_s)?;
     let (summary, predictions) = run(py, || api::compare(&model, &ps, &src, &read))?;
     let d = json_to_py(py, &summary)?;
     let list: Vec<Bound<'py, PyDict>> =
@@ -429,13 +442,13 @@ fn diagnose<'py>(
     files: &Bound<'py, PyAny>,
     val: Option<&Bound<'py, PyAny>>,
     params: Option<&Bound<'py, PyAny>>,
-    seed: Option<u64>,
+    seed: Option<i128>,
     effort: Option<f64>,
     time_limit_s: Option<f64>,
     columns: Vec<String>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
-    max_samples: Option<usize>,
+    max_samples: Option<i128>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let fit_src = sources(py, files, 0)?;
     let val_src = match val {
@@ -443,8 +456,8 @@ fn diagnose<'py>(
         _ => Vec::new(),
     };
     let ps = params_source(py, params)?;
-    let settings = fit_settings(seed, effort, time_limit_s, Vec::new(), Vec::new());
-    let read = read_settings(max_samples, columns, resample, trim_start_s);
+    let settings = fit_settings(py, seed, effort, time_limit_s, Vec::new(), Vec::new())?;
+    let read = read_settings(py, max_samples, columns, resample, trim_start_s)?;
     let d = run(py, || api::diagnose(&model, &fit_src, &val_src, &ps, &settings, &read))?;
     json_to_py(py, &d)
 }
@@ -469,12 +482,12 @@ fn simulate<'py>(
     noise_um: Option<f64>,
     quantum_um: Option<f64>,
     offset_um: Option<f64>,
-    oversample: Option<u32>,
+    oversample: Option<i128>,
     eddy_model: Option<&str>,
     no_current: bool,
     search_coil: bool,
     flux_noise_mt: Option<f64>,
-    seed: Option<u64>,
+    seed: Option<i128>,
     name: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     let ps = params_source(py, params)?;

@@ -319,6 +319,16 @@ def test_bad_option_values_are_the_clis_errors():
     with pytest.raises(gma.GmaError) as e:
         gma.simulate("ja", waveform="triangle")
     assert "'triangle'" in str(e.value) and "multisine" in str(e.value)
+    # Whole numbers out of their type's range are GmaErrors naming the keyword (were OverflowError).
+    for call, fragment in [
+        (lambda: gma.fit("ja", [FIT_CSV], seed=-1), "seed must be a whole number in [0, 2^64), got -1"),
+        (lambda: gma.fit("ja", [FIT_CSV], seed=2**70), "seed must be"),
+        (lambda: gma.read_recording(FIT_CSV, max_samples=-1), "max_samples must be a whole number of at least 5"),
+        (lambda: gma.simulate("ja", oversample=-1), "--oversample"),
+    ]:
+        with pytest.raises(gma.GmaError) as e:
+            call()
+        assert fragment in str(e.value)
     # What is missing, without the command line's usage line (a call has no `--out`).
     with pytest.raises(gma.GmaError) as e:
         gma.simulate("ja", flux_noise_mt=0.1)
