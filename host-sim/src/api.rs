@@ -582,8 +582,9 @@ pub fn simulate_rig(
         argv.extend(value.iter().map(Into::into));
     }
     let mut args = SimulateCli::try_parse_from(argv).map_err(|e| usage_error(&e))?.args;
-    args.quiet = true; // the file is temporary
-                       // Checked here first, so that problems are reported under the names given, not the temporary files'.
+    // The file is temporary: no "wrote … to FILE" line.
+    args.quiet = true;
+    // Checked here first, so that problems are reported under the names given, not the temporary files'.
     params.load(crate::params::parse_spec(&args.model)?)?;
     args.params = match params {
         ParamsSource::Demo => None,
