@@ -544,7 +544,7 @@ pub fn model_response(
     let (p, _) = params.load(spec)?;
     let initial = match initial_excursion_a_per_m {
         Some(x) if x.is_finite() => fit::InitialState::Excursion(x),
-        Some(x) => bail!("initial_excursion_A_per_m must be finite, got {x}"),
+        Some(x) => bail!("initial_excursion_a_per_m must be finite, got {x}"),
         None => fit::InitialState::Demagnetized,
     };
     Ok(fit::simulate_drive(spec, &p, drive, initial)?.0)

@@ -276,13 +276,18 @@ fn whole<T: TryFrom<i128>>(py: Python<'_>, name: &str, v: Option<i128>, range: &
 fn read_settings(
     py: Python<'_>,
     max_samples: Option<i128>,
-    columns: Vec<String>,
+    columns: Option<Vec<String>>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
 ) -> PyResult<ReadSettings> {
     let d = ReadSettings::default();
     let max_samples = whole(py, "max_samples", max_samples, "a whole number of at least 5")?;
-    Ok(ReadSettings { max_samples: max_samples.unwrap_or(d.max_samples), columns, resample, trim_start_s })
+    Ok(ReadSettings {
+        max_samples: max_samples.unwrap_or(d.max_samples),
+        columns: columns.unwrap_or_default(),
+        resample,
+        trim_start_s,
+    })
 }
 
 /// The search options; None is the CLI's default.
@@ -291,8 +296,8 @@ fn fit_settings(
     seed: Option<i128>,
     effort: Option<f64>,
     time_limit_s: Option<f64>,
-    fix: Vec<String>,
-    bound: Vec<String>,
+    fix: Option<Vec<String>>,
+    bound: Option<Vec<String>>,
 ) -> PyResult<FitSettings> {
     let d = FitSettings::default();
     let seed = whole(py, "seed", seed, "a whole number in [0, 2^64)")?;
@@ -300,8 +305,8 @@ fn fit_settings(
         seed: seed.unwrap_or(d.seed),
         effort: effort.unwrap_or(d.effort),
         time_limit_s,
-        fix,
-        bound,
+        fix: fix.unwrap_or_default(),
+        bound: bound.unwrap_or_default(),
     })
 }
 
@@ -310,11 +315,11 @@ fn fit_settings(
 /// `displacement_um` [µm], `force_N` [N], `temperature_C` [°C], `flux_density_T` [T]). `columns`, `resample`, `trim_start_s`
 /// and `max_samples` are the CLI's `--column`, `--resample`, `--trim-start`, `--max-samples`.
 #[pyfunction]
-#[pyo3(signature = (path, *, columns=Vec::new(), resample=None, trim_start_s=None, max_samples=None))]
+#[pyo3(signature = (path, *, columns=None, resample=None, trim_start_s=None, max_samples=None))]
 fn read_recording<'py>(
     py: Python<'py>,
     path: PathBuf,
-    columns: Vec<String>,
+    columns: Option<Vec<String>>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
     max_samples: Option<i128>,
@@ -331,7 +336,7 @@ fn read_recording<'py>(
 #[pyfunction]
 #[pyo3(signature = (path, *, max_samples=None))]
 fn read_loop<'py>(py: Python<'py>, path: PathBuf, max_samples: Option<i128>) -> PyResult<Bound<'py, PyDict>> {
-    let read = read_settings(py, max_samples, Vec::new(), None, None)?;
+    let read = read_settings(py, max_samples, None, None, None)?;
     let (f, cut) = run(py, || api::read_loop(path, &read))?;
     warn(py, cut)?;
     loop_dict(py, &f)
@@ -343,7 +348,7 @@ fn read_loop<'py>(py: Python<'py>, path: PathBuf, max_samples: Option<i128>) -> 
 /// writes; pass the result as `params=` to compare, diagnose, simulate).
 #[pyfunction]
 #[pyo3(signature = (model, files, *, val=None, params=None, seed=None, effort=None, time_limit_s=None,
-    fix=Vec::new(), bound=Vec::new(), columns=Vec::new(), resample=None, trim_start_s=None, max_samples=None))]
+    fix=None, bound=None, columns=None, resample=None, trim_start_s=None, max_samples=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit<'py>(
     py: Python<'py>,
@@ -354,9 +359,9 @@ fn fit<'py>(
     seed: Option<i128>,
     effort: Option<f64>,
     time_limit_s: Option<f64>,
-    fix: Vec<String>,
-    bound: Vec<String>,
-    columns: Vec<String>,
+    fix: Option<Vec<String>>,
+    bound: Option<Vec<String>>,
+    columns: Option<Vec<String>>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
     max_samples: Option<i128>,
@@ -381,14 +386,14 @@ fn fit<'py>(
 /// `magnetization_A_per_m`; for a loop file `field_A_per_m` and the model's `flux_density_T` or
 /// `magnetization_A_per_m`.
 #[pyfunction]
-#[pyo3(signature = (model, files, *, params=None, columns=Vec::new(), resample=None, trim_start_s=None, max_samples=None))]
+#[pyo3(signature = (model, files, *, params=None, columns=None, resample=None, trim_start_s=None, max_samples=None))]
 #[allow(clippy::too_many_arguments)]
 fn compare<'py>(
     py: Python<'py>,
     model: String,
     files: &Bound<'py, PyAny>,
     params: Option<&Bound<'py, PyAny>>,
-    columns: Vec<String>,
+    columns: Option<Vec<String>>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
     max_samples: Option<i128>,
@@ -434,7 +439,7 @@ fn simulation_items(py: Python<'_>, d: &Bound<'_, PyDict>, sim: &host_sim::fit::
 /// diagnose --json` object as a dict (`verdict`, `candidates`, `findings`, …).
 #[pyfunction]
 #[pyo3(signature = (model, files, *, val=None, params=None, seed=None, effort=None, time_limit_s=None,
-    columns=Vec::new(), resample=None, trim_start_s=None, max_samples=None))]
+    columns=None, resample=None, trim_start_s=None, max_samples=None))]
 #[allow(clippy::too_many_arguments)]
 fn diagnose<'py>(
     py: Python<'py>,
@@ -445,7 +450,7 @@ fn diagnose<'py>(
     seed: Option<i128>,
     effort: Option<f64>,
     time_limit_s: Option<f64>,
-    columns: Vec<String>,
+    columns: Option<Vec<String>>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
     max_samples: Option<i128>,
@@ -456,7 +461,7 @@ fn diagnose<'py>(
         _ => Vec::new(),
     };
     let ps = params_source(py, params)?;
-    let settings = fit_settings(py, seed, effort, time_limit_s, Vec::new(), Vec::new())?;
+    let settings = fit_settings(py, seed, effort, time_limit_s, None, None)?;
     let read = read_settings(py, max_samples, columns, resample, trim_start_s)?;
     let d = run(py, || api::diagnose(&model, &fit_src, &val_src, &ps, &settings, &read))?;
     json_to_py(py, &d)
@@ -521,18 +526,31 @@ fn simulate<'py>(
 /// The model's response to a drive given as arrays: `drive` is a dict with `time_s` [s] and
 /// `current_A` [A] (or `command_V` [V] for a model with `amp`). Returns `time_s`,
 /// `displacement_um`, `current_A`, `field_A_per_m`, `magnetization_A_per_m`. The rod starts
-/// demagnetised, or after `initial_excursion_A_per_m` (a state `compare` estimated: its
-/// `files[].initial_excursion_a_per_m`).
+/// demagnetised, or after `initial_excursion_a_per_m` [A/m] (the state `compare` estimated: its
+/// `files[].initial_excursion_a_per_m`). `initial_excursion_A_per_m` is the same keyword under
+/// its first name.
 #[pyfunction]
-#[pyo3(signature = (model, drive, *, params=None, initial_excursion_A_per_m=None))]
+#[pyo3(signature = (model, drive, *, params=None, initial_excursion_a_per_m=None, initial_excursion_A_per_m=None))]
 #[allow(non_snake_case)]
 fn model_response<'py>(
     py: Python<'py>,
     model: String,
     drive: &Bound<'py, PyAny>,
     params: Option<&Bound<'py, PyAny>>,
+    initial_excursion_a_per_m: Option<f64>,
     initial_excursion_A_per_m: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let initial_excursion = match (initial_excursion_a_per_m, initial_excursion_A_per_m) {
+        (Some(_), Some(_)) => {
+            return Err(to_py_err(
+                py,
+                anyhow::anyhow!(
+                    "initial_excursion_a_per_m and initial_excursion_A_per_m are one keyword: give it once"
+                ),
+            ))
+        }
+        (a, b) => a.or(b),
+    };
     let m = drive.cast::<PyMapping>().map_err(|_| {
         to_py_err(
             py,
@@ -543,7 +561,7 @@ fn model_response<'py>(
     })?;
     let rec = recording_from_mapping(py, m, "<drive>")?;
     let ps = params_source(py, params)?;
-    let sim = run(py, || api::model_response(&model, &ps, &rec, initial_excursion_A_per_m))?;
+    let sim = run(py, || api::model_response(&model, &ps, &rec, initial_excursion))?;
     let d = PyDict::new(py);
     d.set_item("time_s", array(py, &rec.time_s))?;
     simulation_items(py, &d, &sim)?;

@@ -161,10 +161,14 @@ def test_model_response_is_the_compare_prediction_without_the_offset(fitted):
     drive = {"time_s": rec["time_s"], "current_A": rec["current_A"]}
     cmp = gma.compare("ja+mech", rec, params=fitted)
     row = cmp["files"][0]
-    resp = gma.model_response(
-        "ja+mech", drive, params=fitted, initial_excursion_A_per_m=row["initial_excursion_a_per_m"]
-    )
+    x0 = row["initial_excursion_a_per_m"]
+    resp = gma.model_response("ja+mech", drive, params=fitted, initial_excursion_a_per_m=x0)
     np.testing.assert_allclose(resp["displacement_um"] + row["offset_um"], cmp["predictions"][0]["displacement_um"])
+    # The keyword's first name still works; giving both is refused by name.
+    first = gma.model_response("ja+mech", drive, params=fitted, initial_excursion_A_per_m=x0)
+    np.testing.assert_array_equal(first["displacement_um"], resp["displacement_um"])
+    with pytest.raises(gma.GmaError, match="give it once"):
+        gma.model_response("ja+mech", drive, params=fitted, initial_excursion_a_per_m=x0, initial_excursion_A_per_m=x0)
     # Demagnetised (the default) is another start: the estimated state is not a no-op here.
     demag = gma.model_response("ja+mech", drive, params=fitted)
     assert row["initial_excursion_a_per_m"] != 0.0
@@ -343,3 +347,10 @@ def test_simulate_takes_the_clis_defaults():
     assert rec["current_A"].max() == pytest.approx(2.0, abs=1e-3)
     sq = gma.simulate("ja", waveform="square", amplitude=0.5, bias=0.0, freq_hz=10.0)
     assert set(np.round(sq["current_A"], 6)) == {-0.5, 0.5}
+
+
+def test_signatures_show_their_defaults():
+    # help(gma.fit) is the user's reference: no default may print as `...`.
+    for f in (gma.read_recording, gma.read_loop, gma.fit, gma.compare, gma.diagnose, gma.simulate, gma.model_response):
+        sig = f.__text_signature__
+        assert sig is not None and "..." not in sig, (f.__name__, sig)
