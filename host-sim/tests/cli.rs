@@ -260,11 +260,18 @@ fn a_fit_file_typed_after_a_val_file_is_said() {
         assert_eq!(fitted, 2, "{args:?}: fitted as typed");
         assert!(w.iter().any(|w| w.starts_with(&said)), "{args:?}: {w:?}");
     }
-    // Repeated `--val`, or the README's form (fit files named otherwise after the one `--val`
-    // file): nothing is said.
-    for (args, fits) in
-        [(vec![fit.as_str(), "--val", &val, "--val", &val2], 1), (vec!["--val", &val, &fit, &fit2], 2)]
-    {
+    // Repeated `--val`, the README's form (fit files named otherwise after the one `--val`
+    // file), or a fit file that says so in a name sharing the validation file's prefix (the
+    // demo's `demo-val1.csv demo-fit1.csv`): nothing is said.
+    let demo_val = dir.path().join("demo-val1.csv").to_str().unwrap().to_string();
+    let demo_fit = dir.path().join("demo-fit1.csv").to_str().unwrap().to_string();
+    std::fs::copy(&val, &demo_val).unwrap();
+    std::fs::copy(&fit2, &demo_fit).unwrap();
+    for (args, fits) in [
+        (vec![fit.as_str(), "--val", &val, "--val", &val2], 1),
+        (vec!["--val", &val, &fit, &fit2], 2),
+        (vec!["--val", &demo_val, &demo_fit, &fit], 2),
+    ] {
         let (fitted, w) = run(&args);
         assert_eq!(fitted, fits, "{args:?}");
         assert!(!w.iter().any(|w| w.contains("follows `--val")), "{args:?}: {w:?}");

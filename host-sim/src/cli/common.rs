@@ -181,10 +181,19 @@ fn fit_files_after_val(args: &[std::ffi::OsString], fit_files: &[PathBuf]) -> Ve
 
 /// Whether two file names look like one pattern's matches: their stems (names without the
 /// extension) share a start or an end of at least three characters (`run-val1`, `run-val2`;
-/// `sine_val`, `chirp_val`).
+/// `sine_val`, `chirp_val`), and the second does not call itself a fit file where the first
+/// does not (`demo-val1`, `demo-fit1`: a fit file as typed).
 fn look_alike(a: &Path, b: &Path) -> bool {
-    let stem = |p: &Path| p.file_stem().map(|s| s.to_string_lossy().chars().collect::<Vec<char>>());
+    let stem =
+        |p: &Path| p.file_stem().map(|s| s.to_string_lossy().to_lowercase().chars().collect::<Vec<char>>());
     let (Some(a), Some(b)) = (stem(a), stem(b)) else { return false };
+    let says_fit = |s: &[char]| {
+        let s: String = s.iter().collect();
+        s.contains("fit") || s.contains("train")
+    };
+    if says_fit(&b) && !says_fit(&a) {
+        return false;
+    }
     let start = a.iter().zip(&b).take_while(|(x, y)| x == y).count();
     let end = a.iter().rev().zip(b.iter().rev()).take_while(|(x, y)| x == y).count();
     start.max(end) >= 3
