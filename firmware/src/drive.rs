@@ -7,17 +7,24 @@
 //!
 //! Telemetry leaves the interrupt as the raw [`TimedFrame`] through a single-producer
 //! single-consumer queue; thread mode encodes (CRC + COBS) and sends it.
+//!
+//! The bridge's master output enable is written 1 only on the tick that arms, with no break
+//! flag pending, and read back on every other armed tick ([`gma_control::gate`]); each
+//! interrupt entry is timed with the cycle counter against the tick period
+//! ([`gma_control::timing`]).
 
 use core::cell::UnsafeCell;
 use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicU32, Ordering};
 
-use gma_control::command::{Decoder, Received, Reply, MAX_REPLY_ENCODED};
+use gma_control::command::{Command, Decoder, Received, Reply, MAX_REPLY_ENCODED};
 use gma_control::current::CurrentLoopParams;
 use gma_control::faults::FaultCode;
+use gma_control::gate::{GateAction, OutputGate};
 use gma_control::telemetry::TimedFrame;
+use gma_control::timing::TickPeriod;
 use gma_control::units::{AdcCode, Volts, ADC_FULL_SCALE};
-use gma_control::{ControlConfig, Controller, RawSample, TickOutput};
+use gma_control::{ControlConfig, Controller, RawSample, StagedParameters, TickOutput};
 use heapless::spsc::{Consumer, Producer, Queue};
 
 /// PWM carrier [Hz]: 20 kHz, above hearing; center-aligned, so the counter's update events come
@@ -61,8 +68,8 @@ pub const fn dead_time_ticks(timer_hz: u32) -> u32 {
 }
 
 /// Bus voltage divider of the reference board [V at the bus per V at the ADC pin]: 56 kΩ over
-/// 3.3 kΩ, so the 3.3 V ADC range spans 0–59.3 V (the coil's energy pumps the 24 V bus to
-/// ~39 V on a trip; the divider must not saturate there).
+/// 3.3 kΩ, so the 3.3 V ADC range spans 0–59.3 V (the coil's energy pumps the 100 µF, 24 V bus
+/// to 39.2 V on a 4 A trip, 41.7 V on a 4.4 A one; the divider must not saturate there).
 pub const BUS_DIVIDER: f32 = (56.0 + 3.3) / 3.3;
 
 /// ADC reference [V].
@@ -105,19 +112,37 @@ pub type TelemetryQueue = Queue<TimedFrame, TELEMETRY_QUEUE>;
 /// wait or a long telemetry burst), three in a row mean the loop no longer runs at its rate.
 pub const DEADLINE_LATCH_AFTER: u8 = 3;
 
+/// CPU clock [Hz] (gma-drive's clock tree: HSI 16 MHz / 4 × 85 / 2).
+pub const SYSCLK_HZ: u32 = 170_000_000;
+/// CPU cycles per control tick, as the cycle counter should count them between two interrupt
+/// entries: 17 000 at 10 kHz.
+pub const TICK_CYCLES: u32 =
+    (SYSCLK_HZ as f64 * ControlConfig::REFERENCE.current_loop.tick_s as f64 + 0.5) as u32;
+/// The tick period check: ±2 % of [`TICK_CYCLES`] over each window of 32 intervals, any single
+/// interval off by half a period at once, the first 2 intervals after start-up not judged (see
+/// [`gma_control::timing`] for why one interval out of ±2 % is only counted).
+pub const fn tick_period_check() -> TickPeriod {
+    TickPeriod::new(TICK_CYCLES, TICK_CYCLES / 50, 2)
+}
+
 /// What the interrupt needs from the hardware. Each method is a few register accesses on the
 /// board.
 pub trait PowerStage {
     /// The injected conversions of this trigger: coil current, displacement, bus voltage
     /// (raw codes); acknowledges them.
     fn read_conversions(&mut self) -> [u16; 3];
-    /// Whether the break input (gate-driver fault) has tripped since the last call; clears the
-    /// flag. The hardware has already forced the outputs off when it reads true.
-    fn take_break_flag(&mut self) -> bool;
+    /// Whether any break flag (break input 1, break input 2, system break) has been set since
+    /// the last call; clears them (a flag whose source is still active stays set). The
+    /// hardware has already forced the outputs off when it reads true.
+    fn take_break_flags(&mut self) -> bool;
+    /// Whether any break flag is set now (not cleared): asked right before MOE is written 1.
+    fn break_pending(&self) -> bool;
     /// Timer compare values of leg A and leg B (preloaded: they take effect at the next update).
     fn set_compare(&mut self, leg_a: u16, leg_b: u16);
     /// Master output enable (false: the outputs go to their idle state, all gates low).
     fn set_outputs_enabled(&mut self, enabled: bool);
+    /// The master output enable as read back (the hardware clears it on a break).
+    fn outputs_enabled(&self) -> bool;
     /// Feeds the independent watchdog.
     fn feed_watchdog(&mut self);
     /// Whether the next conversion has already completed: the tick overran its period.
@@ -137,6 +162,12 @@ pub mod trip {
     /// The controller asked for a duty that is not a finite number: `PARAMETERS_INVALID` (the
     /// model produced it; only a new parameter set clears it).
     pub const NON_FINITE_DUTY: u32 = 1 << 2;
+    /// MOE read back 0 on an armed tick with no break flag seen: `BRIDGE_BREAK`.
+    pub const OUTPUTS_LOST: u32 = 1 << 3;
+    /// An arming tick found a break flag pending and left MOE at 0: `BRIDGE_BREAK`.
+    pub const ARMING_BLOCKED: u32 = 1 << 4;
+    /// The interval between interrupt entries was not the tick period: `TICK_TIMING`.
+    pub const TICK_PERIOD: u32 = 1 << 5;
 }
 
 /// Counters the interrupt publishes for thread mode (it is their only writer).
@@ -150,6 +181,11 @@ pub struct DriveCounters {
     pub trips: AtomicU32,
     /// Largest interrupt duration so far [cycles].
     pub max_tick_cycles: AtomicU32,
+    /// Intervals between interrupt entries outside ±2 % of the tick period, one by one
+    /// (interrupt latency included).
+    pub period_off: AtomicU32,
+    /// The last 32-interval window's length [cycles] (nominal 32 × [`TICK_CYCLES`]).
+    pub last_window_cycles: AtomicU32,
 }
 
 impl DriveCounters {
@@ -160,6 +196,8 @@ impl DriveCounters {
             deadline_overruns: AtomicU32::new(0),
             trips: AtomicU32::new(0),
             max_tick_cycles: AtomicU32::new(0),
+            period_off: AtomicU32::new(0),
+            last_window_cycles: AtomicU32::new(0),
         }
     }
 
@@ -200,6 +238,8 @@ pub struct DriveLoop<S: PowerStage> {
     counters: &'static DriveCounters,
     late_in_a_row: u8,
     trips: u32,
+    gate: OutputGate,
+    period: TickPeriod,
 }
 
 impl<S: PowerStage> DriveLoop<S> {
@@ -211,7 +251,17 @@ impl<S: PowerStage> DriveLoop<S> {
         telemetry: Producer<'static, TimedFrame>,
         counters: &'static DriveCounters,
     ) -> Self {
-        Self { controller, stage, timing, telemetry, counters, late_in_a_row: 0, trips: 0 }
+        Self {
+            controller,
+            stage,
+            timing,
+            telemetry,
+            counters,
+            late_in_a_row: 0,
+            trips: 0,
+            gate: OutputGate::new(),
+            period: tick_period_check(),
+        }
     }
 
     /// The controller (faults, commands from thread mode).
@@ -224,25 +274,54 @@ impl<S: PowerStage> DriveLoop<S> {
     /// shown in this tick's telemetry record.
     pub fn on_conversion(&mut self) -> TickOutput {
         let start = self.stage.cycle_count();
+        let period_wrong = self.period.entry(start);
         let [current, displacement, bus] = self.stage.read_conversions();
-        let break_tripped = self.stage.take_break_flag();
-        if break_tripped {
+        let flags = self.stage.take_break_flags();
+        // MOE read back before anything writes it: 0 while held on means the hardware took the
+        // outputs off, whether or not a flag says why.
+        let lost = self.gate.lost(self.stage.outputs_enabled());
+        if flags {
             self.trips |= trip::BREAK_INPUT;
+        }
+        if lost {
+            self.trips |= trip::OUTPUTS_LOST;
+        }
+        if period_wrong {
+            // Latched before the tick, so that the controller holds the bridge off in it.
+            self.trips |= trip::TICK_PERIOD;
+            self.controller.latch_fault(FaultCode::TICK_TIMING);
         }
         let raw = RawSample {
             current: AdcCode(current),
             displacement: AdcCode(displacement),
             bus: bus_volts(bus),
-            break_tripped,
+            break_tripped: flags || lost,
         };
         let mut out = self.controller.tick(&raw);
         if !out.duty.is_finite() {
             self.trips |= trip::NON_FINITE_DUTY;
             self.trip_now(&mut out, FaultCode::PARAMETERS_INVALID);
         }
+        if lost {
+            // The controller has latched it from `break_tripped`; whatever it returned, this
+            // tick does not write MOE = 1 again.
+            self.trip_now(&mut out, FaultCode::BRIDGE_BREAK);
+        }
         let (a, b) = self.timing.compare_values(out.duty);
         self.stage.set_compare(a, b);
-        self.stage.set_outputs_enabled(out.bridge_enabled);
+        let stage = &self.stage;
+        match self.gate.decide(out.bridge_enabled, || stage.break_pending()) {
+            GateAction::Hold => {}
+            GateAction::Enable => self.stage.set_outputs_enabled(true),
+            GateAction::Disable => {
+                self.stage.set_outputs_enabled(false);
+                if out.bridge_enabled {
+                    // The arming tick found a break flag set since the tick began.
+                    self.trips |= trip::ARMING_BLOCKED;
+                    self.trip_now(&mut out, FaultCode::BRIDGE_BREAK);
+                }
+            }
+        }
         self.stage.feed_watchdog();
         if self.stage.next_conversion_done() {
             DriveCounters::add(&self.counters.deadline_overruns, 1);
@@ -251,12 +330,15 @@ impl<S: PowerStage> DriveLoop<S> {
                 // Off now, not at the next tick: that one is already late.
                 self.trips |= trip::DEADLINE;
                 self.trip_now(&mut out, FaultCode::MISSED_DEADLINE);
+                self.gate.decide(false, || true);
                 self.stage.set_outputs_enabled(false);
             }
         } else {
             self.late_in_a_row = 0;
         }
         self.counters.trips.store(self.trips, Ordering::Relaxed);
+        self.counters.period_off.store(self.period.off, Ordering::Relaxed);
+        self.counters.last_window_cycles.store(self.period.last_window, Ordering::Relaxed);
         let cycles = self.stage.cycle_count().wrapping_sub(start);
         if cycles > self.counters.max_tick_cycles.load(Ordering::Relaxed) {
             self.counters.max_tick_cycles.store(cycles, Ordering::Relaxed);
@@ -283,13 +365,37 @@ pub const REPLY_QUEUE: usize = 8;
 /// The reply queue's type.
 pub type ReplyQueue = Queue<Reply, REPLY_QUEUE>;
 
+/// Thread-mode work a frame needs before it reaches the controller: a parameter load's
+/// compensator is built into `staged` here (a Preisach model takes about 400 000 instructions,
+/// more than the 2 ms watchdog), with the interrupt running; other frames leave it empty. Not
+/// inlined: the build's temporaries then take stack only while a load runs, not in every
+/// caller's frame.
+#[inline(never)]
+pub fn stage(received: &Received, staged: &mut StagedParameters) {
+    if let Received::Command(_, Command::LoadParameters { spec, params }) = received {
+        staged.rebuild(&control_config(), *spec, params);
+    }
+}
+
 /// Executes one decoded frame on the controller: a command (any valid one is the keep-alive) or
-/// the refusal of an intact frame the decoder could not accept. The board calls it inside a
-/// critical section, as the interrupt shares the controller.
-pub fn execute(controller: &mut Controller, received: &Received) -> Reply {
+/// the refusal of an intact frame the decoder could not accept; a parameter load is only
+/// moved in from `staged` ([`stage`] built it). The board calls it inside a critical section,
+/// as the interrupt shares the controller.
+pub fn execute<S: PowerStage>(
+    drive: &mut DriveLoop<S>,
+    received: &Received,
+    staged: &mut StagedParameters,
+) -> Reply {
     match received {
-        Received::Command(tag, cmd) => controller.command(*tag, cmd),
-        Received::Refused { tag, opcode, reason } => controller.refusal(*tag, *opcode, *reason),
+        Received::Command(tag, Command::LoadParameters { .. }) => {
+            // The move holds the interrupt off for about 8 300 instructions (`qemu-bench
+            // load-swap`), half a tick, with the bridge off (loads are refused while armed):
+            // the late entry could pass the lost-tick limit; it is latency, not the period.
+            drive.period.resettle(2);
+            drive.controller.load_staged(*tag, staged)
+        }
+        Received::Command(tag, cmd) => drive.controller.command(*tag, cmd),
+        Received::Refused { tag, opcode, reason } => drive.controller.refusal(*tag, *opcode, *reason),
     }
 }
 
@@ -311,13 +417,25 @@ impl CommandPort {
     }
 
     /// Received bytes, split anywhere (COBS frames ended by their 0 delimiters): each frame that
-    /// completes goes to `execute_frame` — the board's runs [`execute`] on the controller inside
-    /// a critical section — and its reply is queued. `execute_frame` returns `None` when there
-    /// is no controller to answer (before start-up).
-    pub fn on_bytes(&mut self, bytes: &[u8], mut execute_frame: impl FnMut(&Received) -> Option<Reply>) {
+    /// completes is staged ([`stage`], outside any lock) and goes to `execute_frame` — the
+    /// board's runs [`execute`] on the controller inside a critical section — and its reply is
+    /// queued. `execute_frame` returns `None` when there is no controller to answer (before
+    /// start-up). Not inlined, for the same reason as [`stage`]: its frame holds the staged set.
+    #[inline(never)]
+    pub fn on_bytes(
+        &mut self,
+        bytes: &[u8],
+        mut execute_frame: impl FnMut(&Received, &mut StagedParameters) -> Option<Reply>,
+    ) {
+        let mut staged = StagedParameters::empty();
         for &b in bytes {
             let Some(received) = self.decoder.push_command(b) else { continue };
-            let Some(reply) = execute_frame(&received) else { continue };
+            stage(&received, &mut staged);
+            let reply = execute_frame(&received, &mut staged);
+            // Whatever it held (the replaced compensator, a refused set) is dropped now, outside
+            // the critical section.
+            staged = StagedParameters::empty();
+            let Some(reply) = reply else { continue };
             if self.replies.enqueue(reply).is_err() {
                 self.replies_dropped = self.replies_dropped.wrapping_add(1);
             }
@@ -388,7 +506,7 @@ impl<T> Default for Slot<T> {
 }
 
 /// The power stage of the QEMU binaries: plain memory in place of the registers, with the break
-/// and deadline events set by the test.
+/// and deadline events and the cycle counter set by the test.
 #[cfg(feature = "qemu")]
 #[derive(Debug, Default)]
 pub struct MemoryStage {
@@ -400,10 +518,17 @@ pub struct MemoryStage {
     pub late: bool,
     /// Last compare values (leg A, leg B).
     pub compare: [u16; 2],
-    /// Master output enable.
+    /// Master output enable (the test clears it as the hardware would on a break).
     pub outputs_enabled: bool,
+    /// Writes of MOE = 1.
+    pub enable_writes: u32,
     /// Watchdog feeds.
     pub watchdog_feeds: u32,
+    /// The cycle counter (the test advances it by a tick period per trigger; QEMU has none).
+    pub cycles: u32,
+    /// A break that arrives during the next tick, after its flags were read (pending when the
+    /// arming write is decided).
+    pub break_during_tick: bool,
 }
 
 #[cfg(feature = "qemu")]
@@ -411,14 +536,25 @@ impl PowerStage for MemoryStage {
     fn read_conversions(&mut self) -> [u16; 3] {
         self.conversions
     }
-    fn take_break_flag(&mut self) -> bool {
-        core::mem::take(&mut self.break_flag)
+    fn take_break_flags(&mut self) -> bool {
+        let taken = core::mem::take(&mut self.break_flag);
+        self.break_flag = core::mem::take(&mut self.break_during_tick);
+        taken
+    }
+    fn break_pending(&self) -> bool {
+        self.break_flag
     }
     fn set_compare(&mut self, leg_a: u16, leg_b: u16) {
         self.compare = [leg_a, leg_b];
     }
     fn set_outputs_enabled(&mut self, enabled: bool) {
+        if enabled {
+            self.enable_writes = self.enable_writes.wrapping_add(1);
+        }
         self.outputs_enabled = enabled;
+    }
+    fn outputs_enabled(&self) -> bool {
+        self.outputs_enabled
     }
     fn feed_watchdog(&mut self) {
         self.watchdog_feeds = self.watchdog_feeds.wrapping_add(1);
@@ -427,8 +563,7 @@ impl PowerStage for MemoryStage {
         self.late
     }
     fn cycle_count(&self) -> u32 {
-        // QEMU has no cycle counter; the bench counts instructions instead.
-        0
+        self.cycles
     }
 }
 

@@ -912,7 +912,7 @@ pub fn diagnose(
             let note = match &r {
                 Ok((_, after)) => {
                     format!(
-                        "diagnose: refit {k}/{} done: `+{}` {:.2} %",
+                        "diagnose: refit {k}/{} done: `+{}`, mean NRMSE of the scored files and channels {:.2} %",
                         cands.len(),
                         e.name(),
                         after * 100.0

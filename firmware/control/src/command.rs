@@ -112,7 +112,7 @@ const ARM: u8 = 0x02;
 const DISARM: u8 = 0x03;
 const CLEAR: u8 = 0x04;
 const SET_REFERENCE: u8 = 0x05;
-const LOAD_PARAMETERS: u8 = 0x06;
+pub(crate) const LOAD_PARAMETERS: u8 = 0x06;
 const REPLY_BIT: u8 = 0x80;
 
 impl Command {
@@ -207,7 +207,8 @@ impl Command {
 pub enum Refusal {
     /// A fault is latched: clear it first.
     FaultLatched = 1,
-    /// The current-offset calibration has not finished.
+    /// No bridge-off calibration window (current zero, rest position) has completed since the
+    /// bridge was last on.
     NotCalibrated = 2,
     /// The bus voltage is outside its limits (with hysteresis).
     BusOutOfRange = 3,

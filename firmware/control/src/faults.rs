@@ -26,7 +26,8 @@ impl FaultCode {
     pub const BUS_UNDERVOLTAGE: FaultCode = FaultCode(1 << 6);
     /// Bus voltage too high (the coil's energy pumped back into the bus, or a wrong supply).
     pub const BUS_OVERVOLTAGE: FaultCode = FaultCode(1 << 7);
-    /// The current channel's zero measured at boot is implausible (front end or reference fault).
+    /// The current channel's zero measured with the bridge off is implausible or unsteady
+    /// (front end or reference fault), at boot or at an arm.
     pub const CURRENT_OFFSET: FaultCode = FaultCode(1 << 8);
     /// The last reset was the watchdog's: something hung; an operator must clear it.
     pub const WATCHDOG_RESET: FaultCode = FaultCode(1 << 9);
@@ -37,6 +38,26 @@ impl FaultCode {
     /// The firmware saw consecutive ticks overrun their period (the next conversion already
     /// done when the interrupt ended): the loop no longer runs at its rate.
     pub const MISSED_DEADLINE: FaultCode = FaultCode(1 << 12);
+    /// The interval between two ticks, timed by the CPU's cycle counter, is not the tick period
+    /// the control design assumes ([`crate::timing::TickPeriod`]).
+    pub const TICK_TIMING: FaultCode = FaultCode(1 << 13);
+    /// The rest position measured with the bridge off is unusable: the displacement code sits
+    /// at a rail, or spreads more than `rest_max_spread_um` over the window.
+    pub const REST_POSITION: FaultCode = FaultCode(1 << 14);
+    /// `rearm_trips` trips whose cause cannot be seen with the bridge off
+    /// ([`FaultCode::UNVERIFIABLE`]) within `rearm_window_ticks`: they and this stay latched
+    /// until a reset.
+    pub const REPEATED_TRIPS: FaultCode = FaultCode(1 << 15);
+
+    /// Trips whose cause the board cannot observe once the bridge is off (a short, a gate-driver
+    /// fault, a probe that stopped following, an overrun tick): a clear command cannot prove
+    /// them gone, so re-arming after them is rationed ([`FaultLimits::rearm_trips`]).
+    pub const UNVERIFIABLE: FaultCode = FaultCode(
+        Self::OVERCURRENT.0 | Self::BRIDGE_BREAK.0 | Self::DISPLACEMENT_STUCK.0 | Self::MISSED_DEADLINE.0,
+    );
+    /// Faults of the bridge-off calibration (current zero, rest position): they clear when the
+    /// latest measurement window is good.
+    pub const CALIBRATION: FaultCode = FaultCode(Self::CURRENT_OFFSET.0 | Self::REST_POSITION.0);
 
     /// No fault.
     pub const NONE: FaultCode = FaultCode(0);
@@ -53,7 +74,7 @@ impl FaultCode {
 
     /// Names of the set bits, for logs.
     pub fn names(self) -> impl Iterator<Item = &'static str> {
-        const NAMES: [&str; 13] = [
+        const NAMES: [&str; 16] = [
             "overcurrent",
             "coil_i2t",
             "current_sensor_range",
@@ -67,6 +88,9 @@ impl FaultCode {
             "command_timeout",
             "bridge_break",
             "missed_deadline",
+            "tick_timing",
+            "rest_position",
+            "repeated_trips",
         ];
         (0..NAMES.len()).filter(move |b| self.0 & (1 << b) != 0).map(|b| NAMES[b])
     }
@@ -104,20 +128,39 @@ pub struct FaultLimits {
     pub bus_hysteresis_v: f32,
     /// Consecutive ticks a bus reading must stay outside a limit before it trips.
     pub bus_qualify_ticks: u16,
-    /// The current channel's zero measured at boot must lie within this of its nominal
-    /// (mid-scale) value [V].
+    /// The current channel's zero measured with the bridge off must lie within this of its
+    /// nominal (mid-scale) value [V].
     pub current_offset_window_v: f32,
+    /// Largest spread (max − min) of the current codes over a zero-measurement window: the mean
+    /// of an oscillating input can look like a good zero.
+    pub current_zero_max_spread_codes: u16,
+    /// Largest spread of the displacement over the rest-position window [µm].
+    pub rest_max_spread_um: f32,
+    /// Trips of [`FaultCode::UNVERIFIABLE`] within `rearm_window_ticks` after which they stay
+    /// latched until a reset ([`FaultCode::REPEATED_TRIPS`]); at most [`MAX_REARM_TRIPS`].
+    pub rearm_trips: u8,
+    /// The window those trips are counted over [ticks].
+    pub rearm_window_ticks: u32,
 }
+
+/// Most trips [`FaultLimits::rearm_trips`] may allow (the monitor keeps their times).
+pub const MAX_REARM_TRIPS: usize = 8;
 
 impl FaultLimits {
     /// The reference board: 4 A trip, 2 A continuous, 4 A²s budget, 20-code margins; a probe
     /// whose span over 50 ms stays below 2 µm per ampere of a ≥ 0.3 A current swing is stuck
     /// (the reference actuator tracking its 25 µm sine spans 18 µm per ampere of current span
     /// on our simulated rig, nine times the limit; ±2 codes of noise span 0.1 µm, a sixth of
-    /// the least span a 0.3 A swing demands); bus 12–34 V with 1 V hysteresis,
-    /// 3 ticks (300 µs) to qualify (a 24 V supply; the 100 µF bus absorbs a 4 A coil's 48 mJ at
-    /// about 31 V, below the trip, and 34 V leaves margin to 40 V parts); current zero within
-    /// ±0.15 V (±0.75 A, ±186 codes) of 1.65 V.
+    /// the least span a 0.3 A swing demands); bus 12–34 V with 1 V hysteresis, 3 ticks
+    /// (300 µs) to qualify (a 24 V supply; 34 V leaves margin to 40 V parts). A trip does NOT
+    /// stay under 34 V: with the bridge off the coil's ½·L·I² returns through the body diodes
+    /// into the 100 µF bus, √(24² + L·I²/C) = 39.2 V from 4 A (48 mJ) and 41.7 V from 4.4 A
+    /// (58 mJ); any trip above 3.1 A passes 34 V, so an overcurrent trip also latches
+    /// `bus_overvoltage` unless the board absorbs the energy (firmware/README.md, "Safe
+    /// state"). Current zero within ±0.15 V (±0.75 A, ±186 codes) of 1.65 V and spreading at
+    /// most 32 codes (0.13 A) over its window; rest position spreading at most 1 µm. The
+    /// third overcurrent, break, stuck-probe or deadline trip within a minute (600 000
+    /// ticks) needs a reset.
     pub const REFERENCE: FaultLimits = FaultLimits {
         overcurrent_a: 4.0,
         continuous_a: 2.0,
@@ -131,11 +174,23 @@ impl FaultLimits {
         bus_hysteresis_v: 1.0,
         bus_qualify_ticks: 3,
         current_offset_window_v: 0.15,
+        current_zero_max_spread_codes: 32,
+        rest_max_spread_um: 1.0,
+        rearm_trips: 3,
+        rearm_window_ticks: 600_000,
     };
 
     /// Whether the bus is far enough inside its limits to clear a bus fault or arm.
     pub fn bus_healthy(&self, bus_v: f32) -> bool {
         bus_v >= self.min_bus_v + self.bus_hysteresis_v && bus_v <= self.max_bus_v - self.bus_hysteresis_v
+    }
+
+    /// Whether the limits are usable (the re-arm count within what the monitor can hold).
+    pub fn is_valid(&self) -> bool {
+        (1..=MAX_REARM_TRIPS as u8).contains(&self.rearm_trips)
+            && self.rearm_window_ticks > 0
+            && self.rest_max_spread_um.is_finite()
+            && self.rest_max_spread_um > 0.0
     }
 }
 
@@ -144,6 +199,12 @@ impl FaultLimits {
 pub struct FaultMonitor {
     limits: FaultLimits,
     latched: FaultCode,
+    /// Ticks checked since boot (wraps after 5 days; only differences are used).
+    ticks: u32,
+    /// Tick of each recent [`FaultCode::UNVERIFIABLE`] trip, newest at `trips % MAX_REARM_TRIPS`.
+    trip_ticks: [u32; MAX_REARM_TRIPS],
+    /// Such trips since boot.
+    trips: u32,
     i2t: f32,
     under_ticks: u16,
     over_ticks: u16,
@@ -165,6 +226,9 @@ impl FaultMonitor {
         Self {
             limits,
             latched: FaultCode::NONE,
+            ticks: 0,
+            trip_ticks: [0; MAX_REARM_TRIPS],
+            trips: 0,
             i2t: 0.0,
             under_ticks: 0,
             over_ticks: 0,
@@ -184,9 +248,36 @@ impl FaultMonitor {
         self.latched
     }
 
-    /// Latches `f` (e.g. a parameter set rejected at start-up).
+    /// Latches `f` (e.g. a parameter set rejected at start-up). A trip of
+    /// [`FaultCode::UNVERIFIABLE`] (none of them latched before) is counted; the
+    /// `rearm_trips`-th within `rearm_window_ticks` latches [`FaultCode::REPEATED_TRIPS`].
     pub fn latch(&mut self, f: FaultCode) {
-        self.latched = self.latched | f;
+        let before = self.latched;
+        self.latched = before | f;
+        if f.contains(FaultCode::UNVERIFIABLE) && !before.contains(FaultCode::UNVERIFIABLE) {
+            self.trip_ticks[self.trips as usize % MAX_REARM_TRIPS] = self.ticks;
+            self.trips = self.trips.wrapping_add(1);
+            let n = (self.limits.rearm_trips as usize).clamp(1, MAX_REARM_TRIPS);
+            if self.trips as usize >= n {
+                // The n-th trip back (n − 1 before this one) within the window.
+                let oldest = self.trip_ticks[(self.trips as usize - n) % MAX_REARM_TRIPS];
+                if self.ticks.wrapping_sub(oldest) < self.limits.rearm_window_ticks {
+                    self.latched = self.latched | FaultCode::REPEATED_TRIPS;
+                }
+            }
+        }
+    }
+
+    /// Starts the I²t integrator at its budget: after a reset that was not a power-on the coil
+    /// may still be as hot as the budget allows (it cools back at the continuous rating, 1 s
+    /// for the reference coil at zero current).
+    pub fn start_hot(&mut self) {
+        self.i2t = self.limits.i2t_budget_a2s;
+    }
+
+    /// The I²t integrator [A² s above the continuous rating].
+    pub fn i2t_a2s(&self) -> f32 {
+        self.i2t
     }
 
     /// Unlatches `f` whose cause was removed by command (a valid parameter set loaded).
@@ -272,6 +363,7 @@ impl FaultMonitor {
         displacement: Micrometres,
         tick_s: f32,
     ) -> FaultCode {
+        self.ticks = self.ticks.wrapping_add(1);
         let f = self.present(raw, current, tick_s) | self.bus(raw.bus.0) | self.stuck(current, displacement);
         self.latch(f);
         self.latched
@@ -279,12 +371,22 @@ impl FaultMonitor {
 
     /// The explicit recovery command: clears what is latched except what is still present
     /// (the I²t budget must have cooled below half, the bus must be inside its limits by the
-    /// hysteresis; a rejected parameter set and an implausible current zero stay).
-    pub fn clear(&mut self, raw: &RawSample, current: Amps) -> FaultCode {
-        let keep =
-            FaultCode(self.latched.0 & (FaultCode::PARAMETERS_INVALID.0 | FaultCode::CURRENT_OFFSET.0));
-        let mut still = self.present(raw, current, 0.0) | keep;
-        if self.i2t > 0.5 * self.limits.i2t_budget_a2s {
+    /// hysteresis; `calibration` are the calibration faults the latest bridge-off measurement
+    /// still shows). A rejected parameter set stays (a valid load clears it); after
+    /// [`FaultCode::REPEATED_TRIPS`] the unverifiable trips stay with it until a reset. The
+    /// other unverifiable trips (overcurrent, break, stuck probe, deadline) clear, as their
+    /// cause cannot be seen with the bridge off; `rearm_trips` rations them.
+    pub fn clear(&mut self, raw: &RawSample, current: Amps, calibration: FaultCode) -> FaultCode {
+        let sticky = FaultCode::PARAMETERS_INVALID.0 | FaultCode::REPEATED_TRIPS.0;
+        let mut keep = FaultCode(self.latched.0 & sticky);
+        if self.latched.contains(FaultCode::REPEATED_TRIPS) {
+            keep = keep | FaultCode(self.latched.0 & FaultCode::UNVERIFIABLE.0);
+        }
+        let mut still =
+            self.present(raw, current, 0.0) | keep | FaultCode(calibration.0 & FaultCode::CALIBRATION.0);
+        // A latched I²t trip clears once the coil has cooled to half its budget; a coil that
+        // is merely warm (a warm start) latches nothing here.
+        if self.latched.contains(FaultCode::COIL_I2T) && self.i2t > 0.5 * self.limits.i2t_budget_a2s {
             still = still | FaultCode::COIL_I2T;
         }
         if !self.limits.bus_healthy(raw.bus.0) {
@@ -334,10 +436,117 @@ mod tests {
         assert!((7800..=8200).contains(&k), "tripped after {k} ticks");
         // Cooling at zero current: (0 − 4) A² → below half the budget after 0.5 s.
         let (raw0, i0) = raw_at(0.0);
-        assert!(m.clear(&raw0, i0).contains(FaultCode::COIL_I2T), "must not clear while hot");
+        assert!(
+            m.clear(&raw0, i0, FaultCode::NONE).contains(FaultCode::COIL_I2T),
+            "must not clear while hot"
+        );
         for _ in 0..6_000 {
             m.present(&raw0, i0, 1e-4);
         }
-        assert!(m.clear(&raw0, i0).is_clear());
+        assert!(m.clear(&raw0, i0, FaultCode::NONE).is_clear());
+    }
+
+    /// Ticks at `i` amperes until the monitor latches something; returns the ticks taken.
+    fn run_at(m: &mut FaultMonitor, i: f32, ticks: u32) -> Option<u32> {
+        let (raw, amps) = raw_at(i);
+        (1..=ticks).find(|_| !m.check(&raw, amps, Micrometres(0.0), 1e-4).is_clear())
+    }
+
+    #[test]
+    fn a_reset_other_than_power_on_starts_the_coil_hot() {
+        // 2.5 A against 2 A continuous: (6.25 − 4) A² → the 4 A²s budget in 1.78 s cold.
+        let mut cold = FaultMonitor::new(FaultLimits::REFERENCE);
+        assert_eq!(run_at(&mut cold, 2.5, 17_000), None, "cold coil tripped early");
+        let mut hot = FaultMonitor::new(FaultLimits::REFERENCE);
+        hot.start_hot();
+        assert_eq!(run_at(&mut hot, 2.5, 17_000), Some(1), "a warm start must trip at the first excess");
+        assert!(hot.latched().contains(FaultCode::COIL_I2T));
+        // At zero current it cools at the continuous rating: the whole budget back after 1 s.
+        let mut resting = FaultMonitor::new(FaultLimits::REFERENCE);
+        resting.start_hot();
+        assert_eq!(run_at(&mut resting, 0.0, 10_000), None);
+        assert!(resting.i2t_a2s() < 1e-3, "still {} A²s after 1 s at rest", resting.i2t_a2s());
+    }
+
+    /// Trips `m` by overcurrent, lets the current decay and sends the clear command; returns
+    /// what stays latched.
+    fn overcurrent_trip_and_clear(m: &mut FaultMonitor) -> FaultCode {
+        assert_eq!(run_at(m, 5.0, 1), Some(1));
+        assert!(m.latched().contains(FaultCode::OVERCURRENT));
+        let (raw0, i0) = raw_at(0.0);
+        m.check(&raw0, i0, Micrometres(0.0), 1e-4);
+        m.clear(&raw0, i0, FaultCode::NONE)
+    }
+
+    #[test]
+    fn the_third_unverifiable_trip_within_a_minute_needs_a_reset() {
+        let l = FaultLimits::REFERENCE;
+        let mut m = FaultMonitor::new(l);
+        assert!(overcurrent_trip_and_clear(&mut m).is_clear(), "first trip must clear");
+        run_at(&mut m, 0.0, 1000);
+        assert!(overcurrent_trip_and_clear(&mut m).is_clear(), "second trip must clear");
+        run_at(&mut m, 0.0, 1000);
+        let still = overcurrent_trip_and_clear(&mut m);
+        assert!(
+            still.contains(FaultCode::REPEATED_TRIPS) && still.contains(FaultCode::OVERCURRENT),
+            "third trip in 0.2 s cleared: {:?}",
+            still.names().collect::<Vec<_>>()
+        );
+        // Nothing but a reset: a minute later the clear still refuses.
+        run_at(&mut m, 0.0, l.rearm_window_ticks + 10);
+        let (raw0, i0) = raw_at(0.0);
+        assert!(m.clear(&raw0, i0, FaultCode::NONE).contains(FaultCode::REPEATED_TRIPS));
+
+        // The same three trips spread over more than the window each clear.
+        let mut m = FaultMonitor::new(l);
+        for k in 0..3 {
+            assert!(overcurrent_trip_and_clear(&mut m).is_clear(), "trip {k} a half window apart");
+            run_at(&mut m, 0.0, l.rearm_window_ticks / 2 + 1);
+        }
+    }
+
+    #[test]
+    fn a_break_with_overcurrent_counts_as_one_trip_and_a_stuck_probe_counts() {
+        let mut m = FaultMonitor::new(FaultLimits::REFERENCE);
+        // One event seen twice (the break input, then the current the next tick): one trip.
+        m.latch(FaultCode::BRIDGE_BREAK);
+        m.latch(FaultCode::OVERCURRENT);
+        let (raw0, i0) = raw_at(0.0);
+        assert!(m.clear(&raw0, i0, FaultCode::NONE).is_clear());
+        m.latch(FaultCode::DISPLACEMENT_STUCK);
+        assert!(m.clear(&raw0, i0, FaultCode::NONE).is_clear(), "the second trip must clear");
+        m.latch(FaultCode::MISSED_DEADLINE);
+        let still = m.clear(&raw0, i0, FaultCode::NONE);
+        assert_eq!(still, FaultCode::MISSED_DEADLINE | FaultCode::REPEATED_TRIPS);
+        // Faults that the board sees with the bridge off are not rationed.
+        let mut m = FaultMonitor::new(FaultLimits::REFERENCE);
+        for _ in 0..10 {
+            m.latch(FaultCode::COMMAND_TIMEOUT | FaultCode::BUS_UNDERVOLTAGE);
+            assert!(m.clear(&raw0, i0, FaultCode::NONE).is_clear());
+        }
+    }
+
+    /// The bus after a trip: the coil's ½ L I² into the bus capacitance on top of 24 V. The
+    /// figures firmware/README.md and `FaultLimits::REFERENCE` state, and their consequence:
+    /// the bus over-voltage trip sees every overcurrent trip.
+    #[test]
+    fn the_coil_energy_of_an_overcurrent_trip_exceeds_the_bus_limit() {
+        let (bus_v, bus_f) = (24.0f32, 100e-6f32); // the reference board's supply and bulk capacitance
+        let l_h = crate::current::CurrentLoopParams::REFERENCE.coil_inductance_h;
+        let peak = |i: f32| (bus_v * bus_v + l_h * i * i / bus_f).sqrt();
+        let limits = FaultLimits::REFERENCE;
+        assert!((peak(limits.overcurrent_a) - 39.2).abs() < 0.05, "{}", peak(4.0));
+        assert!((peak(4.4) - 41.7).abs() < 0.05, "{}", peak(4.4));
+        assert!((0.5 * l_h * 16.0 - 0.048).abs() < 1e-6);
+        assert!(
+            peak(limits.overcurrent_a) > limits.max_bus_v,
+            "a trip no longer passes the bus limit: update the docs"
+        );
+        // The largest current whose energy stays under the trip on this bus: 3.1 A.
+        let i_max = ((limits.max_bus_v * limits.max_bus_v - bus_v * bus_v) * bus_f / l_h).sqrt();
+        assert!((i_max - 3.11).abs() < 0.01, "{i_max}");
+        // The bulk capacitance that keeps a 4.4 A trip under the 34 V trip: 200 µF.
+        let c_min = l_h * 4.4 * 4.4 / (limits.max_bus_v * limits.max_bus_v - bus_v * bus_v);
+        assert!((c_min - 200e-6).abs() < 1e-6, "{c_min}");
     }
 }

@@ -9,20 +9,24 @@
 //! ```
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 
+pub mod calibration;
 pub mod command;
 pub mod current;
 pub mod faults;
 pub mod framing;
+pub mod gate;
 pub mod pid;
 pub mod reference;
 pub mod resonant;
 pub mod sim;
 pub mod telemetry;
 pub mod tick;
+pub mod timing;
 pub mod units;
 
 use model_core::{Actuator, ActuatorParams, Compensator, CompensatorState, ModelSpec, ParamError};
 
+use crate::calibration::IdleCalibration;
 use crate::command::{Command, Refusal, Reply};
 use crate::current::{CurrentLoop, CurrentLoopParams};
 use crate::faults::{FaultCode, FaultLimits, FaultMonitor};
@@ -30,14 +34,14 @@ use crate::pid::{Pid, PidParams, PidState};
 use crate::reference::{Reference, Waveform};
 use crate::resonant::{Resonant, ResonantParams};
 use crate::telemetry::Frame;
-use crate::units::{Amps, Calibration, Micrometres, Volts, ADC_FULL_SCALE};
+use crate::units::{Amps, Calibration, Micrometres, Volts};
 
 pub use crate::tick::{RawSample, TickOutput};
 
 /// Everything the controller needs besides the model.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ControlConfig {
-    /// Front-end scaling (the current zero is replaced by the one measured at boot).
+    /// Front-end scaling (the current zero is replaced by the one measured with the bridge off).
     pub calibration: Calibration,
     /// Current loop design.
     pub current_loop: CurrentLoopParams,
@@ -61,8 +65,13 @@ pub struct ControlConfig {
     pub max_current_a: f32,
     /// Ticks without a valid command (or keep-alive) after which an armed bridge disarms.
     pub command_timeout_ticks: u32,
-    /// Current samples averaged at boot, bridge off, for the current channel's zero.
+    /// Samples per bridge-off calibration window (current zero and rest position), taken at
+    /// boot and again whenever the bridge is off; arming needs one completed since the bridge
+    /// was last on.
     pub offset_calibration_ticks: u16,
+    /// Bridge-off ticks skipped before such a window after a run (the coil current decays
+    /// through the body diodes, the rod comes to rest).
+    pub calibration_settle_ticks: u16,
     /// Largest |bias| + amplitude a commanded reference may have [µm].
     pub max_reference_um: f32,
     /// Largest change of the compensator's target per tick [µm]: a step of the reference (a
@@ -76,7 +85,8 @@ impl ControlConfig {
     /// The reference board tracking a 100 Hz sine of 12.5 µm (25 µm peak to peak) about 15 µm,
     /// with the repeating error learned at 100, 200 and 300 Hz (time constant about 1000 ticks);
     /// disarms 200 ms after the last command, averages 256 samples (25.6 ms) for the current
-    /// zero, accepts references within ±50 µm of rest.
+    /// zero and the rest position (after 5 ms of settling once the bridge was on: 4 A decays
+    /// against a 12 V bus in 2 ms), accepts references within ±50 µm of rest.
     pub const REFERENCE: ControlConfig = ControlConfig {
         calibration: Calibration::REFERENCE_BOARD,
         current_loop: CurrentLoopParams::REFERENCE,
@@ -94,6 +104,7 @@ impl ControlConfig {
         max_current_a: 3.5,
         command_timeout_ticks: 2000,
         offset_calibration_ticks: 256,
+        calibration_settle_ticks: 50,
         max_reference_um: 50.0,
         max_feedforward_slew_um: SLEW_UM_PER_TICK,
     };
@@ -156,20 +167,18 @@ impl ResetCause {
     }
 }
 
-/// Boot-time current-zero calibration: samples summed with the bridge off.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct OffsetCalibration {
-    sum: u32,
-    samples: u16,
-    done: bool,
-}
-
 /// The controller: fixed configuration and model, plus the state stepped every tick. It boots
 /// disarmed (bridge off, not switching) and arms only on an explicit command.
 pub struct Controller {
     cfg: ControlConfig,
+    /// The front end's scaling with the measured current zero.
     calibration: Calibration,
-    offset: OffsetCalibration,
+    /// Bridge-off windows for the current zero and the rest position.
+    idle: IdleCalibration,
+    /// Whether a current zero has been measured and adopted.
+    zero_measured: bool,
+    /// Whether the first window since boot has been judged (its faults latched).
+    boot_window_judged: bool,
     armed: bool,
     /// Whether the configuration (current loop, PID, timing) validated at construction.
     design_valid: bool,
@@ -182,7 +191,11 @@ pub struct Controller {
     feedforward_target_um: f32,
     faults: FaultMonitor,
     seq: u32,
-    rest_um: Option<f32>,
+    /// Displacement at rest [µm, absolute], the reference's zero: the latest good bridge-off
+    /// window before the first arming (0 before there is one), then fixed.
+    rest_um: f32,
+    /// Whether the bridge has been armed since boot (the rest position is fixed from then on).
+    rest_fixed: bool,
     pid: Option<(Pid, PidState)>,
     resonant: Option<Resonant>,
     ticks_since_command: u32,
@@ -193,11 +206,16 @@ impl Controller {
     /// Builds the controller for `spec` with the identified `params` (from `gma fit`); the
     /// compensator inverts [`compensator_model`]. A rejected parameter set or controller design
     /// (current loop, PID) latches `PARAMETERS_INVALID`; a watchdog `reset` latches
-    /// `WATCHDOG_RESET`. Either way it starts disarmed.
+    /// `WATCHDOG_RESET`. Either way it starts disarmed. After any reset but a power-on the coil
+    /// I²t starts at its budget (the coil may be hot; BORRSTF also marks a brown-out, which
+    /// cannot be told from a power-on and so starts cold).
     pub fn new(cfg: ControlConfig, spec: ModelSpec, params: &ActuatorParams, reset: ResetCause) -> Self {
         let mut faults = FaultMonitor::new(cfg.limits);
         if reset == ResetCause::Watchdog {
             faults.latch(FaultCode::WATCHDOG_RESET);
+        }
+        if reset != ResetCause::PowerOn {
+            faults.start_hot();
         }
         let current_loop = CurrentLoop::new(cfg.current_loop);
         let pid = cfg.pid.map(Pid::new);
@@ -207,6 +225,7 @@ impl Controller {
             && !matches!(resonant, Some(Err(_)))
             && cfg.command_timeout_ticks > 0
             && cfg.offset_calibration_ticks > 0
+            && cfg.limits.is_valid()
             && cfg.max_reference_um.is_finite()
             && cfg.max_reference_um > 0.0
             && cfg.max_feedforward_slew_um.is_finite()
@@ -220,7 +239,9 @@ impl Controller {
         let mut c = Self {
             cfg,
             calibration: cfg.calibration,
-            offset: OffsetCalibration { sum: 0, samples: 0, done: false },
+            idle: IdleCalibration::new(cfg.offset_calibration_ticks, cfg.calibration_settle_ticks),
+            zero_measured: false,
+            boot_window_judged: false,
             armed: false,
             design_valid,
             current_loop,
@@ -230,7 +251,8 @@ impl Controller {
             feedforward_target_um: 0.0,
             faults,
             seq: 0,
-            rest_um: None,
+            rest_um: 0.0,
+            rest_fixed: false,
             pid,
             resonant,
             ticks_since_command: 0,
@@ -252,11 +274,8 @@ impl Controller {
     /// 4 KB, and every layer that returned it by value kept a copy on the stack of a `load`
     /// command, the deepest path.
     fn install_compensator(&mut self, spec: ModelSpec, params: &ActuatorParams) -> Result<(), ParamError> {
-        let c = Compensator::new(compensator_model(spec, params, self.cfg.current_loop.tick_s)?);
-        self.model_rest_m = c.model().rest_state().mech.displacement_m;
-        let s = c.rest_state();
-        self.compensator = Some((c, s));
-        Ok(())
+        let tick_s = self.cfg.current_loop.tick_s;
+        build_compensator_into(&mut self.compensator, &mut self.model_rest_m, spec, params, tick_s)
     }
 
     /// A controller whose parameter set could not even be read: PARAMETERS_INVALID latched, the
@@ -287,16 +306,33 @@ impl Controller {
         self.armed
     }
 
-    /// The current channel's zero measured at boot [V], once calibration has finished.
+    /// The current channel's zero [V] from the latest good bridge-off window, once there is one.
     pub fn current_zero_v(&self) -> Option<f32> {
-        self.offset.done.then_some(self.calibration.current_zero_v)
+        self.zero_measured.then_some(self.calibration.current_zero_v)
+    }
+
+    /// The rest position [µm, absolute] the reference is relative to (0 before the first good
+    /// bridge-off window; fixed at the first arming).
+    pub fn rest_um(&self) -> f32 {
+        self.rest_um
+    }
+
+    /// The bridge-off calibration (its latest window).
+    pub fn idle_calibration(&self) -> &IdleCalibration {
+        &self.idle
     }
 
     /// The explicit recovery command, given the present measurements: clears what is no longer
     /// present and restarts the loops from rest. Returns what stays latched. It never arms.
     pub fn clear_faults(&mut self, raw: &RawSample) -> FaultCode {
         let i = self.calibration.current(raw.current);
-        self.faults.clear(raw, i)
+        // The calibration faults as the latest window shows them; none since the bridge was on:
+        // unknown, so they stay.
+        let calibration = match self.idle.latest() {
+            Some(m) => m.faults,
+            None => FaultCode(self.faults.latched().0 & FaultCode::CALIBRATION.0),
+        };
+        self.faults.clear(raw, i, calibration)
     }
 
     /// Executes one command (decoded by [`command::Decoder`]); any valid command is also the
@@ -348,8 +384,16 @@ impl Controller {
         if !self.faults().is_clear() {
             return Err(Refusal::FaultLatched);
         }
-        if !self.offset.done {
-            return Err(Refusal::NotCalibrated);
+        // A current zero and rest position measured since the bridge was last on (adopted when
+        // their window completed); a bad one is latched by name.
+        match self.idle.latest() {
+            None => return Err(Refusal::NotCalibrated),
+            Some(m) if !m.faults.is_clear() => {
+                let f = m.faults;
+                self.faults.latch(f);
+                return Err(Refusal::FaultLatched);
+            }
+            Some(_) => {}
         }
         if !self.cfg.limits.bus_healthy(self.last_raw.bus.0) {
             return Err(Refusal::BusOutOfRange);
@@ -367,6 +411,12 @@ impl Controller {
             res.reset();
         }
         self.reference = Reference::new(self.reference.waveform(), self.cfg.current_loop.tick_s);
+        // The next arming needs a new measurement, taken after this run. The rest position
+        // stays this one: after a run the rod's zero-current position includes its remanent
+        // strain (10 µm on the demo rod), and re-taking it would move the reference's frame
+        // by that much from run to run; later windows are checked, not adopted.
+        self.idle.invalidate();
+        self.rest_fixed = true;
         self.armed = true;
         Ok(())
     }
@@ -386,38 +436,77 @@ impl Controller {
         Ok(())
     }
 
-    /// Boot calibration of the current zero (the bridge is off until it is done): the mean of
-    /// the first `offset_calibration_ticks` codes, refused (`CURRENT_OFFSET` latched, the nominal
-    /// zero kept) outside the stated window around the nominal mid-scale zero.
-    fn calibrate_offset(&mut self, raw: &RawSample) {
-        let o = &mut self.offset;
-        o.sum += raw.current.0 as u32;
-        o.samples += 1;
-        if o.samples < self.cfg.offset_calibration_ticks {
-            return;
-        }
-        o.done = true;
-        let code = o.sum as f32 / o.samples as f32;
-        let zero_v = code * (self.calibration.vref / ADC_FULL_SCALE as f32);
-        if (zero_v - self.cfg.calibration.current_zero_v).abs() <= self.cfg.limits.current_offset_window_v {
-            self.calibration.current_zero_v = zero_v;
+    /// A parameter set whose compensator was built outside the controller
+    /// ([`StagedParameters::build`], on the board in thread mode with the interrupt running):
+    /// refused as [`Controller::command`]'s load is, otherwise moved in (the only work done
+    /// where the interrupt is locked out); `staged` is left empty. Also the keep-alive, as any
+    /// command. Not inlined: the move's temporary then takes stack only while it runs.
+    #[inline(never)]
+    pub fn load_staged(&mut self, tag: u8, staged: &mut StagedParameters) -> Reply {
+        self.ticks_since_command = 0;
+        let outcome = if self.armed {
+            Err(Refusal::Armed)
+        } else if !self.design_valid || !staged.valid {
+            Err(Refusal::InvalidParameters)
         } else {
-            self.faults.latch(FaultCode::CURRENT_OFFSET);
+            // A move, not a swap: the replaced compensator needs no keeping, and one copy is
+            // the least time the interrupt is held off.
+            self.compensator = staged.compensator.take();
+            self.model_rest_m = staged.model_rest_m;
+            staged.valid = false;
+            self.faults.release(FaultCode::PARAMETERS_INVALID);
+            Ok(())
+        };
+        self.reply(tag, command::LOAD_PARAMETERS, outcome)
+    }
+
+    /// A bridge-off sample for the calibration windows. A window's good parts are adopted at
+    /// once (the current zero always, the rest position until the first arming); the first
+    /// window since boot latches its faults.
+    fn calibrate(&mut self, raw: &RawSample) {
+        let Some(m) = self.idle.sample(raw, &self.cfg.calibration, &self.cfg.limits) else { return };
+        if !self.boot_window_judged {
+            self.boot_window_judged = true;
+            self.faults.latch(m.faults);
+        }
+        if !m.faults.contains(FaultCode::CURRENT_OFFSET) {
+            self.calibration.current_zero_v = m.current_zero_v;
+            self.zero_measured = true;
+        }
+        if !m.faults.contains(FaultCode::REST_POSITION) && !self.rest_fixed {
+            self.rest_um = m.rest_um;
+        }
+    }
+
+    /// The safe state, in this very tick: disarmed (re-arming takes a clear and an arm
+    /// command), the bridge off, the record showing `faults`.
+    fn safe_output(&mut self, seq: u32, i: Amps, y: Micrometres, faults: FaultCode) -> TickOutput {
+        self.armed = false;
+        self.current_loop.reset();
+        TickOutput {
+            duty: 0.0,
+            bridge_enabled: false,
+            frame: Frame {
+                seq,
+                reference_um: 0.0,
+                command_v: 0.0,
+                current_a: i.0,
+                displacement_um: y.0,
+                faults: faults.0,
+            },
         }
     }
 
     /// One control tick.
     pub fn tick(&mut self, raw: &RawSample) -> TickOutput {
         self.last_raw = *raw;
-        if !self.offset.done && !self.armed {
-            self.calibrate_offset(raw);
+        if !self.armed {
+            self.calibrate(raw);
         }
         let cal = &self.calibration;
         let tick_s = self.cfg.current_loop.tick_s;
         let i = cal.current(raw.current);
-        let y_abs = cal.displacement(raw.displacement);
-        let rest = *self.rest_um.get_or_insert(y_abs.0);
-        let y = Micrometres(y_abs.0 - rest);
+        let y = Micrometres(cal.displacement(raw.displacement).0 - self.rest_um);
         self.ticks_since_command = self.ticks_since_command.saturating_add(1);
         if self.armed && self.ticks_since_command > self.cfg.command_timeout_ticks {
             self.faults.latch(FaultCode::COMMAND_TIMEOUT);
@@ -426,22 +515,7 @@ impl Controller {
         let seq = self.seq;
         self.seq = self.seq.wrapping_add(1);
         if !faults.is_clear() || !self.armed {
-            // The safe state, in this very tick: any fault disarms; re-arming takes a clear
-            // and an arm command.
-            self.armed = false;
-            self.current_loop.reset();
-            return TickOutput {
-                duty: 0.0,
-                bridge_enabled: false,
-                frame: Frame {
-                    seq,
-                    reference_um: 0.0,
-                    command_v: 0.0,
-                    current_a: i.0,
-                    displacement_um: y.0,
-                    faults: faults.0,
-                },
-            };
+            return self.safe_output(seq, i, y, faults);
         }
         let fundamental = self.reference.fundamental();
         let r = self.reference.advance();
@@ -463,6 +537,12 @@ impl Controller {
         };
         let max_i = self.cfg.max_current_a;
         let i_ref = (i_ff + i_pid + i_res).clamp(-max_i, max_i);
+        if !i_ref.is_finite() {
+            // The model or a loop produced a NaN: the current loop would make it 0 V with the
+            // bridge on and nothing latched. Only a valid parameter set clears it.
+            self.faults.latch(FaultCode::PARAMETERS_INVALID);
+            return self.safe_output(seq, i, y, self.faults.latched());
+        }
         let cmd = self.current_loop.step(Amps(i_ref), i, raw.bus);
         TickOutput {
             duty: cmd.duty,
@@ -494,16 +574,69 @@ pub fn compensator_model(
     Actuator::new(spec.for_compensator(), &p)
 }
 
+/// The compensator for `spec` with `params` at `tick_s`, moved into `slot` (left as it was when
+/// the set is refused), and the model's rest displacement into `rest_m`. The one build path of
+/// the controller and of a staged load: not inlined, so that its code exists once.
+#[inline(never)]
+fn build_compensator_into(
+    slot: &mut Option<(Compensator, CompensatorState)>,
+    rest_m: &mut f32,
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    tick_s: f32,
+) -> Result<(), ParamError> {
+    let c = Compensator::new(compensator_model(spec, params, tick_s)?);
+    *rest_m = c.model().rest_state().mech.displacement_m;
+    let s = c.rest_state();
+    *slot = Some((c, s));
+    Ok(())
+}
+
+/// A parameter set's compensator built ahead of [`Controller::load_staged`]: the model build
+/// (about 400 000 instructions for a Preisach set, more than 2 ms) runs without locking the
+/// controller, and the controller only moves it in.
+pub struct StagedParameters {
+    compensator: Option<(Compensator, CompensatorState)>,
+    model_rest_m: f32,
+    valid: bool,
+}
+
+impl StagedParameters {
+    /// Builds and validates the compensator for `spec` with `params` at `cfg`'s tick, as
+    /// [`Controller::new`] does.
+    pub fn build(cfg: &ControlConfig, spec: ModelSpec, params: &ActuatorParams) -> Self {
+        let mut s = Self::empty();
+        s.rebuild(cfg, spec, params);
+        s
+    }
+
+    /// Nothing staged (a load with it is refused).
+    pub const fn empty() -> Self {
+        Self { compensator: None, model_rest_m: 0.0, valid: false }
+    }
+
+    /// [`StagedParameters::build`] in place (no second copy of the compensator on the stack).
+    pub fn rebuild(&mut self, cfg: &ControlConfig, spec: ModelSpec, params: &ActuatorParams) {
+        let tick_s = cfg.current_loop.tick_s;
+        self.valid =
+            build_compensator_into(&mut self.compensator, &mut self.model_rest_m, spec, params, tick_s)
+                .is_ok();
+    }
+
+    /// Whether the set validated (and has not been installed yet).
+    pub fn is_valid(&self) -> bool {
+        self.valid
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::command::{ReferenceCommand, Shape};
     use crate::sim::{CoilActuator, Rig};
 
-    /// A square reference's 25 µm steps reach the inverse model as ramps of at most the slew
-    /// limit per tick, and the target still arrives at each level.
-    #[test]
-    fn reference_steps_reach_the_compensator_slew_limited() {
+    /// The demo set's controller on its simulated rig, calibrated and armed (tag 1).
+    fn armed_on_the_demo_rig() -> (Controller, Rig<CoilActuator>, ControlConfig, ModelSpec, ActuatorParams) {
         let spec = ModelSpec::parse("ja+eddy+mech").unwrap();
         let p = ActuatorParams::TERFENOL_DEMO;
         let mut rig = Rig::new(CoilActuator::new(spec, &p, 1e-4).unwrap(), 1);
@@ -514,6 +647,36 @@ mod tests {
             rig.apply(&out).unwrap();
         }
         assert_eq!(ctl.command(1, &Command::Arm).outcome, Ok(()));
+        (ctl, rig, cfg, spec, p)
+    }
+
+    /// A NaN current reference (here from a NaN reference value through the PID; a model can
+    /// produce one the same way): before, the current loop turned it into 0 V with the bridge
+    /// enabled and nothing latched. Now the tick that sees it is the safe state, with
+    /// `parameters_invalid` latched until a valid parameter set is loaded.
+    #[test]
+    fn a_non_finite_current_reference_is_the_safe_state_with_parameters_invalid() {
+        let (mut ctl, mut rig, cfg, spec, p) = armed_on_the_demo_rig();
+        for _ in 0..20 {
+            let out = ctl.tick(&rig.sample());
+            assert!(out.bridge_enabled);
+            rig.apply(&out).unwrap();
+        }
+        ctl.reference = Reference::new(Waveform::Constant { bias: f32::NAN }, cfg.current_loop.tick_s);
+        let out = ctl.tick(&rig.sample());
+        assert!(!out.bridge_enabled && out.duty == 0.0 && !ctl.armed(), "{out:?}");
+        assert_eq!(FaultCode(out.frame.faults), FaultCode::PARAMETERS_INVALID);
+        assert_eq!(ctl.command(2, &Command::ClearFaults).outcome, Err(Refusal::FaultStillPresent));
+        let load = Command::LoadParameters { spec, params: p };
+        assert_eq!(ctl.command(3, &load).outcome, Ok(()));
+        assert!(ctl.faults().is_clear());
+    }
+
+    /// A square reference's 25 µm steps reach the inverse model as ramps of at most the slew
+    /// limit per tick, and the target still arrives at each level.
+    #[test]
+    fn reference_steps_reach_the_compensator_slew_limited() {
+        let (mut ctl, mut rig, cfg, ..) = armed_on_the_demo_rig();
         let square =
             ReferenceCommand { shape: Shape::Square, amplitude_um: 12.5, bias_um: 15.0, freq_hz: 100.0 };
         assert_eq!(ctl.command(2, &Command::SetReference(square)).outcome, Ok(()));

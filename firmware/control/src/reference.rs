@@ -2,6 +2,9 @@
 //! multisine, steps), produced tick by tick without a sine call per tick: each tone is a unit
 //! phasor rotated by its per-tick angle (renormalised every tick), the rotation's cos/sin from a
 //! short Taylor series (angles ≤ 0.63 rad per tick up to 1 kHz at 10 kHz: error < 1e-7).
+//! Square and triangle waves step a 32-bit phase accumulator (one period = 2³², wrapping), so
+//! their timing is as exact after days as at the start; there is no time variable to lose
+//! resolution or wrap.
 
 /// Most tones of a multisine.
 pub const MAX_TONES: usize = 8;
@@ -81,7 +84,13 @@ fn rotation(theta: f32) -> (f32, f32) {
 pub struct Reference {
     wave: Waveform,
     tick_s: f32,
+    /// Ticks since the start, saturating: only the chirp's sweep reads it (held at `f1` after
+    /// `duration_s`, so saturation changes nothing).
     ticks: u32,
+    /// Phase of a square or triangle wave [2⁻³² periods], wrapping.
+    phase: u32,
+    /// Its step per tick.
+    phase_step: u32,
     phasor: [(f32, f32); MAX_TONES],
     step: [(f32, f32); MAX_TONES],
 }
@@ -113,8 +122,15 @@ impl Reference {
             }
             w @ (Waveform::Steps { .. } | Waveform::Triangle { .. } | Waveform::Constant { .. }) => w,
         };
-        let mut r =
-            Self { wave, tick_s, ticks: 0, phasor: [(1.0, 0.0); MAX_TONES], step: [(1.0, 0.0); MAX_TONES] };
+        let mut r = Self {
+            wave,
+            tick_s,
+            ticks: 0,
+            phase: 0,
+            phase_step: 0,
+            phasor: [(1.0, 0.0); MAX_TONES],
+            step: [(1.0, 0.0); MAX_TONES],
+        };
         let two_pi_t = 2.0 * core::f32::consts::PI * tick_s;
         match wave {
             Waveform::Sine { freq_hz, .. } => r.step[0] = rotation(two_pi_t * freq_hz),
@@ -127,6 +143,9 @@ impl Reference {
                     r.phasor[k] = (c, s);
                     r.step[k] = rotation(two_pi_t * freq_hz * (k + 1) as f32);
                 }
+            }
+            Waveform::Steps { freq_hz, .. } | Waveform::Triangle { freq_hz, .. } => {
+                r.phase_step = phase_step(freq_hz, tick_s);
             }
             _ => {}
         }
@@ -150,8 +169,8 @@ impl Reference {
     /// The value at the current tick, then advances one tick.
     #[inline]
     pub fn advance(&mut self) -> f32 {
-        let t = self.ticks as f32 * self.tick_s;
-        self.ticks = self.ticks.wrapping_add(1);
+        let phase = self.phase;
+        self.phase = phase.wrapping_add(self.phase_step);
         let advance = |z: &mut (f32, f32), w: (f32, f32)| {
             let (c, s) = (z.0 * w.0 - z.1 * w.1, z.0 * w.1 + z.1 * w.0);
             // Renormalise: one Newton step towards |z| = 1 keeps the amplitude exact.
@@ -166,6 +185,8 @@ impl Reference {
             }
             Waveform::Chirp { f0_hz, f1_hz, duration_s, amplitude, bias } => {
                 let v = bias + amplitude * self.phasor[0].1;
+                let t = self.ticks as f32 * self.tick_s;
+                self.ticks = self.ticks.saturating_add(1);
                 let f = if t < duration_s { f0_hz + (f1_hz - f0_hz) * t / duration_s } else { f1_hz };
                 let w = rotation(2.0 * core::f32::consts::PI * self.tick_s * f);
                 advance(&mut self.phasor[0], w);
@@ -183,15 +204,12 @@ impl Reference {
                 let scale = amplitude / (1.6 * model_core::math::sqrt(n as f32));
                 bias + scale * sum
             }
-            Waveform::Steps { freq_hz, amplitude, bias } => {
-                let phase = t * freq_hz;
-                let frac = phase - libm_floor(phase);
-                bias + if frac < 0.5 { amplitude } else { -amplitude }
+            Waveform::Steps { amplitude, bias, .. } => {
+                bias + if phase < HALF_PERIOD { amplitude } else { -amplitude }
             }
-            Waveform::Triangle { freq_hz, amplitude, bias } => {
+            Waveform::Triangle { amplitude, bias, .. } => {
                 // Phase shifted a quarter period so that the ramp starts at the bias.
-                let phase = t * freq_hz + 0.25;
-                let frac = phase - libm_floor(phase);
+                let frac = phase.wrapping_add(HALF_PERIOD / 2) as f32 * PHASE_UNIT;
                 bias + amplitude * (1.0 - 4.0 * (frac - 0.5).abs())
             }
             Waveform::Constant { bias } => bias,
@@ -218,12 +236,19 @@ impl Reference {
     }
 }
 
-fn libm_floor(x: f32) -> f32 {
-    let t = x as i32 as f32;
-    if t > x {
-        t - 1.0
+/// Half a period of the phase accumulator.
+const HALF_PERIOD: u32 = 1 << 31;
+/// One unit of the phase accumulator [periods].
+const PHASE_UNIT: f32 = 1.0 / 4_294_967_296.0;
+
+/// The accumulator's step for `freq_hz` at `tick_s` (below a sixth of the tick rate, see
+/// [`Reference::new`]): computed in f64 once, so the period is right to 2⁻³² of a tick's phase.
+fn phase_step(freq_hz: f32, tick_s: f32) -> u32 {
+    let step = freq_hz as f64 * tick_s as f64 * 4_294_967_296.0;
+    if step.is_finite() && step > 0.0 && step < 4_294_967_295.0 {
+        (step + 0.5) as u32
     } else {
-        t
+        0
     }
 }
 
@@ -256,6 +281,61 @@ mod tests {
             worst = worst.max((v - exact).abs());
         }
         assert!(worst < 2e-3, "max error {worst} over 10 s");
+    }
+
+    /// 2²⁵ ticks (56 minutes at 10 kHz) stepped for real. With the time base `ticks as f32 *
+    /// tick_s` this failed: past 2²⁴ ticks the f32 time rounds to pairs of ticks and the phase
+    /// t·f to 0.03 periods (square edges 46–54 ticks apart, a triangle off by 12 % of its
+    /// amplitude), and the u32 tick count wrapped after 5 days. The accumulator has no growing
+    /// state; its only error is the step's rounding, 2⁻³³ of a period per tick.
+    #[test]
+    fn square_and_triangle_keep_their_timing_over_a_long_run() {
+        const N: u32 = 1 << 25;
+        let tick_s = 1e-4f32;
+        let mut sq = Reference::new(Waveform::Steps { freq_hz: 100.0, amplitude: 1.0, bias: 0.0 }, tick_s);
+        let mut tri =
+            Reference::new(Waveform::Triangle { freq_hz: 100.0, amplitude: 1.0, bias: 0.0 }, tick_s);
+        let (mut last, mut since, mut edges, mut worst) = (sq.advance(), 1u32, 0u32, 0.0f64);
+        tri.advance();
+        for k in 1..N {
+            let v = sq.advance();
+            if v != last {
+                // The f32 tick (1e-4 rounds 2.5e-8 short) makes each half period 50.0000013
+                // ticks: the edges fall on the 50th or 51st tick, never elsewhere.
+                assert!(since == 50 || since == 51, "square edge at tick {k} after {since} ticks");
+                (last, since, edges) = (v, 0, edges + 1);
+            }
+            since += 1;
+            // The closed form at the generator's own frequency: a tick's phase step, rounded
+            // once to 2⁻³² of a period (checked below).
+            let exact = {
+                let frac = (k as f64 * tri.phase_step as f64 / 4_294_967_296.0 + 0.25).fract();
+                1.0 - 4.0 * (frac - 0.5).abs()
+            };
+            worst = worst.max((tri.advance() as f64 - exact).abs());
+        }
+        assert!((N / 50 - 2..=N / 50).contains(&edges), "{edges} edges in {N} ticks");
+        assert!(worst < 1e-5, "triangle off the closed form by {worst} of its amplitude");
+        let wanted = 100.0 * tick_s as f64 * 4_294_967_296.0;
+        assert!((tri.phase_step as f64 - wanted).abs() <= 0.5, "step {} for {wanted}", tri.phase_step);
+        // Across the accumulator's wrap (every period): half a step either side of it, 0.245
+        // and 0.255 periods past the rising bias.
+        tri.phase = u32::MAX - tri.phase_step / 2;
+        let (a, b) = (tri.advance(), tri.advance());
+        assert!((a + 0.02).abs() < 1e-3 && (b - 0.02).abs() < 1e-3, "at the wrap: {a}, {b}");
+    }
+
+    #[test]
+    fn a_chirp_holds_its_end_frequency_past_the_tick_counter_range() {
+        let w = Waveform::Chirp { f0_hz: 10.0, f1_hz: 200.0, duration_s: 1.0, amplitude: 1.0, bias: 0.0 };
+        let mut r = Reference::new(w, 1e-4);
+        r.ticks = u32::MAX - 3;
+        let mut held = r;
+        held.ticks = 20_000; // past the sweep: f1
+        for _ in 0..10 {
+            assert_eq!(r.advance(), held.advance());
+        }
+        assert_eq!(r.ticks, u32::MAX, "the counter saturates");
     }
 
     #[test]

@@ -10,10 +10,11 @@
 //!
 //! Safe state: MOE off, every gate low (OSSI = OSSR = 1, idle levels 0). It holds from before the
 //! channels are enabled, on any latched fault, on a break-input trip (hardware, in the same PWM
-//! cycle), in the panic and HardFault handlers (a stack overflow faults below SRAM and the
-//! HardFault entry resets the stack pointer first, `firmware::fault`), on a core lockup, a CCM
-//! SRAM parity error or a flash ECC error (system break inputs, hardware), while a debugger
-//! halts the core (TIM1 frozen), and after a watchdog reset.
+//! cycle; MOE is written 1 only on the arming tick, never over a break flag), in the panic and
+//! HardFault handlers (interrupts off, so nothing sets MOE again or feeds the watchdog; a stack
+//! overflow faults below SRAM and the HardFault entry resets the stack pointer first,
+//! `firmware::fault`), on a core lockup, an SRAM parity error or a flash ECC error (system break
+//! inputs, hardware), while a debugger halts the core (TIM1 frozen), and after a watchdog reset.
 #![no_std]
 #![no_main]
 
@@ -26,6 +27,7 @@ use embassy_executor::Spawner;
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, Exten, InjectedAdc, SampleTime};
 use embassy_stm32::gpio::{AfType, Flex, OutputType, Pull};
 use embassy_stm32::interrupt::Priority;
+use embassy_stm32::pac::iwdg::vals::Key;
 use embassy_stm32::peripherals::{ADC1, IWDG, TIM1};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::complementary_pwm::{
@@ -41,7 +43,7 @@ use embassy_time::{Instant, Timer};
 use firmware::drive::{
     control_config, dead_time_ticks, encode_queued, encode_replies, execute, quiet_window_max_duty,
     BridgeTiming, CommandPort, DriveCounters, DriveLoop, PowerStage, ReplyQueue, Slot, TelemetryQueue,
-    PWM_HZ, TELEMETRY_QUEUE,
+    PWM_HZ, TELEMETRY_QUEUE, TICK_CYCLES,
 };
 use firmware::drive_params::{MODEL_SPEC, PARAMS_POSTCARD};
 use gma_control::command::{Reply, MAX_REPLY_ENCODED};
@@ -81,13 +83,24 @@ fn bridge_off() {
     pac::TIM1.bdtr().modify(|w| w.set_moe(false));
 }
 
+/// Starts the independent watchdog (key 0xCCCC in IWDG_KR, RM0440 "IWDG key register"; a no-op
+/// when it runs already): a fault before start-up unleashed it still ends in a reset, with
+/// the reset-default timeout (about 512 ms) if start-up had not configured it yet.
+fn watchdog_start() {
+    pac::IWDG.kr().write(|w| w.set_key(Key::START));
+}
+
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
+    // Interrupts off first: the 10 kHz interrupt would otherwise run on, set MOE again while
+    // armed and feed the watchdog. Never re-enabled: the watchdog resets the board into its
+    // idle boot, which sees the watchdog reset.
+    cortex_m::interrupt::disable();
     bridge_off();
+    watchdog_start();
     error!("gma-drive: panic: {}", defmt::Display2Format(info));
-    // The watchdog, no longer fed, resets the board; the next boot sees the watchdog reset.
     loop {
-        cortex_m::asm::wfi();
+        cortex_m::asm::nop();
     }
 }
 
@@ -96,10 +109,50 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 #[allow(unsafe_code)] // no_mangle: the symbol the HardFault entry branches to.
 #[no_mangle]
 extern "C" fn gma_hard_fault() -> ! {
+    // HardFault already blocks the interrupt; disabled anyway, as in the panic handler.
+    cortex_m::interrupt::disable();
     bridge_off();
+    watchdog_start();
     loop {
         cortex_m::asm::nop();
     }
+}
+
+// SRAM parity (RM0440 "Embedded SRAM", and FLASH_OPTR in "FLASH option register"): with the
+// SRAM_PE option bit at 0 (parity ON — the bit disables it; the G4 HAL's OB_SRAM_PARITY_ENABLE
+// is 0, covering CCM SRAM and the start of SRAM1) every read of a byte never written since
+// power-on can raise a parity error, which SYSCFG_CFGR2.SPL turns into a TIM1 system break
+// and an NMI. Moves of structs read their padding, and `.ccmram` is NOLOAD; so before any RAM
+// initialisation (cortex-m-rt's `__pre_init`, no stack in use yet) all of CCM SRAM and SRAM1 are
+// zeroed when parity is on. Plain assembly: no Rust code may run before RAM is initialised.
+// SAFETY: runs once from the reset handler before `.bss`/`.data` are set up; touches only
+// FLASH_OPTR (read) and the parity-checked RAM, which holds nothing yet.
+#[allow(unsafe_code)]
+mod pre_init {
+    core::arch::global_asm!(
+        ".section .text.__pre_init, \"ax\", %progbits",
+        ".global __pre_init",
+        ".type __pre_init, %function",
+        ".thumb_func",
+        "__pre_init:",
+        "    ldr r0, =0x40022020", // FLASH_OPTR
+        "    ldr r0, [r0]",
+        "    tst r0, #0x01000000", // SRAM_PE = 1: parity off, nothing to do
+        "    bne 3f",
+        "    movs r2, #0",
+        "    ldr r0, =0x10000000", // CCM SRAM, 32 KiB
+        "    ldr r1, =0x10008000",
+        "1:  str r2, [r0], #4",
+        "    cmp r0, r1",
+        "    bne 1b",
+        "    ldr r0, =0x20000000", // SRAM1, 80 KiB (the stack is empty: nothing has run)
+        "    ldr r1, =0x20014000",
+        "2:  str r2, [r0], #4",
+        "    cmp r0, r1",
+        "    bne 2b",
+        "3:  bx lr",
+        "    .ltorg",
+    );
 }
 
 /// The board's side of the interrupt: register accesses through the PAC, the HAL drivers kept
@@ -120,16 +173,27 @@ impl PowerStage for BoardStage {
         codes
     }
 
-    fn take_break_flag(&mut self) -> bool {
-        let tripped = pac::TIM1.sr().read().bif(0);
+    fn take_break_flags(&mut self) -> bool {
+        // TIM1_SR (RM0440 Rev 4 §28.6.5): BIF (break input 1, the gate driver), B2IF (break
+        // input 2) and SBIF (system break: lockup, SRAM parity, flash ECC via SYSCFG_CFGR2).
+        let sr = pac::TIM1.sr().read();
+        let tripped = sr.bif(0) || sr.bif(1) || sr.sbif();
         if tripped {
-            // rc_w0: writing 0 clears BIF, 1 leaves the other flags alone.
+            // rc_w0: writing 0 clears a flag (not while its source is still active), 1 leaves
+            // the other flags alone.
             pac::TIM1.sr().write(|w| {
                 w.0 = !0;
                 w.set_bif(0, false);
+                w.set_bif(1, false);
+                w.set_sbif(false);
             });
         }
         tripped
+    }
+
+    fn break_pending(&self) -> bool {
+        let sr = pac::TIM1.sr().read();
+        sr.bif(0) || sr.bif(1) || sr.sbif()
     }
 
     fn set_compare(&mut self, leg_a: u16, leg_b: u16) {
@@ -138,8 +202,16 @@ impl PowerStage for BoardStage {
     }
 
     fn set_outputs_enabled(&mut self, enabled: bool) {
-        // A break input still active keeps MOE cleared whatever is written here.
+        // TIM1_BDTR.MOE (RM0440 Rev 4 §28.6.20): cleared asynchronously by any break; it cannot
+        // be set while a break source is active. `firmware::drive` writes 1 only on the arming
+        // tick, after checking the flags.
         pac::TIM1.bdtr().modify(|w| w.set_moe(enabled));
+    }
+
+    fn outputs_enabled(&self) -> bool {
+        // Read on the ticks after the arming one (a read right after writing 1 would see the
+        // resynchronised value late, RM0440 §28.3 "Using the break function").
+        pac::TIM1.bdtr().read().moe()
     }
 
     fn feed_watchdog(&mut self) {
@@ -227,6 +299,13 @@ async fn main(spawner: Spawner) {
         MODEL_SPEC,
         defmt::Debug2Format(&reset_cause)
     );
+    // FLASH_OPTR.SRAM_PE (RM0440 "FLASH option register"; 0 = parity checked): whether SYSCFG_CFGR2.SPL above
+    // guards anything. When it is on, `__pre_init` zeroed CCM SRAM and SRAM1 at reset.
+    if pac::FLASH.optr().read().sram_pe() {
+        warn!("gma-drive: SRAM parity check OFF (FLASH_OPTR.SRAM_PE = 1): a CCM SRAM bit error goes unseen");
+    } else {
+        info!("gma-drive: SRAM parity check on (FLASH_OPTR.SRAM_PE = 0); CCM SRAM and SRAM1 zeroed at reset");
+    }
 
     // Full bridge: TIM1 CH1/CH1N (PA8/PA7) one leg, CH2/CH2N (PA9/PB0) the other. The driver
     // sets MOE on construction, before any channel is enabled; it is cleared at once.
@@ -248,8 +327,10 @@ async fn main(spawner: Spawner) {
     // drives the pins to their idle levels instead of releasing them; idle level 0 on all four
     // outputs = every gate low. All off rather than both low sides on: the break input means a
     // gate-driver fault (desaturation, short), where switching any transistor on can feed the
-    // fault; the coil's energy (48 mJ at 4 A) returns to the bus through the body diodes, which
-    // the bus over-voltage trip and the divider's range are sized for.
+    // fault. The coil's energy (48 mJ at 4 A) then returns through the body diodes into the
+    // 100 µF bus: 39.2 V from 4 A, 41.7 V from 4.4 A, over the 34 V trip (which latches with
+    // every such trip). The divider reads it; the board must absorb it (firmware/README.md,
+    // "The coil's energy on a trip").
     pwm.set_off_state_selection_idle(Ossi::IDLE_LEVEL);
     pwm.set_off_state_selection_run(Ossr::IDLE_LEVEL);
     pac::TIM1.cr2().modify(|w| {
@@ -281,10 +362,12 @@ async fn main(spawner: Spawner) {
     pwm.set_duty(Channel::Ch2, half);
     pwm.enable(Channel::Ch1);
     pwm.enable(Channel::Ch2);
-    // Lock level 2 (writable once per reset): dead time, break configuration, idle levels,
-    // OSSI/OSSR and output polarities can no longer change until reset — a stray write cannot
-    // undo the safe state. MOE and the compare values stay writable.
-    pac::TIM1.bdtr().modify(|w| w.set_lock(pac::timer::vals::Lock::LEVEL2));
+    // Lock level 3 (TIM1_BDTR.LOCK, RM0440 Rev 4 §28.6.20; writable once per reset): dead time,
+    // break configuration, idle levels, OSSI/OSSR, output polarities and the output compare
+    // modes (OCxM, OCxPE) can no longer change until reset — a stray write cannot undo the safe
+    // state or turn a PWM channel into a forced-active output. Nothing writes them after this
+    // line: the interrupt writes only CCR1/CCR2 and MOE (`BoardStage`), which stay writable.
+    pac::TIM1.bdtr().modify(|w| w.set_lock(pac::timer::vals::Lock::LEVEL3));
     let timing = BridgeTiming { period_ticks: period_ticks as u16, max_duty: quiet_window_max_duty() };
     info!(
         "gma-drive: PWM ARR {} at {} Hz timer clock, dead time {} ticks, duty within ±{}",
@@ -309,8 +392,9 @@ async fn main(spawner: Spawner) {
     );
 
     // Watchdog: 2 ms, fed by every control tick — a stalled loop resets the board (PWM off).
-    let mut watchdog = IndependentWatchdog::new(p.IWDG, 2_000);
-    watchdog.unleash();
+    // Configured here, started only once the controller exists, right before the interrupt
+    // is unmasked: a Preisach model takes about 400 000 instructions (> 2 ms) to build.
+    let watchdog = IndependentWatchdog::new(p.IWDG, 2_000);
 
     let mut uart_config = UartConfig::default();
     uart_config.baudrate = 4_000_000;
@@ -349,8 +433,11 @@ async fn main(spawner: Spawner) {
         core.DWT.enable_cycle_counter();
         core.NVIC.set_priority(pac::Interrupt::ADC1_2, 0);
         core.NVIC.set_priority(pac::Interrupt::USART2, 2 << 4);
+        // Everything slow is done: from here every tick feeds it within 2 ms.
+        watchdog_start();
         NVIC::unmask(pac::Interrupt::ADC1_2);
     }
+    info!("gma-drive: watchdog running, tick period checked at {} cycles ± 2 % over 32 ticks", TICK_CYCLES);
 
     match command_rx(rx, reply_producer) {
         Ok(task) => spawner.spawn(task),
@@ -388,16 +475,23 @@ async fn telemetry_tx(
                 info!("gma-drive: stack peak {} B of {} B", stack_peak, firmware::stack::size());
             }
             let load = |c: &core::sync::atomic::AtomicU32| c.load(core::sync::atomic::Ordering::Relaxed);
-            let (dropped, late, trips) =
-                (load(&COUNTERS.telemetry_dropped), load(&COUNTERS.deadline_overruns), load(&COUNTERS.trips));
-            if dropped > 0 || late > 0 || trips != 0 {
+            let (dropped, late, trips, off) = (
+                load(&COUNTERS.telemetry_dropped),
+                load(&COUNTERS.deadline_overruns),
+                load(&COUNTERS.trips),
+                load(&COUNTERS.period_off),
+            );
+            if dropped > 0 || late > 0 || trips != 0 || off > 0 {
                 warn!(
-                    "gma-drive: telemetry dropped {} of {}, deadline overruns {}, trips {:#x}, longest tick {} cycles",
+                    "gma-drive: telemetry dropped {} of {}, deadline overruns {}, trips {:#x}, longest tick {} cycles, \
+                     single tick intervals off ±2 % {} (last 32-tick window {} cycles)",
                     dropped,
                     TELEMETRY_QUEUE,
                     late,
                     trips,
-                    load(&COUNTERS.max_tick_cycles)
+                    load(&COUNTERS.max_tick_cycles),
+                    off,
+                    load(&COUNTERS.last_window_cycles)
                 );
             }
         }
@@ -431,11 +525,13 @@ async fn command_rx(mut rx: RingBufferedUartRx<'static>, replies: Producer<'stat
 }
 
 /// Received command bytes: every complete frame goes through the decoder to the controller,
-/// inside a critical section as the interrupt shares it.
+/// inside a critical section as the interrupt shares it. A parameter load's model is built
+/// before, outside the critical section (`CommandPort::on_bytes` stages it, with the interrupt
+/// running); inside, only the move of the compensator into the controller runs.
 fn on_command_bytes(port: &mut CommandPort, bytes: &[u8]) {
-    port.on_bytes(bytes, |received| {
+    port.on_bytes(bytes, |received, staged| {
         critical_section::with(|cs| {
-            DRIVE.borrow_ref_mut(cs).as_mut().map(|drive| execute(drive.controller(), received))
+            DRIVE.borrow_ref_mut(cs).as_mut().map(|drive| execute(drive, received, staged))
         })
     });
 }

@@ -15,6 +15,9 @@ use model_core::magnetization::{JaParams, JaState, JilesAtherton, Preisach};
 use model_core::mechanics::{ChainParams, ChainState, ChainZoh, MassSpringDamper, MechState, SecondOrderZoh};
 use model_core::{Actuator, ActuatorParams, Compensator, ModelSpec};
 
+/// The telemetry queue of the drive-loop cases (one case per run: written once).
+static QUEUE: firmware::drive::Slot<firmware::drive::TelemetryQueue> = firmware::drive::Slot::new();
+
 /// Measured steps per case.
 const STEPS: usize = 500;
 
@@ -187,7 +190,6 @@ fn run(case: &str) -> Result<f32, &'static str> {
             use gma_control::sim::{CoilActuator, Rig};
             use gma_control::telemetry::MAX_ENCODED;
             use gma_control::{Controller, ResetCause};
-            static QUEUE: Slot<TelemetryQueue> = Slot::new();
             static REPLIES: Slot<ReplyQueue> = Slot::new();
             static COUNTERS: DriveCounters = DriveCounters::new();
             let model = if case.starts_with("isr-preisach") { "preisach+eddy+mech" } else { "ja+eddy+mech" };
@@ -207,7 +209,7 @@ fn run(case: &str) -> Result<f32, &'static str> {
             let mut send = |drive: &mut DriveLoop<MemoryStage>, cmd: &Command| -> Result<(), &'static str> {
                 let mut frame = [0u8; command::MAX_ENCODED];
                 let n = cmd.encode(1, &mut frame).map_err(|r| r.name())?;
-                port.on_bytes(&frame[..n], |r| Some(execute(drive.controller(), r)));
+                port.on_bytes(&frame[..n], |r, staged| Some(execute(drive, r, staged)));
                 match replies.dequeue() {
                     Some(reply) => reply.outcome.map_err(|r| r.name()),
                     None => Err("no reply to a command"),
@@ -215,7 +217,10 @@ fn run(case: &str) -> Result<f32, &'static str> {
             };
             let sample = |drive: &mut DriveLoop<MemoryStage>, rig: &mut Rig<CoilActuator>| {
                 let raw = rig.sample();
-                drive.stage().conversions = [raw.current.0, raw.displacement.0, bus_code(raw.bus)];
+                let stage = drive.stage();
+                stage.conversions = [raw.current.0, raw.displacement.0, bus_code(raw.bus)];
+                // One tick period per trigger on the stand-in cycle counter (the period check).
+                stage.cycles = stage.cycles.wrapping_add(firmware::drive::TICK_CYCLES);
             };
             for _ in 0..control_config().offset_calibration_ticks {
                 sample(&mut drive, &mut rig);
@@ -262,6 +267,91 @@ fn run(case: &str) -> Result<f32, &'static str> {
             }
             acc
         }
+        // A Preisach parameter load as the board runs it: `load-build` the model build in thread
+        // mode (`firmware::drive::stage`, interrupt running), `load-swap` what then runs inside
+        // the critical section (`execute`: the checks and the move into the controller); four
+        // loads each.
+        "load-build" | "load-swap" => {
+            use firmware::drive::{
+                control_config, execute, quiet_window_max_duty, stage, BridgeTiming, DriveCounters, DriveLoop,
+                MemoryStage, TelemetryQueue,
+            };
+            use gma_control::command::{Command, Received};
+            use gma_control::{Controller, ResetCause, StagedParameters};
+            static COUNTERS: DriveCounters = DriveCounters::new();
+            let spec = ModelSpec::parse("ja+eddy+mech").map_err(|_| "bad spec")?;
+            let preisach = ModelSpec::parse("preisach+eddy+mech").map_err(|_| "bad spec")?;
+            let ctl = Controller::new(control_config(), spec, &p, ResetCause::PowerOn);
+            // SAFETY: the only write to QUEUE.
+            #[allow(unsafe_code)]
+            let (producer, _consumer) = unsafe { QUEUE.write(TelemetryQueue::new()) }.split();
+            let timing = BridgeTiming { period_ticks: 4250, max_duty: quiet_window_max_duty() };
+            let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS);
+            let received = Received::Command(1, Command::LoadParameters { spec: preisach, params: p });
+            let build = case == "load-build";
+            let mut acc = 0.0;
+            for _ in 0..4 {
+                let mut staged = StagedParameters::empty();
+                if build {
+                    bench_start();
+                }
+                stage(black_box(&received), &mut staged);
+                if build {
+                    bench_end();
+                } else {
+                    bench_start();
+                }
+                let reply = execute(&mut drive, black_box(&received), &mut staged);
+                if !build {
+                    bench_end();
+                }
+                reply.outcome.map_err(|r| r.name())?;
+                acc += 1.0;
+            }
+            acc
+        }
+        // The other commands' work inside the critical section (`execute`), each once after
+        // boot: ping, clear, arm, set reference, disarm.
+        "command-lock" => {
+            use firmware::drive::{
+                control_config, execute, quiet_window_max_duty, BridgeTiming, DriveCounters, DriveLoop,
+                MemoryStage, TelemetryQueue,
+            };
+            use gma_control::command::{Command, Received, ReferenceCommand, Shape};
+            use gma_control::sim::{CoilActuator, Rig};
+            use gma_control::{Controller, ResetCause, StagedParameters};
+            static COUNTERS: DriveCounters = DriveCounters::new();
+            let spec = ModelSpec::parse("ja+eddy+mech").map_err(|_| "bad spec")?;
+            let mut rig = Rig::new(CoilActuator::new(spec, &p, 1e-4).map_err(err)?, 1);
+            let ctl = Controller::new(control_config(), spec, &p, ResetCause::PowerOn);
+            // SAFETY: the only write to QUEUE.
+            #[allow(unsafe_code)]
+            let (producer, mut consumer) = unsafe { QUEUE.write(TelemetryQueue::new()) }.split();
+            let timing = BridgeTiming { period_ticks: 4250, max_duty: quiet_window_max_duty() };
+            let mut drive = DriveLoop::new(ctl, MemoryStage::default(), timing, producer, &COUNTERS);
+            for _ in 0..control_config().offset_calibration_ticks {
+                let raw = rig.sample();
+                let stage = drive.stage();
+                stage.conversions = [raw.current.0, raw.displacement.0, firmware::drive::bus_code(raw.bus)];
+                stage.cycles = stage.cycles.wrapping_add(firmware::drive::TICK_CYCLES);
+                let out = drive.on_conversion();
+                rig.apply(&out).map_err(|_| "rig input out of range")?;
+                while consumer.dequeue().is_some() {}
+            }
+            let square =
+                ReferenceCommand { shape: Shape::Square, amplitude_um: 12.5, bias_um: 15.0, freq_hz: 100.0 };
+            let mut acc = 0.0;
+            for cmd in [Command::Ping, Command::ClearFaults, Command::Arm, Command::SetReference(square), Command::Disarm] {
+                let received = Received::Command(1, cmd);
+                let mut staged = StagedParameters::empty();
+                bench_start();
+                let reply = execute(&mut drive, black_box(&received), &mut staged);
+                bench_end();
+                reply.outcome.map_err(|r| r.name())?;
+                acc += 1.0;
+            }
+            acc
+        }
         "arx" => {
             let arx = Arx::new(ArxParams::DAVINO_003).map_err(err)?;
             let mut s: ArxState<2, 2> = arx.steady_state(0.0).map_err(err)?;
@@ -270,7 +360,8 @@ fn run(case: &str) -> Result<f32, &'static str> {
         _ => {
             return Err(
                 "unknown case (empty, ja-substep, ja-sample-400hz, zoh, chain, chain-400hz, inverse, \
-                 inverse-400hz, preisach, ndof, arx, control-tick, isr, isr-square, telemetry-encode)",
+                 inverse-400hz, preisach, ndof, arx, control-tick, isr, isr-square, telemetry-encode, load-build, \
+                 load-swap)",
             )
         }
     })

@@ -48,7 +48,8 @@ pub enum Action {
     Arm(Target),
     /// Switch the bridge off.
     Disarm(Target),
-    /// Clear the latched faults whose cause is gone (does not arm).
+    /// Clear the latched faults whose cause is gone (does not arm; after three overcurrent,
+    /// bridge-break, stuck-probe or missed-deadline trips within a minute only a reset clears them).
     Clear(Target),
     /// Set the displacement reference [µm from rest]; validated on the board too.
     #[command(allow_negative_numbers = true)]
