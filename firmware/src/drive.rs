@@ -164,7 +164,8 @@ pub mod trip {
     pub const NON_FINITE_DUTY: u32 = 1 << 2;
     /// MOE read back 0 on an armed tick with no break flag seen: `BRIDGE_BREAK`.
     pub const OUTPUTS_LOST: u32 = 1 << 3;
-    /// An arming tick found a break flag pending and left MOE at 0: `BRIDGE_BREAK`.
+    /// An arming tick found a break flag pending, before or right after its MOE write, and left
+    /// MOE at 0: `BRIDGE_BREAK`.
     pub const ARMING_BLOCKED: u32 = 1 << 4;
     /// The interval between interrupt entries was not the tick period: `TICK_TIMING`.
     pub const TICK_PERIOD: u32 = 1 << 5;
@@ -240,6 +241,9 @@ pub struct DriveLoop<S: PowerStage> {
     trips: u32,
     gate: OutputGate,
     period: TickPeriod,
+    /// Since the period was last judged wrong: the clean-window count then (`tick_timing`
+    /// stays latched until the count moves on).
+    timing_suspect: Option<u32>,
 }
 
 impl<S: PowerStage> DriveLoop<S> {
@@ -261,6 +265,7 @@ impl<S: PowerStage> DriveLoop<S> {
             trips: 0,
             gate: OutputGate::new(),
             period: tick_period_check(),
+            timing_suspect: None,
         }
     }
 
@@ -287,8 +292,15 @@ impl<S: PowerStage> DriveLoop<S> {
             self.trips |= trip::OUTPUTS_LOST;
         }
         if period_wrong {
-            // Latched before the tick, so that the controller holds the bridge off in it.
             self.trips |= trip::TICK_PERIOD;
+            self.timing_suspect = Some(self.period.clean_windows);
+        } else if self.timing_suspect.is_some_and(|at| self.period.clean_windows != at) {
+            self.timing_suspect = None;
+        }
+        if self.timing_suspect.is_some() {
+            // Latched before the tick, so that the controller holds the bridge off in it, and
+            // again on every tick until a whole window has been judged right: a clear command
+            // before that cannot prove the period good again.
             self.controller.latch_fault(FaultCode::TICK_TIMING);
         }
         let raw = RawSample {
@@ -312,7 +324,16 @@ impl<S: PowerStage> DriveLoop<S> {
         let stage = &self.stage;
         match self.gate.decide(out.bridge_enabled, || stage.break_pending()) {
             GateAction::Hold => {}
-            GateAction::Enable => self.stage.set_outputs_enabled(true),
+            GateAction::Enable => {
+                self.stage.set_outputs_enabled(true);
+                // A break pulse between the pending check and the write left its flag set and
+                // the outputs on: off again before the next PWM edge, latched.
+                if self.gate.undo_enable(self.stage.break_pending()) {
+                    self.stage.set_outputs_enabled(false);
+                    self.trips |= trip::ARMING_BLOCKED;
+                    self.trip_now(&mut out, FaultCode::BRIDGE_BREAK);
+                }
+            }
             GateAction::Disable => {
                 self.stage.set_outputs_enabled(false);
                 if out.bridge_enabled {
@@ -388,11 +409,16 @@ pub fn execute<S: PowerStage>(
 ) -> Reply {
     match received {
         Received::Command(tag, Command::LoadParameters { .. }) => {
-            // The move holds the interrupt off for about 8 300 instructions (`qemu-bench
+            // A move holds the interrupt off for about 8 300 instructions (`qemu-bench
             // load-swap`), half a tick, with the bridge off (loads are refused while armed):
-            // the late entry could pass the lost-tick limit; it is latency, not the period.
-            drive.period.resettle(2);
-            drive.controller.load_staged(*tag, staged)
+            // the late entry could pass the lost-tick limit; it is latency, not the period. A
+            // refused load moves nothing and leaves the check running (a host sending loads
+            // could otherwise keep it from ever judging a window).
+            let reply = drive.controller.load_staged(*tag, staged);
+            if reply.outcome.is_ok() {
+                drive.period.resettle(2);
+            }
+            reply
         }
         Received::Command(tag, cmd) => drive.controller.command(*tag, cmd),
         Received::Refused { tag, opcode, reason } => drive.controller.refusal(*tag, *opcode, *reason),

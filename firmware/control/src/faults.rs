@@ -42,7 +42,8 @@ impl FaultCode {
     /// the control design assumes ([`crate::timing::TickPeriod`]).
     pub const TICK_TIMING: FaultCode = FaultCode(1 << 13);
     /// The rest position measured with the bridge off is unusable: the displacement code sits
-    /// at a rail, or spreads more than `rest_max_spread_um` over the window.
+    /// at a rail, or spreads more than `rest_max_spread_um` over the window, or (at an arming)
+    /// lies more than `rest_max_shift_um` from the rest position kept since the first one.
     pub const REST_POSITION: FaultCode = FaultCode(1 << 14);
     /// `rearm_trips` trips whose cause cannot be seen with the bridge off
     /// ([`FaultCode::UNVERIFIABLE`]) within `rearm_window_ticks`: they and this stay latched
@@ -136,6 +137,11 @@ pub struct FaultLimits {
     pub current_zero_max_spread_codes: u16,
     /// Largest spread of the displacement over the rest-position window [µm].
     pub rest_max_spread_um: f32,
+    /// Largest distance [µm] of a later bridge-off window's rest from the rest position kept
+    /// since the first arming (the reference's zero): more is a probe that slipped or a rod
+    /// that moved, and the displacement loop would regulate about the wrong zero. It must pass
+    /// the rod's remanent strain at zero current (10 µm on the demo rod).
+    pub rest_max_shift_um: f32,
     /// Trips of [`FaultCode::UNVERIFIABLE`] within `rearm_window_ticks` after which they stay
     /// latched until a reset ([`FaultCode::REPEATED_TRIPS`]); at most [`MAX_REARM_TRIPS`].
     pub rearm_trips: u8,
@@ -158,7 +164,8 @@ impl FaultLimits {
     /// (58 mJ); any trip above 3.1 A passes 34 V, so an overcurrent trip also latches
     /// `bus_overvoltage` unless the board absorbs the energy (firmware/README.md, "Safe
     /// state"). Current zero within ±0.15 V (±0.75 A, ±186 codes) of 1.65 V and spreading at
-    /// most 32 codes (0.13 A) over its window; rest position spreading at most 1 µm. The
+    /// most 32 codes (0.13 A) over its window; rest position spreading at most 1 µm, and at
+    /// most 20 µm from the one kept since the first arming. The
     /// third overcurrent, break, stuck-probe or deadline trip within a minute (600 000
     /// ticks) needs a reset.
     pub const REFERENCE: FaultLimits = FaultLimits {
@@ -176,6 +183,7 @@ impl FaultLimits {
         current_offset_window_v: 0.15,
         current_zero_max_spread_codes: 32,
         rest_max_spread_um: 1.0,
+        rest_max_shift_um: 20.0,
         rearm_trips: 3,
         rearm_window_ticks: 600_000,
     };
@@ -191,6 +199,8 @@ impl FaultLimits {
             && self.rearm_window_ticks > 0
             && self.rest_max_spread_um.is_finite()
             && self.rest_max_spread_um > 0.0
+            && self.rest_max_shift_um.is_finite()
+            && self.rest_max_shift_um > 0.0
     }
 }
 
@@ -199,10 +209,10 @@ impl FaultLimits {
 pub struct FaultMonitor {
     limits: FaultLimits,
     latched: FaultCode,
-    /// Ticks checked since boot (wraps after 5 days; only differences are used).
-    ticks: u32,
+    /// Ticks checked since boot (64 bits: a trip time never aliases one from days before).
+    ticks: u64,
     /// Tick of each recent [`FaultCode::UNVERIFIABLE`] trip, newest at `trips % MAX_REARM_TRIPS`.
-    trip_ticks: [u32; MAX_REARM_TRIPS],
+    trip_ticks: [u64; MAX_REARM_TRIPS],
     /// Such trips since boot.
     trips: u32,
     i2t: f32,
@@ -261,7 +271,7 @@ impl FaultMonitor {
             if self.trips as usize >= n {
                 // The n-th trip back (n − 1 before this one) within the window.
                 let oldest = self.trip_ticks[(self.trips as usize - n) % MAX_REARM_TRIPS];
-                if self.ticks.wrapping_sub(oldest) < self.limits.rearm_window_ticks {
+                if self.ticks - oldest < u64::from(self.limits.rearm_window_ticks) {
                     self.latched = self.latched | FaultCode::REPEATED_TRIPS;
                 }
             }
@@ -363,7 +373,7 @@ impl FaultMonitor {
         displacement: Micrometres,
         tick_s: f32,
     ) -> FaultCode {
-        self.ticks = self.ticks.wrapping_add(1);
+        self.ticks += 1;
         let f = self.present(raw, current, tick_s) | self.bus(raw.bus.0) | self.stuck(current, displacement);
         self.latch(f);
         self.latched

@@ -2,7 +2,8 @@
 //! hardware break clears MOE asynchronously, and a write of 1 on a later tick, between reading
 //! the break flags and writing the bit, would switch the bridge back on after a short break
 //! pulse. So MOE is written 1 only on the tick that arms, and only when no break flag is
-//! pending; on every other armed tick it is read back, and a 0 there means the hardware took
+//! pending (and the flags are read again right after the write, which is undone if one was
+//! set meanwhile); on every other armed tick it is read back, and a 0 there means the hardware took
 //! the outputs off (a break whose flag the firmware has not seen yet, or any other cause):
 //! the drive latches `bridge_break`.
 
@@ -63,6 +64,17 @@ impl OutputGate {
             }
         }
     }
+
+    /// Right after an `Enable` write, with the break flags read again: a break pulse that came
+    /// and went between the pending check and the write left its flag set, and the write turned
+    /// the outputs back on. True: the write must be undone at once (the gate is off again).
+    #[inline]
+    pub fn undo_enable(&mut self, break_pending: bool) -> bool {
+        if break_pending {
+            self.on = false;
+        }
+        break_pending
+    }
 }
 
 #[cfg(test)]
@@ -89,6 +101,20 @@ mod tests {
         assert!(!g.is_on());
         // Once the flag is gone, the next arming tick writes it.
         assert_eq!(g.decide(true, || false), GateAction::Enable);
+    }
+
+    #[test]
+    fn a_break_flag_set_during_the_arming_write_undoes_it() {
+        let mut g = OutputGate::new();
+        assert_eq!(g.decide(true, || false), GateAction::Enable);
+        assert!(g.undo_enable(true), "a flag read after the write must undo it");
+        assert!(!g.is_on());
+        // Off again: the next armed tick must decide afresh (and reads the flags), not hold.
+        assert_eq!(g.decide(true, || true), GateAction::Disable);
+        // With no flag after the write the gate stays on.
+        assert_eq!(g.decide(true, || false), GateAction::Enable);
+        assert!(!g.undo_enable(false));
+        assert!(g.is_on());
     }
 
     #[test]

@@ -393,6 +393,17 @@ impl Controller {
                 self.faults.latch(f);
                 return Err(Refusal::FaultLatched);
             }
+            // The kept rest is the reference's zero: a probe that slipped since would move it
+            // (a NaN distance counts as too far).
+            Some(m)
+                if self.rest_fixed && {
+                    let shift = (m.rest_um - self.rest_um).abs();
+                    shift.is_nan() || shift > self.cfg.limits.rest_max_shift_um
+                } =>
+            {
+                self.faults.latch(FaultCode::REST_POSITION);
+                return Err(Refusal::FaultLatched);
+            }
             Some(_) => {}
         }
         if !self.cfg.limits.bus_healthy(self.last_raw.bus.0) {

@@ -28,6 +28,8 @@ pub struct TickPeriod {
     pub last_interval: u32,
     /// The last complete window's length [cycles] (nominal: [`WINDOW`] periods).
     pub last_window: u32,
+    /// Windows judged right so far (a `tick_timing` fault may clear only after one more).
+    pub clean_windows: u32,
 }
 
 impl TickPeriod {
@@ -45,6 +47,7 @@ impl TickPeriod {
             off: 0,
             last_interval: 0,
             last_window: 0,
+            clean_windows: 0,
         }
     }
 
@@ -84,7 +87,11 @@ impl TickPeriod {
         self.window_start = now;
         self.window_intervals = 0;
         let (expected, tolerance) = (self.nominal * WINDOW, self.tolerance * WINDOW);
-        gross || length > expected + tolerance || length < expected - tolerance
+        let wrong = gross || length > expected + tolerance || length < expected - tolerance;
+        if !wrong {
+            self.clean_windows = self.clean_windows.wrapping_add(1);
+        }
+        wrong
     }
 }
 
@@ -158,6 +165,21 @@ mod tests {
         // The first intervals after start-up are not judged.
         let mut p = check();
         assert_eq!(first_fault(&mut p, 100, |k| if k < 2 { 5 * NOMINAL } else { NOMINAL }), None);
+    }
+
+    #[test]
+    fn only_windows_judged_right_count_as_clean() {
+        let mut p = check();
+        // Two settling intervals, then three windows: right, wrong (3 % long), right.
+        let mut now = 0u32;
+        p.entry(now);
+        let mut wrong = 0;
+        for k in 0..2 + 3 * WINDOW {
+            let window = k.saturating_sub(2) / WINDOW;
+            now = now.wrapping_add(if window == 1 { NOMINAL * 103 / 100 } else { NOMINAL });
+            wrong += p.entry(now) as u32;
+        }
+        assert_eq!((wrong, p.clean_windows), (1, 2));
     }
 
     #[test]

@@ -512,6 +512,17 @@ fn the_zero_and_the_rest_are_measured_again_after_every_run() {
     assert_eq!(ctl.rest_um(), rest0, "the reference frame moved");
     assert_eq!(ctl.command(0, &Command::Arm).outcome, Ok(()));
     assert!(step(&mut ctl, &mut rig).bridge_enabled);
+    // A probe that slips 30 µm while the bridge is off (its zero 1 V further): the kept rest
+    // would no longer be the rod's, so the arming is refused by name, and a clear does not get
+    // around it (each arming compares again).
+    assert_eq!(ctl.command(0, &Command::Disarm).outcome, Ok(()));
+    rig.calibration.displacement_zero_v = 1.1;
+    idle_until_calibrated(&mut ctl, &mut rig);
+    assert_eq!(ctl.command(0, &Command::Arm).outcome, Err(Refusal::FaultLatched), "armed on a slipped probe");
+    assert!(ctl.faults().contains(FaultCode::REST_POSITION), "{:?}", ctl.faults());
+    assert_eq!(ctl.command(0, &Command::ClearFaults).outcome, Ok(()));
+    assert_eq!(ctl.command(0, &Command::Arm).outcome, Err(Refusal::FaultLatched));
+    assert!(!step(&mut ctl, &mut rig).bridge_enabled);
 }
 
 /// Synthetic bridge-off samples (current and displacement codes) for `n` ticks.
@@ -571,7 +582,6 @@ fn a_staged_parameter_set_is_swapped_in_under_the_load_rules() {
     let cfg = ControlConfig::REFERENCE;
     let p = ActuatorParams::TERFENOL_DEMO;
     let model = spec("preisach+eddy+mech");
-    let mut rig = rig(model, &p);
     let mut ctl = controller(spec("ja+eddy+mech"));
     let mut bad_params = p;
     bad_params.ja.k_a_per_m = f32::NAN;
@@ -583,15 +593,27 @@ fn a_staged_parameter_set_is_swapped_in_under_the_load_rules() {
     let reply = ctl.load_staged(2, &mut staged);
     assert_eq!((reply.tag, reply.outcome), (2, Ok(())));
     assert!(!staged.is_valid(), "the staged set was moved into the controller");
-    // The Preisach compensator now drives the Preisach rig.
-    boot_and_arm(&mut ctl, &mut rig);
-    for k in 0..2000 {
-        if k % 500 == 0 {
-            ctl.command(0, &Command::Ping);
-        }
-        assert!(step(&mut ctl, &mut rig).bridge_enabled);
-    }
-    assert!((rig.displacement_from_rest_um() - 15.0).abs() < 13.0, "not tracking");
+    // The Preisach compensator now drives the Preisach rig: tick for tick the duty of a
+    // controller built with that set, not that of the J–A one it replaced.
+    let run = |ctl: &mut Controller| -> (Vec<f32>, f64) {
+        let mut rig = rig(model, &p);
+        boot_and_arm(ctl, &mut rig);
+        let duties = (0..2000)
+            .map(|k| {
+                if k % 500 == 0 {
+                    ctl.command(0, &Command::Ping);
+                }
+                let out = step(ctl, &mut rig);
+                assert!(out.bridge_enabled);
+                out.duty
+            })
+            .collect();
+        (duties, rig.displacement_from_rest_um())
+    };
+    let (swapped, at_end) = run(&mut ctl);
+    assert!((at_end - 15.0).abs() < 13.0, "not tracking");
+    assert_eq!(swapped, run(&mut controller(model)).0, "not the loaded set's compensator");
+    assert_ne!(swapped, run(&mut controller(spec("ja+eddy+mech"))).0, "still the replaced compensator");
     let mut again = StagedParameters::build(&cfg, model, &p);
     assert_eq!(ctl.load_staged(3, &mut again).outcome, Err(Refusal::Armed));
     assert!(again.is_valid(), "a refused set is left where it was");

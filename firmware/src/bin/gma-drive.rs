@@ -456,6 +456,7 @@ async fn telemetry_tx(
 ) -> ! {
     let mut batch = [0u8; TX_BATCH];
     let mut last_report = Instant::now();
+    let mut reported = (0u32, 0u32, 0u32, 0u32);
     let mut stack_logged = 0;
     loop {
         let n = encode_replies(&mut replies, &mut batch);
@@ -481,7 +482,9 @@ async fn telemetry_tx(
                 load(&COUNTERS.trips),
                 load(&COUNTERS.period_off),
             );
-            if dropped > 0 || late > 0 || trips != 0 || off > 0 {
+            // The counters are totals since boot: said when one has grown, not every second.
+            if (dropped, late, trips, off) != reported {
+                reported = (dropped, late, trips, off);
                 warn!(
                     "gma-drive: telemetry dropped {} of {}, deadline overruns {}, trips {:#x}, longest tick {} cycles, \
                      single tick intervals off ±2 % {} (last 32-tick window {} cycles)",
