@@ -146,7 +146,9 @@ pub fn load_input(
             }
             // Valid to model-core (it steps), but not a J–A model: said wherever the file is used.
             if let Some(why) = crate::fit::multivalued_ja(spec, &f.params) {
-                eprintln!("gma: warning: {name}: {why}; a fit refuses it, other commands use it as given");
+                crate::warning::warn(format_args!(
+                    "{name}: {why}; a fit refuses it, other commands use it as given"
+                ));
             }
             Ok((f.params, ParamSource { parameters_source: name, parameters_defaulted: f.defaulted }))
         }

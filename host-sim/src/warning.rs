@@ -4,6 +4,11 @@
 
 use std::fmt;
 
+/// Says one doubt on stderr, in the one form every command uses (`gma: warning: …`).
+pub fn warn(what: impl fmt::Display) {
+    eprintln!("gma: warning: {what}");
+}
+
 /// One doubt about a result.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Warning {

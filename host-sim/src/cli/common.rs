@@ -15,7 +15,7 @@ use crate::loops::{self, LoopFile};
 use crate::params::{self, ParamSource};
 use crate::recording::Recording;
 use crate::search::SearchOptions;
-use crate::warning::Warning;
+use crate::warning::{warn, Warning};
 
 /// 200 s at the board's 10 kHz: about 100 MB for a recording with every column.
 pub const DEFAULT_MAX_SAMPLES: usize = 2_000_000;
@@ -145,7 +145,7 @@ impl Prepared {
     /// `fit` lists them with its other warnings).
     pub fn warn_about_inputs(&self) {
         for w in &self.input_warnings {
-            eprintln!("gma: warning: {w}");
+            warn(w);
         }
     }
 }
@@ -236,10 +236,7 @@ impl ModelFiles {
     /// Says on stderr that `--time-limit` cut the work short, when it did.
     pub fn warn_if_time_limited(&self, reached: bool) {
         if reached {
-            eprintln!(
-                "gma: warning: {}",
-                Warning::TimeLimit { seconds: self.time_limit.unwrap_or(f64::NAN) }
-            );
+            warn(Warning::TimeLimit { seconds: self.time_limit.unwrap_or(f64::NAN) });
         }
     }
 }

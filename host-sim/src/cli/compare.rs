@@ -85,7 +85,7 @@ pub fn run(a: &CompareArgs) -> Result<()> {
     check_outputs(&planned.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &ids)?;
     let (data, cut) = read_data(inputs, Vec::new(), a.read.max_samples, &read_opts)?;
     for w in &cut {
-        eprintln!("gma: warning: {w}");
+        crate::warning::warn(w);
     }
     let mut summary = match data {
         Data::Loops(files, _) => {
@@ -192,7 +192,7 @@ fn compare_recordings(
     }
     let warnings: Vec<String> = fit::unresolved_mode(spec, p, recs).iter().map(ToString::to_string).collect();
     for w in &warnings {
-        eprintln!("gma: warning: {w}");
+        crate::warning::warn(w);
     }
     let summary =
         CompareSummary { model: spec.to_string(), nrmse: total / recs.len() as f64, files: rows, warnings };

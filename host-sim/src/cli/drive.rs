@@ -269,11 +269,10 @@ fn replies(r: &RepliesArgs) -> Result<()> {
         eprintln!("gma: note: {name}: {} frames that are not replies (telemetry) skipped", d.refused);
     }
     if d.corrupt > 0 {
-        eprintln!(
-            "gma: warning: {name}: {} corrupt chunks skipped (COBS, length or CRC failures: a noisy line, or a \
-             port not set raw)",
+        crate::warning::warn(format_args!(
+            "{name}: {} corrupt chunks skipped (COBS, length or CRC failures: a noisy line, or a port not set raw)",
             d.corrupt
-        );
+        ));
     }
     if r.json {
         out!("{}", json!({"replies": list, "corrupt": d.corrupt, "not_replies": d.refused}));

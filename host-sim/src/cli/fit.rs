@@ -15,7 +15,7 @@ use crate::provenance::Provenance;
 use crate::recording::Recording;
 use crate::results::{FileScoreRow, FitSummary, FitText};
 use crate::uncertainty;
-use crate::warning::Warning;
+use crate::warning::{warn, Warning};
 
 /// Options of `gma fit`.
 #[derive(Args)]
@@ -64,7 +64,7 @@ pub fn run(a: &FitArgs) -> Result<()> {
     let j = a.mf.json;
     say!(j, "{summary}");
     for w in &warnings {
-        eprintln!("gma: warning: {w}");
+        warn(w);
     }
     // An invalid result is an error: nothing is written, and --json gets the error object.
     let invalid: Vec<String> = warnings.iter().filter(|w| w.invalidates()).map(|w| w.to_string()).collect();
@@ -129,7 +129,7 @@ pub(crate) fn fit_recordings(
             (Some(u), w)
         }
         Err(e) => {
-            eprintln!("gma: warning: no parameter uncertainty: {e}");
+            warn(format_args!("no parameter uncertainty: {e}"));
             (None, Vec::new())
         }
     };

@@ -54,14 +54,17 @@ pub fn run(a: &RecordArgs) -> Result<()> {
         files.join(", ")
     );
     if r.lost + r.corrupt + r.invalid + r.restarts > 0 {
-        eprintln!(
-            "gma: warning: {} frames lost, {} corrupt chunks, {} frames with non-finite or implausible values, \
+        crate::warning::warn(format_args!(
+            "{} frames lost, {} corrupt chunks, {} frames with non-finite or implausible values, \
              {} restarts; none of them written, and each gap starts a new file",
             r.lost, r.corrupt, r.invalid, r.restarts
-        );
+        ));
     }
     if r.short > 0 {
-        eprintln!("gma: warning: {} frames in segments shorter than 3 frames were not written", r.short);
+        crate::warning::warn(format_args!(
+            "{} frames in segments shorter than 3 frames were not written",
+            r.short
+        ));
     }
     if a.json {
         out!(

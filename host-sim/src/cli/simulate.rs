@@ -168,7 +168,7 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
         Some(input) => {
             let (measured, cut) = read_recording(input, a.read.max_samples, &read_opts)?;
             if let Some(w) = cut {
-                eprintln!("gma: warning: {w}");
+                crate::warning::warn(w);
             }
             let (rec, drive) = run_on_drive(a, spec, &p, &measured, &name)?;
             let what = format!(
