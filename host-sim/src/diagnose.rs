@@ -35,7 +35,7 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::{bail, Result};
-use model_core::effects::{Candidacy, Signature, Stage};
+use model_core::effects::{Candidacy, MagnetizationLaw, Signature, Stage};
 use model_core::{Effect, ModelSpec};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -45,6 +45,7 @@ use crate::fit::{self, evaluate, simulate, FitOptions, FitResult, Simulation};
 mod alternatives;
 use crate::progress;
 use crate::recording::Recording;
+pub(crate) use crate::spectral::effective_samples;
 pub use alternatives::{check_ja_variants, check_laws, LawScore, VariantScore};
 
 /// A candidate must cut the scored NRMSE at least this much to be the verdict (the issue's
@@ -77,6 +78,32 @@ pub const MIN_SAMPLES: usize = 200;
 /// of their effective sample sizes (χ²₁ at 5 % over N_eff): below it the difference is noise.
 fn r2_differ(a: &Candidate, b: &Candidate) -> bool {
     (a.evidence_r2 - b.evidence_r2).abs() > CHI2_1_95 / a.n_eff.min(b.n_eff).max(1.0)
+}
+
+/// Which of the candidates the data cannot tell apart is the verdict, and whether its signature
+/// decided: the one whose signature R² exceeds every other's by more than an R²'s significance
+/// ([`r2_differ`]), else the one with the largest ΔBIC. Both are properties of the set, not of
+/// its order (a pairwise "R² if they differ, else ΔBIC" is not transitive, and picking with it
+/// depended on the order the candidates arrived in); equal ΔBIC, only from identical refits,
+/// falls to the effect's name.
+fn choose_among_tied(tied: &[&Candidate]) -> (usize, bool) {
+    let dominates = |i: usize| {
+        tied.iter()
+            .enumerate()
+            .all(|(j, c)| j == i || (r2_differ(tied[i], c) && tied[i].evidence_r2 > c.evidence_r2))
+    };
+    if let Some(i) = (0..tied.len()).find(|&i| dominates(i)).filter(|_| tied.len() > 1) {
+        return (i, true);
+    }
+    let best = (0..tied.len())
+        .max_by(|&i, &j| {
+            tied[i]
+                .delta_bic
+                .total_cmp(&tied[j].delta_bic)
+                .then(tied[j].effect.name().cmp(tied[i].effect.name()))
+        })
+        .unwrap_or(0);
+    (best, false)
 }
 
 /// One candidate effect, as the JSON contract lists it.
@@ -113,8 +140,8 @@ pub struct Candidate {
     /// BIC gain of the refit on the scored (validation, else fit) files with the effective
     /// sample size (positive: supported): Σ N_eff,f ln(MSE_before,f / MSE_after,f) − Δk ln(Σ N_eff,f).
     pub delta_bic: f64,
-    /// Effective number of independent samples in the baseline's fit residual (from its lag-1
-    /// autocorrelation ρ: N (1 − ρ)/(1 + ρ) per file).
+    /// Effective number of independent samples in the baseline's fit residual (N/τ per file, τ
+    /// its integrated autocorrelation time: [`crate::spectral::effective_samples`]).
     pub n_eff: f64,
     /// The refit's NRMSE per scored file (on `channel`).
     pub per_file_after: Vec<f64>,
@@ -123,14 +150,34 @@ pub struct Candidate {
     pub refit: Option<FitResult>,
 }
 
+/// Before/after ratio of an error: infinite when a refit is exact (an exact refit of a
+/// noise-free recording is the strongest evidence, not none), 1 when either is not a number or
+/// both are zero.
+fn error_cut(before: f64, after: f64) -> f64 {
+    if !(before.is_finite() && after.is_finite()) || before <= 0.0 {
+        1.0
+    } else if after > 0.0 {
+        before / after
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// A cut in words: "2.4× lower", "1.3× higher", "to zero".
+fn cut_words(cut: f64) -> String {
+    if cut.is_infinite() {
+        "to zero".into()
+    } else if cut >= 1.0 {
+        format!("{cut:.1}× lower")
+    } else {
+        format!("{:.1}× higher", 1.0 / cut)
+    }
+}
+
 impl Candidate {
     /// Before/after ratio of the scored NRMSE.
     pub fn cut(&self) -> f64 {
-        if self.nrmse_after > 0.0 {
-            self.nrmse_before / self.nrmse_after
-        } else {
-            1.0
-        }
+        error_cut(self.nrmse_before, self.nrmse_after)
     }
 
     /// The decision rule: the refit cuts the error at least [`MIN_CUT`]×, is lower on enough
@@ -148,6 +195,11 @@ impl Candidate {
             && self.delta_bic > 0.0
             && indicated
     }
+}
+
+/// The most files of which [`required_wins`] asks every one (7 at 5 %: 7 of 8 suffice).
+fn all_must_improve_up_to() -> usize {
+    (1..64).take_while(|&n| required_wins(n) == n).last().unwrap_or(0)
 }
 
 /// Files a candidate must improve out of `n`: the fewest wins a one-sided sign test accepts at
@@ -641,20 +693,15 @@ fn effect_shows(off: &[f64], on: &[f64]) -> bool {
     change > noise
 }
 
-/// Effective number of independent samples of a residual: N (1 − ρ)/(1 + ρ) with ρ its lag-1
-/// autocorrelation (an AR(1) approximation; ρ ≤ 0 counts every sample).
-fn effective_samples(r: &[f64]) -> f64 {
-    let n = r.len();
-    if n < 2 {
-        return n as f64;
+/// Parameters fitted on the scored files themselves: a law with a memory starts each file
+/// from an estimated pre-history ([`fit::InitialState::Estimated`], one excursion per file,
+/// judged on the file's start), a law without none. A refit that adds a memory gains one
+/// such parameter per scored file, and the information criterion counts it.
+pub(crate) fn estimated_states(spec: ModelSpec, files: usize) -> usize {
+    match spec.law() {
+        MagnetizationLaw::JilesAtherton | MagnetizationLaw::Preisach => files,
+        MagnetizationLaw::Linear | MagnetizationLaw::Anhysteretic => 0,
     }
-    let c0: f64 = r.iter().map(|v| v * v).sum();
-    if c0 <= 0.0 {
-        return n as f64;
-    }
-    let c1: f64 = r.windows(2).map(|w| w[0] * w[1]).sum();
-    let rho = (c1 / c0).clamp(0.0, 0.999);
-    (n as f64 * (1.0 - rho) / (1.0 + rho)).max(1.0)
 }
 
 /// Σ_f N_eff,f ln(MSE_before,f / MSE_after,f): the Gaussian log-likelihood gain of a refit with
@@ -762,13 +809,16 @@ pub fn diagnose(
     val_files: &[Recording],
     opts: FitOptions,
 ) -> Result<Diagnosis> {
-    for rec in fit_files {
+    // Validation files too: each is scored after its first drive cycle (the burn-in), and votes
+    // in the sign test as a whole file.
+    for rec in fit_files.iter().chain(val_files) {
         let drive = rec.current_a.as_deref().or(rec.command_v.as_deref()).unwrap_or_default();
         let n = reversals(drive);
         if n < 2 {
             bail!(
                 "{}: the drive covers less than one cycle ({n} reversal{} in {:.1} ms): a diagnosis compares \
-                 both branches of the loop, so record at least one full period of the excitation",
+                 both branches of the loop and scores each file after its first cycle, so record at least one \
+                 full period of the excitation",
                 rec.name,
                 if n == 1 { "" } else { "s" },
                 rec.duration_s() * 1e3
@@ -1036,17 +1086,23 @@ pub fn diagnose(
                 ));
             }
         }
-        let added = refit.as_ref().map_or(0, |f| f.free.len().saturating_sub(base.free.len())).max(1);
+        let added = refit
+            .as_ref()
+            .map_or(0, |f| {
+                (f.free.len() + estimated_states(s2, score_files.len()))
+                    .saturating_sub(base.free.len() + estimated_states(spec, score_files.len()))
+            })
+            .max(1);
         // Judged on the scored files: with validation files a gain there is one the added
         // parameters could not buy by fitting (the fit files reward any flexibility that absorbs
         // model-form error, and punish a refit that stops doing so).
         let n_eff_scored: f64 = base_score_s.iter().map(|s| effective_samples(&s.residual)).sum();
         let delta_bic =
             information_gain(&base_score_s, &after_score_s) - added as f64 * n_eff_scored.max(2.0).ln();
-        let cut = if before_c > 0.0 && after_c > 0.0 { before_c / after_c } else { 1.0 };
+        let cut = error_cut(before_c, after_c);
         let evidence = format!(
             "{} explains {:.0} % of the residual variance ({}); adding it and \
-             refitting takes the {} {channel} NRMSE from {:.2} % to {:.2} % ({:.1}× {}), lower on {files_improved} of {} \
+             refitting takes the {} {channel} NRMSE from {:.2} % to {:.2} % ({}), lower on {files_improved} of {} \
              files ({files_improved_showing} of the {files_showing} it shows in); ΔBIC {:+.1}",
             match channel {
                 Channel::Current => "the amplifier lag −di/dt of command → current",
@@ -1059,8 +1115,7 @@ pub fn diagnose(
             if val_files.is_empty() { "fit" } else { "validation" },
             before_c * 100.0,
             after_c * 100.0,
-            if cut >= 1.0 { cut } else { 1.0 / cut },
-            if cut >= 1.0 { "lower" } else { "higher" },
+            cut_words(cut),
             after_score_s.len(),
             delta_bic,
             channel = channel.name(),
@@ -1117,19 +1172,9 @@ pub fn diagnose(
                 c.passes() && c.channel == best.channel && (i == 0 || !beaten)
             })
             .collect();
-        let chosen = tied
-            .iter()
-            .copied()
-            .max_by(|&i, &j| {
-                let (a, b) = (&candidates[i], &candidates[j]);
-                let by_r2 = if r2_differ(a, b) {
-                    a.evidence_r2.total_cmp(&b.evidence_r2)
-                } else {
-                    std::cmp::Ordering::Equal
-                };
-                by_r2.then(a.delta_bic.total_cmp(&b.delta_bic))
-            })
-            .unwrap_or(0);
+        let tied_candidates: Vec<&Candidate> = tied.iter().map(|&i| &candidates[i]).collect();
+        let (k, by_signature) = choose_among_tied(&tied_candidates);
+        let chosen = tied[k];
         let tied_effects: Vec<Effect> = tied.iter().map(|&i| candidates[i].effect).collect();
         let pick = candidates.remove(chosen);
         candidates.insert(0, pick);
@@ -1158,13 +1203,14 @@ pub fn diagnose(
             };
             let why = if same_signature {
                 by_bic(format!("they share the signature ({})", signature_words(v.effect.info().signature)))
-            } else if others.iter().any(|c| !r2_differ(v, c)) {
+            } else if !by_signature {
                 by_bic(format!(
-                    "their signatures explain the residual alike (R² {:.1} % against {}, differences below an R²'s \
-                     significance at N_eff = {:.0})",
+                    "no signature explains the residual better than every other's by more than an R²'s significance \
+                     (R² {:.1} % against {}; significance at N_eff = {:.0}: {:.1} %)",
                     v.evidence_r2 * 100.0,
                     others.iter().map(|c| format!("{:.1} %", c.evidence_r2 * 100.0)).collect::<Vec<_>>().join(", "),
-                    v.n_eff
+                    v.n_eff,
+                    100.0 * CHI2_1_95 / v.n_eff.max(1.0)
                 ))
             } else {
                 format!(
@@ -1190,9 +1236,35 @@ pub fn diagnose(
                 undistinguished.iter().map(|e| e.name()).collect::<Vec<_>>().join("`, `"),
             ));
         }
+        // Passing candidates judged on another channel are not ranked against the verdict by
+        // these numbers (cuts on different channels measure different things): said, not dropped.
+        let v = &candidates[0];
+        let elsewhere: Vec<String> = candidates
+            .iter()
+            .filter(|c| c.passes() && c.channel != v.channel)
+            .map(|c| {
+                format!(
+                    "`{}` on the {} ({}, ΔBIC {:+.1})",
+                    c.effect,
+                    c.channel,
+                    cut_words(c.cut()),
+                    c.delta_bic
+                )
+            })
+            .collect();
+        if !elsewhere.is_empty() {
+            findings.push(format!(
+                "also passing, judged on another channel than the verdict's {}: {}. Cuts on different channels are \
+                 not comparable evidence, so the verdict is only the larger cut: add it and diagnose again to see \
+                 whether the other is still missing",
+                v.channel,
+                elsewhere.join(", ")
+            ));
+        }
     } else if let Some(best) = candidates.iter().max_by(|a, b| a.cut().total_cmp(&b.cut())) {
         findings.push(format!(
-            "no candidate passes (cut ≥ {MIN_CUT}×, lower on enough scored files it shows in (all of up to six: a one-sided sign test at 5 %), ΔBIC > 0{}); the best, `{}`, takes {:.2} % to {:.2} % on {} (lower on {} of {}, on {} of the {} it shows in, ΔBIC {:+.1}, R² {:.1} %)",
+            "no candidate passes (cut ≥ {MIN_CUT}×, lower on enough scored files it shows in (all of up to {}: a one-sided sign test at 5 %), ΔBIC > 0{}); the best, `{}`, takes {:.2} % to {:.2} % on {} (lower on {} of {}, on {} of the {} it shows in, ΔBIC {:+.1}, R² {:.1} %)",
+            all_must_improve_up_to(),
             if best.held_out { String::new() } else { format!(", signature significant or cut ≥ {DECISIVE_CUT}×") },
             best.effect,
             best.nrmse_before * 100.0,
@@ -1405,6 +1477,85 @@ mod tests {
         assert_eq!(required_wins(6), 6);
         assert_eq!(required_wins(8), 7);
         assert_eq!(required_wins(10), 9);
+        // What the "no candidate passes" finding says: all of up to seven files.
+        assert_eq!(all_must_improve_up_to(), 7);
+    }
+
+    fn candidate(effect: Effect, cut: f64, r2: f64, delta_bic: f64, n_eff: f64) -> Candidate {
+        Candidate {
+            effect,
+            channel: "displacement",
+            score: 0.5,
+            evidence: String::new(),
+            nrmse_before: 0.03,
+            nrmse_after: 0.03 / cut,
+            evidence_r2: r2,
+            files_improved: 4,
+            files_scored: 4,
+            files_showing: 4,
+            files_improved_showing: 4,
+            held_out: true,
+            delta_bic,
+            n_eff,
+            per_file_after: vec![0.03 / cut; 4],
+            refit: None,
+        }
+    }
+
+    /// The verdict among candidates the data cannot tell apart is a property of the set, not of
+    /// the order they arrive in: R² within their significance (3.84/N_eff = 0.4 %) leave it to
+    /// ΔBIC, whatever order the cuts put them in. (A pairwise "R² if they differ, else ΔBIC"
+    /// picked `sensor_delay` in one order and `eddy_current` in another.)
+    #[test]
+    fn the_choice_among_undistinguished_candidates_does_not_depend_on_their_order() {
+        let set = [
+            candidate(Effect::EddyCurrent, 2.02, 0.300, 10.0, 1000.0),
+            candidate(Effect::MechanicalDynamics, 2.01, 0.297, 30.0, 1000.0),
+            candidate(Effect::SensorDelay, 2.00, 0.294, 50.0, 1000.0),
+        ];
+        for order in [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]] {
+            let tied: Vec<&Candidate> = order.iter().map(|&i| &set[i]).collect();
+            let (k, by_signature) = choose_among_tied(&tied);
+            assert_eq!(tied[k].effect, Effect::SensorDelay, "order {order:?}");
+            assert!(!by_signature);
+        }
+        // A signature that explains clearly more than every other's decides, ΔBIC or not.
+        let set = [
+            candidate(Effect::EddyCurrent, 2.0, 0.60, 10.0, 1000.0),
+            candidate(Effect::MechanicalDynamics, 2.0, 0.30, 30.0, 1000.0),
+            candidate(Effect::SensorDelay, 2.0, 0.297, 50.0, 1000.0),
+        ];
+        for order in [[0, 1, 2], [2, 1, 0], [1, 2, 0]] {
+            let tied: Vec<&Candidate> = order.iter().map(|&i| &set[i]).collect();
+            let (k, by_signature) = choose_among_tied(&tied);
+            assert_eq!((tied[k].effect, by_signature), (Effect::EddyCurrent, true), "order {order:?}");
+        }
+    }
+
+    /// An exact refit of a noise-free recording is the strongest evidence there is: it passes
+    /// (its cut was read as 1× before, and it could never pass).
+    #[test]
+    fn an_exact_refit_cuts_the_error_infinitely_and_passes() {
+        let mut c = candidate(Effect::Hysteresis, 2.0, 0.5, 100.0, 1000.0);
+        c.nrmse_after = 0.0;
+        c.per_file_after = vec![0.0; 4];
+        assert!(c.cut().is_infinite());
+        assert!(c.passes());
+        assert_eq!(cut_words(c.cut()), "to zero");
+        assert_eq!(error_cut(f64::NAN, 0.01), 1.0);
+        assert_eq!(error_cut(0.0, 0.0), 1.0);
+        assert_eq!(cut_words(0.5), "2.0× higher");
+    }
+
+    /// A law with a memory starts each scored file from a fitted pre-history: one parameter per
+    /// file that the information criterion counts when a refit adds the memory.
+    #[test]
+    fn a_fitted_initial_state_per_file_counts_as_a_parameter() {
+        let spec = |s: &str| ModelSpec::parse(s).unwrap();
+        assert_eq!(estimated_states(spec("anhysteretic+mech"), 4), 0);
+        assert_eq!(estimated_states(spec("ja+mech"), 4), 4);
+        assert_eq!(estimated_states(spec("preisach"), 3), 3);
+        assert_eq!(estimated_states(spec("linear"), 3), 0);
     }
 
     /// A file counts for an effect when switching it off moves the prediction by more than the
@@ -1437,28 +1588,6 @@ mod tests {
         assert!(!not_pinned_by_the_fit_files((0.012, 0.009), &[(0.014, 0.020), (0.010, 0.009)]));
         // One validation file alone is no pattern either.
         assert!(!not_pinned_by_the_fit_files((0.012, 0.009), &[(0.014, 0.020)]));
-    }
-
-    fn ar1(n: usize, rho: f64, seed: u64) -> Vec<f64> {
-        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-        let mut x = 0.0;
-        (0..n)
-            .map(|_| {
-                x = rho * x + rng.random_range(-1.0..1.0);
-                x
-            })
-            .collect()
-    }
-
-    #[test]
-    fn effective_samples_shrink_with_residual_correlation() {
-        let n = 20_000;
-        let white = effective_samples(&ar1(n, 0.0, 1));
-        assert!((white / n as f64 - 1.0).abs() < 0.05, "white noise: N_eff {white}");
-        // AR(1) with ρ = 0.9: N (1 − ρ)/(1 + ρ) = N/19.
-        let red = effective_samples(&ar1(n, 0.9, 2));
-        let expected = n as f64 * 0.1 / 1.9;
-        assert!((red / expected - 1.0).abs() < 0.15, "ρ = 0.9: N_eff {red}, expected {expected}");
     }
 
     fn rec_with(u: Vec<f64>, i: Vec<f64>, dt: f64) -> Recording {

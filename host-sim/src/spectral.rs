@@ -118,6 +118,54 @@ pub fn cross_correlation(x: &[f64], y: &[f64], max_lag: usize) -> Result<Correla
     Ok(Correlation { r, samples: n, bound: Z95 / (n as f64).sqrt() })
 }
 
+/// Effective number of independent samples of a series, N/τ, with τ the larger of two readings
+/// of its autocorrelation, each blind where the other sees:
+/// - the integrated autocorrelation time 1 + 2 Σ_k ρ(k), its sum cut by Geyer's initial monotone
+///   sequence (Geyer 1992: the pairs Γ_m = ρ(2m) + ρ(2m+1) summed while positive, each held at
+///   most the one before, τ = −1 + 2 Σ Γ_m). It sees slow model error under white noise, whose
+///   lag-1 correlation is small (the noise) but which stays correlated for a fraction of its
+///   period (the lag-1 reading alone overstated N_eff a hundredfold there);
+/// - the AR(1) reading (1 + ρ(1))/(1 − ρ(1)). It sees a residual that oscillates in a band
+///   (a missed resonance), whose correlations cancel in the sum although a statistic along a
+///   regressor in the same band (a least-squares gain, a parameter's interval) is inflated.
+///
+/// Negative correlation counts every sample once: the result lies in [1, N]. A series without
+/// variance about its mean counts once (one offset), an all-zero one N times; a non-finite one
+/// once.
+pub fn effective_samples(x: &[f64]) -> f64 {
+    let n = x.len();
+    if n < 4 {
+        return n as f64;
+    }
+    if x.iter().any(|v| !v.is_finite()) {
+        return 1.0;
+    }
+    // Variance at the rounding level of the values is none: a constant.
+    let (_, energy) = mean_and_energy(x);
+    let peak = x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if peak == 0.0 {
+        return n as f64;
+    }
+    if energy <= n as f64 * (1e-12 * peak).powi(2) {
+        return 1.0;
+    }
+    let Ok(correlation) = cross_correlation(x, x, n / 2) else { return 1.0 };
+    let r = correlation.r;
+    let mut tau = -1.0;
+    let mut previous = f64::INFINITY;
+    for pair in r.chunks_exact(2) {
+        let gamma = (pair[0] + pair[1]).min(previous);
+        if gamma <= 0.0 {
+            break;
+        }
+        tau += 2.0 * gamma;
+        previous = gamma;
+    }
+    let rho1 = r.get(1).copied().unwrap_or(0.0).clamp(0.0, 0.999);
+    let tau = tau.max((1.0 + rho1) / (1.0 - rho1));
+    (n as f64 / tau).clamp(1.0, n as f64)
+}
+
 /// One-sided Welch spectra of an input u and an output y on the same frequency grid.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Spectra {
@@ -289,6 +337,83 @@ pub fn unwrap_deg(phases: &[f64]) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use rand::{Rng as _, SeedableRng as _};
+
+    fn uniform_noise(n: usize, seed: u64) -> Vec<f64> {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        (0..n).map(|_| rng.random_range(-1.0..1.0)).collect()
+    }
+
+    #[test]
+    fn effective_samples_of_white_noise_and_of_an_ar1_series() {
+        let n = 20_000;
+        let white = effective_samples(&uniform_noise(n, 1));
+        assert!(white > 0.9 * n as f64 && white <= n as f64, "white noise: N_eff {white}");
+        // AR(1) with ρ = 0.9: τ = (1 + ρ)/(1 − ρ) = 19.
+        let mut x = 0.0;
+        let ar1: Vec<f64> = uniform_noise(n, 2)
+            .into_iter()
+            .map(|e| {
+                x = 0.9 * x + e;
+                x
+            })
+            .collect();
+        let red = effective_samples(&ar1);
+        let expected = n as f64 / 19.0;
+        assert!((red / expected - 1.0).abs() < 0.25, "ρ = 0.9: N_eff {red}, expected {expected}");
+    }
+
+    /// Slow model error under white noise of the same power (the residual of a model that
+    /// misses a slow effect): ρ(1) is only ≈ 0.5, an AR(1) reading of it says N/3, while the
+    /// error stays correlated over a third of its period, τ ≈ 1 + P/(2π) (≈ 320 at P = 2000).
+    #[test]
+    fn slow_error_under_noise_counts_once_per_stretch_of_its_period_not_per_sample() {
+        let (n, period) = (30_000, 2000.0);
+        let noise = uniform_noise(n, 3);
+        // Uniform noise on [−1, 1] has variance 1/3; the sine's amplitude √(2/3) matches it.
+        let amp = (2.0f64 / 3.0).sqrt();
+        let x: Vec<f64> = noise
+            .iter()
+            .enumerate()
+            .map(|(k, e)| e + amp * (2.0 * std::f64::consts::PI * k as f64 / period).sin())
+            .collect();
+        let got = effective_samples(&x);
+        let expected = n as f64 / (1.0 + period / (2.0 * std::f64::consts::PI));
+        assert!(got > expected / 1.5 && got < expected * 1.5, "N_eff {got}, expected ≈ {expected}");
+        assert!(got < n as f64 / 30.0, "N_eff {got}: the lag-1 reading's N/3 would pass this check");
+    }
+
+    /// A residual oscillating in a band (a missed resonance, 10 samples a period): its
+    /// correlations cancel in Geyer's sum (τ ≈ 2.6), the AR(1) reading keeps it (ρ(1) = cos 36°,
+    /// τ = 9.5), and the larger counts.
+    #[test]
+    fn a_band_limited_residual_counts_by_its_lag_one_correlation() {
+        let n = 20_000;
+        let noise = uniform_noise(n, 4);
+        let x: Vec<f64> = noise
+            .iter()
+            .enumerate()
+            .map(|(k, e)| 0.05 * e + (2.0 * std::f64::consts::PI * k as f64 / 10.0).sin())
+            .collect();
+        let rho1 = (2.0 * std::f64::consts::PI / 10.0).cos();
+        let expected = n as f64 * (1.0 - rho1) / (1.0 + rho1);
+        let got = effective_samples(&x);
+        assert!((got / expected - 1.0).abs() < 0.1, "N_eff {got}, expected ≈ {expected}");
+    }
+
+    #[test]
+    fn effective_samples_stay_between_one_and_n() {
+        let n = 1000;
+        let alternating: Vec<f64> = (0..n).map(|k| if k % 2 == 0 { 1.0 } else { -1.0 }).collect();
+        assert_eq!(effective_samples(&alternating), n as f64, "negative correlation counts each sample once");
+        assert_eq!(effective_samples(&vec![0.3; n]), 1.0, "a constant offset is one sample");
+        assert_eq!(effective_samples(&vec![0.0; n]), n as f64);
+        assert_eq!(effective_samples(&[f64::NAN; 10]), 1.0);
+        assert_eq!(effective_samples(&[1.0, 2.0]), 2.0);
+        let ramp: Vec<f64> = (0..n).map(|k| k as f64).collect();
+        let r = effective_samples(&ramp);
+        assert!((1.0..10.0).contains(&r), "a ramp is one slow trend: N_eff {r}");
+    }
 
     #[test]
     fn welch_psd_of_a_sine_integrates_to_its_power() {

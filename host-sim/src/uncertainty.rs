@@ -237,30 +237,28 @@ pub fn analyse(spec: ModelSpec, res: &FitResult, files: &[Recording]) -> Result<
     for (i, l) in lost.iter_mut().enumerate() {
         *l |= norms[i] == 0.0;
     }
-    // Per block (file and channel): its residual variance and lag-1 autocorrelation, which
-    // inflates its variance by N/N_eff = (1 + ρ₁)/(1 − ρ₁). The blocks' weights in the cost are
-    // not their inverse noise variances, so the covariance is the sandwich
-    // A⁺ (Σ_b c_b J_bᵀ J_b) A⁺ with A = JᵀJ and c_b = s_b² (1 + ρ₁,b)/(1 − ρ₁,b); with one block
-    // (or equal c_b) it is s² (JᵀJ)⁻¹ · N/N_eff.
-    let inflation = |rho: f64| if rho > 0.0 { (1.0 + rho) / (1.0 - rho).max(1e-12) } else { 1.0 };
-    let lag1 = |b: &[f64]| -> (f64, f64) {
-        (b.windows(2).map(|w| w[0] * w[1]).sum(), b.iter().map(|x| x * x).sum())
-    };
+    // Per block (file and channel): its residual variance and its correlation time τ_b, which
+    // inflates its variance by N/N_eff = τ_b (the diagnosis counts independent samples the same
+    // way: crate::spectral::effective_samples). The blocks' weights in the cost
+    // are not their inverse noise variances, so the covariance is the sandwich
+    // A⁺ (Σ_b s_b² τ_b J_bᵀ J_b) A⁺ with A = JᵀJ; with one block (or equal s_b² τ_b) it is
+    // s² (JᵀJ)⁻¹ · N/N_eff. The pooled lag-1 autocorrelation is reported beside it.
     let mut meat = DMatrix::<f64>::zeros(p, p);
     let (mut start, mut effective, mut num, mut den) = (0, 0.0, 0.0, 0.0);
     for (solved, b) in &blocks {
         let nb = b.len();
-        let (lag, ss) = lag1(b);
-        num += lag;
+        let ss: f64 = b.iter().map(|x| x * x).sum();
+        num += b.windows(2).map(|w| w[0] * w[1]).sum::<f64>();
         den += ss;
-        let rho = if ss > 0.0 { lag / ss } else { 0.0 };
+        let n_eff = crate::spectral::effective_samples(b).max(1.0);
+        let inflation = nb as f64 / n_eff;
         // Degrees of freedom: the block's closed-form unknowns (offset, flux scale and zero) and
         // its share of the parameters.
         let dof = *solved as f64 + p as f64 * nb as f64 / n as f64;
         let s2 = ss / (nb as f64 - dof).max(1.0);
-        effective += nb as f64 / inflation(rho);
+        effective += n_eff;
         let jb = js.rows(start, nb);
-        meat += (jb.transpose() * jb) * (s2 * inflation(rho));
+        meat += (jb.transpose() * jb) * (s2 * inflation);
         start += nb;
     }
     let rho1 = if den > 0.0 { num / den } else { 0.0 };

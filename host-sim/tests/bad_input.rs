@@ -205,6 +205,10 @@ fn less_than_one_period_is_refused_by_diagnose_instead_of_guessed() {
     let short = write(dir.path(), "short.csv", &csv(HEADER, &good_rows()[..60]));
     let o = gma(&["diagnose", "--model", "ja", &short]);
     refused(&o, &["short.csv", "less than one cycle", "0 reversals"], "diagnose on 6 ms");
+    // As a validation file: scored after its first cycle, it would have had none to burn in.
+    let long = write(dir.path(), "long.csv", &csv(HEADER, &good_rows()));
+    let o = gma(&["diagnose", "--model", "ja", &long, "--val", &short]);
+    refused(&o, &["short.csv", "less than one cycle"], "diagnose --val on 6 ms");
     let o = gma(&["report", "--model", "ja", "--out", dir.path().join("r.html").to_str().unwrap(), &short]);
     refused(&o, &["short.csv", "less than one cycle"], "report on 6 ms");
     assert!(!dir.path().join("r.html").exists());

@@ -16,8 +16,8 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::{
-    burn_in, displacement_scores, effective_samples, information_gain, mean, required_wins, Diagnosis,
-    Scored, MIN_CUT,
+    burn_in, displacement_scores, effective_samples, estimated_states, information_gain, mean, required_wins,
+    Diagnosis, Scored, MIN_CUT,
 };
 use crate::fit::{self, FitOptions};
 use crate::progress;
@@ -150,7 +150,7 @@ impl Diagnosis {
         let skip: Vec<usize> = score_files.iter().map(burn_in).collect();
         let before = displacement_scores(spec, &base.params, score_files, &skip)?;
         let n_eff: f64 = before.iter().map(|s| effective_samples(&s.residual)).sum();
-        let base_free = base.free.len() as f64;
+        let base_free = (base.free.len() + estimated_states(spec, score_files.len())) as f64;
         let phase = progress::Phase::start(
             opts.progress,
             &format!("diagnose: refitting `{spec}` {what}"),
@@ -166,7 +166,7 @@ impl Diagnosis {
                     Ok((
                         displacement_scores(a.spec, &f.params, score_files, &skip)?,
                         f.time_limited,
-                        f.free.len(),
+                        f.free.len() + estimated_states(a.spec, score_files.len()),
                     ))
                 });
                 phase.step(&format!("diagnose: `{}` refitted", a.name));
