@@ -5,7 +5,7 @@
 //!   exactly (ZOH) by the same closed form as the mechanics.
 
 use crate::error::{check, non_negative, positive, ParamError};
-use crate::field::FirstOrderLag;
+use crate::field::{FirstOrderLag, LagState};
 use crate::mechanics::{MassSpringDamper, MechState, SecondOrderZoh};
 
 /// First-order amplifier parameters.
@@ -19,7 +19,7 @@ pub struct FirstOrderAmpParams {
     pub tau_s: f32,
 }
 
-/// First-order amplifier (state: the current).
+/// First-order amplifier (state: the current, as a [`LagState`]).
 pub type FirstOrderAmp = FirstOrderLag;
 
 impl FirstOrderAmpParams {
@@ -136,11 +136,13 @@ pub enum Amplifier {
     SecondOrder(SecondOrderAmp),
 }
 
-/// Amplifier state: the coil current and, for the second-order model, its internal state.
+/// Amplifier state: the coil current and the model's own state.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct AmpState {
     /// Coil current [A].
     pub current_a: f32,
+    /// State of the first-order model (its output is the current).
+    pub first_order: LagState,
     /// Internal state of the second-order model.
     pub internal: MechState,
 }
@@ -150,7 +152,7 @@ impl Amplifier {
     #[inline]
     pub fn step(&self, s: &mut AmpState, u_v: f32) -> f32 {
         s.current_a = match self {
-            Amplifier::FirstOrder(a) => a.step(&mut s.current_a, u_v),
+            Amplifier::FirstOrder(a) => a.step(&mut s.first_order, u_v),
             Amplifier::SecondOrder(a) => a.step(&mut s.internal, u_v),
         };
         s.current_a
@@ -160,7 +162,7 @@ impl Amplifier {
     #[inline]
     pub fn input_for(&self, s: &AmpState, target_a: f32) -> f32 {
         match self {
-            Amplifier::FirstOrder(a) => a.input_for(s.current_a, target_a),
+            Amplifier::FirstOrder(a) => a.input_for(&s.first_order, target_a),
             Amplifier::SecondOrder(a) => a.input_for(&s.internal, target_a),
         }
     }

@@ -13,7 +13,7 @@
 use crate::amplifier::{AmpState, Amplifier, FirstOrderAmpParams, SecondOrderAmp, SecondOrderAmpParams};
 use crate::effects::{Effect, MagnetizationLaw};
 use crate::error::{check, positive, ParamError};
-use crate::field::{CoilField, FirstOrderLag};
+use crate::field::{CoilField, FirstOrderLag, LagState};
 use crate::magnetization::{
     Anhysteretic, AnhystereticParams, JaParams, JaState, JilesAtherton, LinearMagnetization, Preisach,
     PreisachParams, PreisachState, ValidPreisachParams,
@@ -30,8 +30,8 @@ pub const MAX_DELAY_SAMPLES: usize = 64;
 /// a drive signal, and would only push the models towards overflow.
 pub const MAX_INPUT: f32 = 1.0e4;
 
-/// Shortest sample period accepted [s] (10 MHz): below it the discretisations' exponentials of
-/// −dt/τ round to 1 and a recording would need more samples than fit in memory.
+/// Shortest sample period accepted [s] (10 MHz): below it a recording would need more samples
+/// than fit in memory. (Each lag checks its own dt/τ: [`crate::field::MAX_TAU_IN_SAMPLES`].)
 pub const DT_MIN_S: f32 = 1.0e-7;
 /// Longest sample period accepted [s] (0.1 Hz).
 pub const DT_MAX_S: f32 = 10.0;
@@ -208,17 +208,17 @@ pub struct ActuatorState {
     /// Coil current [A] and the amplifier's internal state.
     pub amp: AmpState,
     /// Field in the rod after the eddy lag [A/m].
-    pub rod_field_a_per_m: f32,
+    pub rod_field_a_per_m: LagState,
     /// J–A state (unused by the other magnetization models).
     pub ja: JaState,
     /// Preisach memory (unused by the other magnetization models).
     pub preisach: PreisachState,
     /// Slow magnetization of the aftereffect [A/m].
-    pub m_slow_a_per_m: f32,
+    pub m_slow_a_per_m: LagState,
     /// Coil temperature rise [°C] (what a thermometer on the winding reads).
-    pub temperature_rise_c: f32,
+    pub temperature_rise_c: LagState,
     /// The rod's temperature rise [°C] (behind the coil's by `thermal.rod_tau_s`).
-    pub rod_temperature_rise_c: f32,
+    pub rod_temperature_rise_c: LagState,
     /// Mechanics.
     pub mech: MechState,
     /// Sensor delay line [m].
@@ -228,8 +228,8 @@ pub struct ActuatorState {
 /// State of [`Actuator::thermal_tail_step`] (the coil-heating share of the displacement).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ThermalTailState {
-    temperature_rise_c: f32,
-    rod_temperature_rise_c: f32,
+    temperature_rise_c: LagState,
+    rod_temperature_rise_c: LagState,
     mech: MechState,
     delay: DelayLine<MAX_DELAY_SAMPLES>,
 }
@@ -405,12 +405,12 @@ impl Actuator {
         let delay = DelayLine::clamped(self.delay_samples, y0); // checked ≤ capacity in `new`
         ActuatorState {
             amp: AmpState::default(),
-            rod_field_a_per_m: h0,
+            rod_field_a_per_m: LagState::at(h0),
             ja,
             preisach,
-            m_slow_a_per_m: m0,
-            temperature_rise_c: 0.0,
-            rod_temperature_rise_c: 0.0,
+            m_slow_a_per_m: LagState::at(m0),
+            temperature_rise_c: LagState::default(),
+            rod_temperature_rise_c: LagState::default(),
             mech: MechState { displacement_m: y0, velocity_m_per_s: 0.0 },
             delay,
         }
@@ -419,8 +419,8 @@ impl Actuator {
     /// The start of [`Actuator::thermal_tail_step`]: cold coil, mechanics and delay line at 0.
     pub fn thermal_tail_rest(&self) -> ThermalTailState {
         ThermalTailState {
-            temperature_rise_c: 0.0,
-            rod_temperature_rise_c: 0.0,
+            temperature_rise_c: LagState::default(),
+            rod_temperature_rise_c: LagState::default(),
             mech: MechState::default(),
             delay: DelayLine::clamped(self.delay_samples, 0.0),
         }
@@ -492,7 +492,7 @@ impl Actuator {
         let h = match &self.eddy {
             Some(lag) => lag.step(&mut s.rod_field_a_per_m, h_coil),
             None => {
-                s.rod_field_a_per_m = h_coil;
+                s.rod_field_a_per_m = LagState::at(h_coil);
                 h_coil
             }
         };

@@ -66,12 +66,13 @@ impl Compensator {
         let md = &self.model;
         let st = &mut s.model;
         let preisach_cache = &mut s.preisach_cache;
-        let thermal = md.thermal.as_ref().map_or(0.0, |th| th.elongation_m(st.rod_temperature_rise_c));
+        let thermal =
+            md.thermal.as_ref().map_or(0.0, |th| th.elongation_m(st.rod_temperature_rise_c.value()));
         let strain = (y_ref_m - thermal) / md.rod_length_m;
         let m_obs = md.magnetostriction.magnetization_for(strain, self.branch_sign);
         let m = match &md.aftereffect {
             Some(ae) => {
-                let m = ae.magnetization_for(st.m_slow_a_per_m, m_obs);
+                let m = ae.magnetization_for(&st.m_slow_a_per_m, m_obs);
                 ae.step(&mut st.m_slow_a_per_m, m);
                 m
             }
@@ -85,7 +86,7 @@ impl Compensator {
         };
         let h_coil = match &md.eddy {
             Some(lag) => {
-                let h = lag.input_for(st.rod_field_a_per_m, h_rod);
+                let h = lag.input_for(&st.rod_field_a_per_m, h_rod);
                 lag.step(&mut st.rod_field_a_per_m, h);
                 h
             }
@@ -229,6 +230,24 @@ mod tests {
     fn mismatched_inverse_is_detected() {
         let e = round_trip_error_with("linear+anhysteretic", "ja", &[0.3, 0.15], &[10.0, 37.0]);
         assert!(e > 0.05, "a saturation-only inverse on a J–A plant should miss by > 5 %, got {e}");
+    }
+
+    /// An eddy lag of 1e4 s (a typo for 1e-4) is 1e8 samples at 10 kHz: accepted, and the
+    /// compensator inverts it (at its current limit: the lag is that slow). Before, e^{−dt/τ}
+    /// rounded to 1: the rod field never moved and the inverse divided 0 by 0, its state NaN and
+    /// its output frozen at 0.
+    #[test]
+    fn a_very_slow_eddy_lag_is_inverted_not_frozen() {
+        let p = ActuatorParams { eddy_tau_s: 1e4, ..ActuatorParams::TERFENOL_DEMO };
+        let comp = Compensator::new(Actuator::new(ModelSpec::parse("ja+eddy").unwrap(), &p).unwrap());
+        let mut cs = comp.rest_state();
+        let y0 = comp.model().rest_state().mech.displacement_m;
+        for _ in 0..200 {
+            let u = comp.step(&mut cs, y0 + 20e-6);
+            assert!(u.is_finite() && u > 0.0, "{u}");
+        }
+        let h = cs.model.rod_field_a_per_m.value();
+        assert!(h.is_finite() && h > p.coil.bias_a_per_m, "the rod field rises: {h} A/m");
     }
 
     proptest! {
