@@ -419,11 +419,19 @@ impl JilesAtherton {
     /// Moves the applied field to `h` and returns M [A/m]. A non-finite `h` holds the state.
     #[inline]
     pub fn step(&self, s: &mut JaState, h: f32) -> f32 {
+        self.step_in_at_most(s, h, MAX_SUBSTEPS)
+    }
+
+    /// [`Self::step`] in at most `max_substeps` (≥ 1) sub-steps, coarser ones when the field
+    /// change needs more: for a caller with less time per sample (the inverse compensator's
+    /// trial steps).
+    #[inline]
+    pub fn step_in_at_most(&self, s: &mut JaState, h: f32, max_substeps: u32) -> f32 {
         let dh_total = h - s.h_a_per_m;
         if !dh_total.is_finite() {
             return s.m_a_per_m;
         }
-        let n = self.substeps_for(dh_total);
+        let n = self.substeps_for(dh_total).min(max_substeps).max(1);
         let dh = if n == 1 { dh_total } else { dh_total / n as f32 };
         // The form is chosen once per sample, not once per sub-step.
         match self.p.variant {
@@ -450,6 +458,20 @@ mod tests {
         assert_eq!(ja.substeps_for(f32::MAX), MAX_SUBSTEPS);
         assert_eq!(ja.substeps_for(1e12), MAX_SUBSTEPS);
         assert_eq!(ja.substeps_for(0.0), 1);
+    }
+
+    /// A step held to fewer sub-steps than its field change asks for takes exactly that many,
+    /// coarser (the inverse compensator's time budget per sample rests on it).
+    #[test]
+    fn a_step_held_to_n_sub_steps_takes_n() {
+        let ja = JilesAtherton::new(JaParams::TSMA_ROD1_002).unwrap();
+        let dh = 40.0 * ja.max_substep_a_per_m();
+        let (mut capped, mut by_hand) = (JaState::default(), JaState::default());
+        let m = ja.step_in_at_most(&mut capped, dh, 8);
+        (0..8).for_each(|_| ja.substep(&mut by_hand, dh / 8.0));
+        assert_eq!((m, capped.h_a_per_m), (by_hand.m_a_per_m, dh));
+        assert_eq!(capped.m_irr_a_per_m, by_hand.m_irr_a_per_m);
+        assert_eq!(ja.step_in_at_most(&mut JaState::default(), dh, 64), ja.step(&mut JaState::default(), dh));
     }
 
     /// Found by the model_step fuzz target: a subnormal k made 1/k infinite and M NaN. The

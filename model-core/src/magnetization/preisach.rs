@@ -606,6 +606,23 @@ impl Preisach {
         h
     }
 
+    /// [`Self::field_for_with`]'s field, `s` left as it is: the inverse compensator applies
+    /// the field its current limit lets through ([`Self::move_with`]).
+    pub(crate) fn solve_with(&self, s: &PreisachState, sums: &mut InverseCache, m: f32) -> f32 {
+        self.solve_field(s, sums, m).0
+    }
+
+    /// M after a step from `s` to the finite field `h`, evaluated as the solve's trials are (two
+    /// Everett look-ups with the pair `sums`, not the whole staircase); `s` stays.
+    pub(crate) fn output_after_with(&self, s: &PreisachState, sums: &mut InverseCache, h: f32) -> f32 {
+        self.trial_output(s, sums, h).0
+    }
+
+    /// Moves `s`, and the `sums` that follow it, to the finite field `h`.
+    pub(crate) fn move_with(&self, s: &mut PreisachState, sums: &mut InverseCache, h: f32) {
+        sums.changed_from(self.advance(s, h));
+    }
+
     /// The field and how many evaluations found it.
     fn solve_field(&self, s: &PreisachState, sums: &mut InverseCache, m: f32) -> (f32, usize) {
         let range = if self.reversible_ms > 0.0 {
