@@ -90,7 +90,8 @@ pub struct ActuatorParams {
     pub preisach: PreisachParams,
     /// Quadratic magnetostriction.
     pub magnetostriction: QuadraticParams,
-    /// Active rod length [m]: free displacement = λ L.
+    /// Active rod length [m]: free displacement = λ L. In [1e-4, 10] m: a 0.1 mm rod is
+    /// already a film (the inverse divides the displacement by it).
     pub rod_length_m: f32,
     /// `mechanical_dynamics`.
     pub mech: ModalMechanics,
@@ -307,7 +308,8 @@ impl Actuator {
             None
         };
         let magnetostriction = QuadraticMagnetostriction::new(p.magnetostriction)?;
-        let rod_length_m = check("rod_length_m", p.rod_length_m, |l| l > 0.0 && l <= 10.0, "in (0, 10] m")?;
+        let rod_length_m =
+            check("rod_length_m", p.rod_length_m, |l| (1e-4..=10.0).contains(&l), "in [1e-4, 10] m")?;
         let mech = if spec.has(Effect::MechanicalDynamics) {
             Some(SecondOrderZoh::new(p.mech.unit_gain()?, dt)?)
         } else {

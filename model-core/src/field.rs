@@ -12,7 +12,8 @@ pub const MU0: f64 = 4.0e-7 * core::f64::consts::PI;
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct CoilField {
-    /// Field per ampere N/(k_f L) [A/m per A] = [1/m].
+    /// Field per ampere N/(k_f L) [A/m per A] = [1/m], in [1, 1e7]: one turn per metre is no
+    /// actuator's coil (000's: 13 500), and the inverse divides by it.
     pub turns_per_m: f32,
     /// Bias field from a permanent magnet or DC bias current [A/m].
     pub bias_a_per_m: f32,
@@ -27,9 +28,9 @@ impl CoilField {
         Self::new(turns / (k_f * length_m), bias_a_per_m)
     }
 
-    /// Validates the field gain (> 0) and the bias (finite).
+    /// Validates the field gain (in [1, 1e7] 1/m) and the bias (within ±1e7 A/m).
     pub fn new(turns_per_m: f32, bias_a_per_m: f32) -> Result<Self, ParamError> {
-        check("coil.turns_per_m", turns_per_m, |n| n > 0.0 && n <= 1e7, "in (0, 1e7] 1/m")?;
+        check("coil.turns_per_m", turns_per_m, |n| (1.0..=1e7).contains(&n), "in [1, 1e7] 1/m")?;
         check("coil.bias_a_per_m", bias_a_per_m, |b| b.abs() <= 1e7, "within ±1e7 A/m")?;
         Ok(Self { turns_per_m, bias_a_per_m })
     }
@@ -230,6 +231,17 @@ mod tests {
         let mut y = LagState::at(2e4);
         let u = lag.input_for(&y, 2.1e4);
         assert!(u.is_finite() && (lag.step(&mut y, u) - 2.1e4).abs() < 1.0, "{u} gave {y:?}");
+    }
+
+    /// A subnormal field gain (1e-45) made the inverse's current infinite; below one turn per
+    /// metre it is refused by name.
+    #[test]
+    fn a_coil_without_turns_is_refused_by_name() {
+        for bad in [1e-45, 0.5, 2e7] {
+            assert!(matches!(CoilField::new(bad, 0.0), Err(ParamError::OutOfRange("coil.turns_per_m", _))));
+        }
+        let weakest = CoilField::new(1.0, 1e7).unwrap();
+        assert!(weakest.current_for(-1e7).is_finite());
     }
 
     #[test]

@@ -63,7 +63,7 @@ pub struct ThermalParams {
     pub thermal_resistance_c_per_w: f32,
     /// Thermal time constant τ_th [s].
     pub tau_s: f32,
-    /// Rod length L [m].
+    /// Rod length L [m], in [1e-4, 10] (as the chain's).
     pub rod_length_m: f32,
     /// Expansion coefficient α_T [1/°C].
     pub expansion_per_c: f32,
@@ -104,7 +104,8 @@ impl ThermalDrift {
             |r| (0.0..=1e4).contains(&r),
             "in [0, 1e4] °C/W",
         )?;
-        let l = check("thermal.rod_length_m", p.rod_length_m, |l| l > 0.0 && l <= 10.0, "in (0, 10] m")?;
+        let l =
+            check("thermal.rod_length_m", p.rod_length_m, |l| (1e-4..=10.0).contains(&l), "in [1e-4, 10] m")?;
         let a = check(
             "thermal.expansion_per_c",
             p.expansion_per_c,

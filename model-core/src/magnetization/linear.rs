@@ -10,15 +10,18 @@ use crate::error::{check, ParamError};
 pub struct LinearMagnetization {
     /// Offset a [A/m].
     pub offset_a_per_m: f32,
-    /// Slope b = dM/dH (relative susceptibility, dimensionless).
+    /// Slope b = dM/dH (relative susceptibility, dimensionless), in [1e-3, 1e5]: a material
+    /// whose magnetization barely moves (below 1e-3: a paramagnet's scale; Terfenol-D's is about
+    /// 7) strains nothing, and the inverse divides by it.
     pub susceptibility: f32,
 }
 
 impl LinearMagnetization {
-    /// Validates: finite offset, finite susceptibility > 0 (M must rise with H for the inverse).
+    /// Validates: offset within ±1e7 A/m, susceptibility in [1e-3, 1e5] (M must rise with H for
+    /// the inverse).
     pub fn new(offset_a_per_m: f32, susceptibility: f32) -> Result<Self, ParamError> {
         check("linear.offset_a_per_m", offset_a_per_m, |a| a.abs() <= 1e7, "within ±1e7 A/m")?;
-        check("linear.susceptibility", susceptibility, |b| b > 0.0 && b <= 1e5, "in (0, 1e5]")?;
+        check("linear.susceptibility", susceptibility, |b| (1e-3..=1e5).contains(&b), "in [1e-3, 1e5]")?;
         Ok(Self { offset_a_per_m, susceptibility })
     }
 
@@ -168,6 +171,12 @@ mod tests {
         assert_eq!(f.solve(), Err(FitError::ConstantField));
         assert_eq!(f.push(f32::NAN, 0.0), Err(FitError::NonFinitePoint(2)));
         assert!(LinearMagnetization::new(0.0, 0.0).is_err());
+        // A subnormal susceptibility (1e-45) made the inverse's field infinite.
+        for bad in [1e-45, 5e-4] {
+            let e = LinearMagnetization::new(0.0, bad).err().map(|e| e.name());
+            assert_eq!(e, Some("linear.susceptibility"));
+        }
+        assert!(LinearMagnetization::new(1e7, 1e-3).unwrap().field_for(-1e7).is_finite());
     }
 
     #[test]
