@@ -41,23 +41,46 @@ pub const DT_MAX_S: f32 = 10.0;
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct ModalMechanics {
-    /// Natural frequency f_n [Hz].
+    /// Natural frequency f_n [Hz]; at a sample period, high enough that the f32 step decays
+    /// ([`ModalMechanics::discretised`]).
     pub natural_frequency_hz: f32,
-    /// Damping ratio ζ.
+    /// Damping ratio ζ, at least [`ModalMechanics::MIN_DAMPING_RATIO`].
     pub damping_ratio: f32,
 }
 
 impl ModalMechanics {
+    /// Smallest damping ratio accepted (a resonance gain of 500; real actuators' modes: 0.01 and
+    /// up). Undamped, the step's f32 transition matrix set the amplitude: a free oscillation grew
+    /// 2.48× over 1e8 samples; and the states stay below 500 times the largest free
+    /// displacement the other bounds allow, so finite.
+    pub const MIN_DAMPING_RATIO: f32 = 1e-3;
+
     /// The unit-stiffness mass-spring-damper with this f_n and ζ (static gain 1).
     pub fn unit_gain(&self) -> Result<MassSpringDamper, ParamError> {
         let fn_hz = positive("mech.natural_frequency_hz", self.natural_frequency_hz)?;
-        let zeta = check("mech.damping_ratio", self.damping_ratio, |z| z >= 0.0, ">= 0")?;
+        let zeta =
+            check("mech.damping_ratio", self.damping_ratio, |z| z >= Self::MIN_DAMPING_RATIO, ">= 1e-3")?;
         let w = 2.0 * core::f32::consts::PI * fn_hz;
         Ok(MassSpringDamper {
             mass_kg: 1.0 / (w * w),
             damping_n_s_per_m: 2.0 * zeta / w,
             stiffness_n_per_m: 1.0,
         })
+    }
+
+    /// [`Self::unit_gain`] discretised at `dt_s`, refused by f_n when a free oscillation would
+    /// not decay in f32: it decays by ζ 2π f_n dt_s per sample, and for a mode far below the
+    /// sample rate (f_n dt_s ≲ 1e-4 at the smallest ζ) the rounding of the step's coefficients
+    /// is as large.
+    pub fn discretised(&self, dt_s: f32) -> Result<SecondOrderZoh, ParamError> {
+        let zoh = SecondOrderZoh::new(self.unit_gain()?, dt_s)?;
+        if !zoh.decays() {
+            return Err(ParamError::OutOfRange(
+                "mech.natural_frequency_hz",
+                "high enough against the sample rate that the f32 step decays (damping_ratio * 2 pi * f_n * dt_s above about 1e-7)",
+            ));
+        }
+        Ok(zoh)
     }
 }
 
@@ -310,11 +333,7 @@ impl Actuator {
         let magnetostriction = QuadraticMagnetostriction::new(p.magnetostriction)?;
         let rod_length_m =
             check("rod_length_m", p.rod_length_m, |l| (1e-4..=10.0).contains(&l), "in [1e-4, 10] m")?;
-        let mech = if spec.has(Effect::MechanicalDynamics) {
-            Some(SecondOrderZoh::new(p.mech.unit_gain()?, dt)?)
-        } else {
-            None
-        };
+        let mech = if spec.has(Effect::MechanicalDynamics) { Some(p.mech.discretised(dt)?) } else { None };
         let thermal =
             if spec.has(Effect::ThermalDrift) { Some(ThermalDrift::new(p.thermal, dt)?) } else { None };
         let delay_samples = if spec.has(Effect::SensorDelay) {
@@ -413,7 +432,7 @@ impl Actuator {
             m_slow_a_per_m: LagState::at(m0),
             temperature_rise_c: LagState::default(),
             rod_temperature_rise_c: LagState::default(),
-            mech: MechState { displacement_m: y0, velocity_m_per_s: 0.0 },
+            mech: MechState { displacement_m: y0, velocity_m_per_rad: 0.0 },
             delay,
         }
     }
