@@ -410,6 +410,9 @@ impl JilesAtherton {
     fn close_with_irreversible(&self, s: &mut JaState, dh: f32, m_predicted: f32) {
         let p = &self.p;
         s.h_a_per_m += dh;
+        // Within ±M_s as M itself: a huge field step made the prediction infinite, and the mean
+        // field α·∞ NaN for α = 0 (the wrong sign for α < 0).
+        let m_predicted = within(m_predicted, p.ms_a_per_m);
         let (l, dl) = langevin_with_slope((s.h_a_per_m + p.alpha * m_predicted) * self.inv_a);
         s.m_a_per_m = within(self.c_ms * l + self.one_minus_c * s.m_irr_a_per_m, p.ms_a_per_m);
         s.langevin = l;
@@ -458,6 +461,31 @@ mod tests {
         assert_eq!(ja.substeps_for(f32::MAX), MAX_SUBSTEPS);
         assert_eq!(ja.substeps_for(1e12), MAX_SUBSTEPS);
         assert_eq!(ja.substeps_for(0.0), 1);
+    }
+
+    /// A huge but finite field (3e38 A/m, the host API accepts it) gives a finite M of its
+    /// sign: the predicted M overflowed, and with α = 0 the mean field was 0·∞ = NaN, with
+    /// α < 0 −∞ (M of the wrong sign).
+    #[test]
+    fn a_huge_finite_field_saturates_the_rod() {
+        for (alpha, h) in [(0.0, 3.0e38), (-0.5, 1e36), (0.5, -3.0e38)] {
+            let p = JaParams {
+                a_a_per_m: 1.0,
+                k_a_per_m: 1.0,
+                ms_a_per_m: 1e7,
+                c: 0.0,
+                alpha,
+                ..JaParams::TSMA_ROD1_002
+            };
+            for variant in JaVariant::ALL {
+                let ja = JilesAtherton::new(JaParams { variant, ..p }).unwrap();
+                let m = ja.step(&mut JaState::default(), h);
+                assert!(
+                    m.is_finite() && m.signum() == h.signum(),
+                    "{variant}, α = {alpha}: M = {m} at h = {h}"
+                );
+            }
+        }
     }
 
     /// A step held to fewer sub-steps than its field change asks for takes exactly that many,
