@@ -291,7 +291,7 @@ pub fn run_model(
             out.magnetization_a_per_m.push(m);
         }
         if heating {
-            out.temperature_rise_c.push(s.temperature_rise_c as f64);
+            out.temperature_rise_c.push(s.temperature_rise_c.value() as f64);
         }
         let magnetic = match &kept {
             Some(run) => run[k],

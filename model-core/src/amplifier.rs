@@ -5,7 +5,7 @@
 //!   exactly (ZOH) by the same closed form as the mechanics.
 
 use crate::error::{check, non_negative, positive, ParamError};
-use crate::field::FirstOrderLag;
+use crate::field::{FirstOrderLag, LagState};
 use crate::mechanics::{MassSpringDamper, MechState, SecondOrderZoh};
 
 /// First-order amplifier parameters.
@@ -19,7 +19,7 @@ pub struct FirstOrderAmpParams {
     pub tau_s: f32,
 }
 
-/// First-order amplifier (state: the current).
+/// First-order amplifier (state: the current, as a [`LagState`]).
 pub type FirstOrderAmp = FirstOrderLag;
 
 impl FirstOrderAmpParams {
@@ -59,21 +59,41 @@ impl SecondOrderAmpParams {
         self.k_u as f64 * num / den
     }
 
-    /// The largest gain over frequency, max_ω |G(jω)| [A/V]: |G|²/k_U² = (1 + A²x)/((1 − Bx)² +
-    /// C²x) with x = ω², whose derivative vanishes at x* = K/(B (B + √(B² + A²K))), K = A² − C² +
-    /// 2B (the written form keeps its digits when A²K ≪ B²); no peak when K ≤ 0 (the DC gain is
-    /// the largest).
-    pub fn peak_gain(&self) -> f64 {
-        let (a, b, c) = (self.a_s as f64, self.b_s2 as f64, self.c_s as f64);
-        let k = a * a - c * c + 2.0 * b;
-        let ratio2 = if k > 0.0 && b > 0.0 {
-            let x = k / (b * (b + libm::sqrt(b * b + a * a * k)));
-            let d = (1.0 - b * x) * (1.0 - b * x) + c * c * x;
-            ((1.0 + a * a * x) / d).max(1.0)
-        } else {
-            1.0
+    /// ∫|h(t)| dt [A/V], the area under the impulse response's magnitude: the most |i| a
+    /// command bounded by 1 V reaches (at every instant, so at every sample of the ZOH step),
+    /// and at least the peak gain max_ω |G(jω)|, which bounds sines only. In closed form: with
+    /// σ = C/(2B), h(t) = (k_U/B) e^{−σt} (A c(t) + (1 − Aσ) s(t)), c = cos(ω_d t) and s =
+    /// sin(ω_d t)/ω_d (cosh and sinh when overdamped), and the step response F(t) = k_U (1 −
+    /// e^{−σt}(c + σ s)) + (k_U A/B) e^{−σt} s. Overdamped, h changes sign at most once, at t*,
+    /// and the area is 2 F(t*) − k_U (else k_U = F(∞)); underdamped, its lobes between the zeros
+    /// t_0 + kπ/ω_d shrink by ρ = e^{−σπ/ω_d}: |F(t_0)| + |F(t_0) − k_U| (1 + ρ)/(1 − ρ).
+    pub fn response_area(&self) -> f64 {
+        let (k_u, a, b, c) = (self.k_u as f64, self.a_s as f64, self.b_s2 as f64, self.c_s as f64);
+        let sigma = c / (2.0 * b);
+        let q = 1.0 / b - sigma * sigma; // ω_d², negative when overdamped
+        let d = 1.0 - a * sigma; // the weight of s(t) in h
+        let step_response = |t: f64, c_t: f64, s_t: f64| {
+            let e = libm::exp(-sigma * t);
+            k_u * (1.0 - e * (c_t + sigma * s_t)) + k_u * a / b * e * s_t
         };
-        self.k_u as f64 * libm::sqrt(ratio2)
+        if q > 0.0 {
+            let wd = libm::sqrt(q);
+            // A cos x + (d/ω_d) sin x = R cos(x − φ), first zero at x₀ = φ + π/2 ∈ [0, π].
+            let x0 = libm::atan2(d / wd, a) + core::f64::consts::FRAC_PI_2;
+            let f0 = step_response(x0 / wd, libm::cos(x0), libm::sin(x0) / wd);
+            let rho = libm::exp(-sigma * core::f64::consts::PI / wd);
+            libm::fabs(f0) + libm::fabs(f0 - k_u) * (1.0 + rho) / (1.0 - rho)
+        } else {
+            let w = libm::sqrt(-q);
+            // A cosh(wt) + d sinh(wt)/w: a zero only if d < 0, where tanh(wt)/w = A/(−d) < 1/w.
+            if d >= 0.0 || w * a >= -d {
+                return k_u;
+            }
+            let r = a / -d;
+            let t = if w > 0.0 { libm::atanh(w * r) / w } else { r };
+            let (c_t, s_t) = if w > 0.0 { (libm::cosh(w * t), libm::sinh(w * t) / w) } else { (1.0, t) };
+            2.0 * step_response(t, c_t, s_t) - k_u
+        }
     }
 }
 
@@ -82,6 +102,8 @@ impl SecondOrderAmpParams {
 pub struct SecondOrderAmp {
     zoh: SecondOrderZoh,
     p: SecondOrderAmpParams,
+    /// A ω_n: the zero's weight on the state's ẋ/ω_n.
+    zero_per_rad: f32,
 }
 
 impl SecondOrderAmp {
@@ -91,27 +113,30 @@ impl SecondOrderAmp {
         non_negative("amp2.a_s", p.a_s)?;
         positive("amp2.b_s2", p.b_s2)?;
         non_negative("amp2.c_s", p.c_s)?;
-        // Bounded like the first-order amplifier's gain: a resonance too lightly damped for
-        // that is not an amplifier (and its current would overflow the chain downstream).
-        let peak = p.peak_gain();
-        if !(peak.is_finite() && peak <= 1e3) {
+        // Its output bounded like the first-order amplifier's (|i| ≤ 1e3 A/V × |u|): a resonance
+        // too lightly damped, or a zero too strong, is not an amplifier (and its current would
+        // overflow the chain downstream). A bound on the peak gain alone let a strong zero's
+        // output reach twice it (Σ|h| 1995 A/V at a peak of 999).
+        let area = p.response_area();
+        if !(area.is_finite() && area <= 1e3) {
             return Err(ParamError::OutOfRange(
                 "amp2",
-                "a peak gain max |G(jw)| <= 1e3 A/V (more damping C, a smaller zero A or gain k_u)",
+                "an output of at most 1e3 A per V of command (the area of |h(t)|: more damping C, a smaller zero A or gain k_u)",
             ));
         }
         let zoh = SecondOrderZoh::new(
             MassSpringDamper { mass_kg: p.b_s2, damping_n_s_per_m: p.c_s, stiffness_n_per_m: 1.0 },
             dt_s,
         )?;
-        Ok(Self { zoh, p })
+        let zero_per_rad = (p.a_s as f64 / libm::sqrt(p.b_s2 as f64)) as f32;
+        Ok(Self { zoh, p, zero_per_rad })
     }
 
     /// One sample with command `u_v` held; returns the coil current [A].
     #[inline]
     pub fn step(&self, s: &mut MechState, u_v: f32) -> f32 {
         self.zoh.step(s, u_v);
-        self.p.k_u * (s.displacement_m + self.p.a_s * s.velocity_m_per_s)
+        self.p.k_u * (s.displacement_m + self.zero_per_rad * s.velocity_m_per_rad)
     }
 }
 
@@ -136,11 +161,13 @@ pub enum Amplifier {
     SecondOrder(SecondOrderAmp),
 }
 
-/// Amplifier state: the coil current and, for the second-order model, its internal state.
+/// Amplifier state: the coil current and the model's own state.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct AmpState {
     /// Coil current [A].
     pub current_a: f32,
+    /// State of the first-order model (its output is the current).
+    pub first_order: LagState,
     /// Internal state of the second-order model.
     pub internal: MechState,
 }
@@ -150,7 +177,7 @@ impl Amplifier {
     #[inline]
     pub fn step(&self, s: &mut AmpState, u_v: f32) -> f32 {
         s.current_a = match self {
-            Amplifier::FirstOrder(a) => a.step(&mut s.current_a, u_v),
+            Amplifier::FirstOrder(a) => a.step(&mut s.first_order, u_v),
             Amplifier::SecondOrder(a) => a.step(&mut s.internal, u_v),
         };
         s.current_a
@@ -160,7 +187,7 @@ impl Amplifier {
     #[inline]
     pub fn input_for(&self, s: &AmpState, target_a: f32) -> f32 {
         match self {
-            Amplifier::FirstOrder(a) => a.input_for(s.current_a, target_a),
+            Amplifier::FirstOrder(a) => a.input_for(&s.first_order, target_a),
             Amplifier::SecondOrder(a) => a.input_for(&s.internal, target_a),
         }
     }
@@ -207,11 +234,29 @@ mod tests {
         assert!((peak as f64 - SecondOrderAmpParams::TSMA_002.gain_at_hz(500.0)).abs() < 0.015, "{peak}");
     }
 
-    /// The closed-form peak against a fine log sweep of |G(j 2π f)|, for an overdamped amplifier
-    /// (002's), a resonant one, one with a strong zero and one without; and the undamped
-    /// resonance the fuzzer found (B 1.5e-41 s², C 9e-41 s: 4e19 Hz, ζ 1e-20) is refused.
+    /// Σ|h[n]| of the discretised amplifier's impulse response over `samples`: the most |i| a
+    /// command bounded by 1 V reaches at this sample period.
+    fn discrete_area(p: SecondOrderAmpParams, dt_s: f32, samples: usize) -> f64 {
+        let amp = SecondOrderAmp::new(p, dt_s).unwrap();
+        let mut s = MechState::default();
+        (0..samples).map(|n| amp.step(&mut s, if n == 0 { 1.0 } else { 0.0 }).abs() as f64).sum()
+    }
+
+    /// max |G(j 2π f)| over a fine log sweep from 0.1 Hz to 1 MHz.
+    fn peak_gain(p: SecondOrderAmpParams) -> f64 {
+        (0..=60_000)
+            .map(|k| p.gain_at_hz(10f64.powf(-1.0 + 7.0 * k as f64 / 60_000.0)))
+            .fold(p.k_u as f64, f64::max)
+    }
+
+    /// The closed-form area against the peak gain (a fine log sweep of |G(j 2π f)|) and the area
+    /// of the discretised impulse response, for an overdamped amplifier (002's), a resonant one,
+    /// one with a strong zero and one without: above both, and the area at a 1 µs step.
+    /// Refused: the strong zero with a peak gain of 999 A/V the review found (output Σ|h| 1995
+    /// A/V at 10 kHz: through the chain's largest gains M² overflowed), and the undamped resonance
+    /// the fuzzer found (B 1.5e-41 s², C 9e-41 s: 4e19 Hz, ζ 1e-20).
     #[test]
-    fn peak_gain_is_the_largest_gain_over_frequency() {
+    fn the_response_area_bounds_the_output_and_refuses_what_could_overflow() {
         let sets = [
             SecondOrderAmpParams::TSMA_002,
             SecondOrderAmpParams { k_u: 2.0, a_s: 0.0, b_s2: 1e-8, c_s: 2e-5 },
@@ -219,15 +264,63 @@ mod tests {
             SecondOrderAmpParams { k_u: 1.0, a_s: 0.0, b_s2: 1e-8, c_s: 1e-3 },
         ];
         for p in sets {
-            let swept = (0..=60_000)
-                .map(|k| p.gain_at_hz(10f64.powf(-1.0 + 7.0 * k as f64 / 60_000.0)))
-                .fold(p.k_u as f64, f64::max);
-            let peak = p.peak_gain();
-            assert!(peak >= swept * (1.0 - 1e-9) && peak <= swept * 1.001, "{p:?}: {peak} vs swept {swept}");
+            let area = p.response_area();
+            let peak = peak_gain(p);
+            let (at_10khz, fine) = (discrete_area(p, 1e-4, 20_000), discrete_area(p, 1e-6, 2_000_000));
+            // (The sums in f32: to 1e-5.)
+            assert!(
+                area >= peak && area >= at_10khz * (1.0 - 1e-5),
+                "{p:?}: {area} against {peak}, {at_10khz}"
+            );
+            assert!((area - fine).abs() <= 2e-3 * area, "{p:?}: area {area}, by a 1 µs step {fine}");
         }
+        let wn = 2.0 * core::f64::consts::PI * 100.0;
+        let unit = SecondOrderAmpParams {
+            k_u: 1.0,
+            a_s: (1e6 / wn) as f32,
+            b_s2: (1.0 / (wn * wn)) as f32,
+            c_s: (200.0 / wn) as f32,
+        };
+        let strong_zero = SecondOrderAmpParams { k_u: (999.0 / peak_gain(unit)) as f32, ..unit };
+        assert!(strong_zero.response_area() > 1.9e3, "{}", strong_zero.response_area());
         let undamped = SecondOrderAmpParams { k_u: 2.0, a_s: 1e-8, b_s2: 1.5221e-41, c_s: 9.004e-41 };
-        assert!(undamped.peak_gain() > 1e20);
-        assert!(matches!(SecondOrderAmp::new(undamped, 1e-4), Err(ParamError::OutOfRange("amp2", _))));
+        for p in [strong_zero, undamped] {
+            assert!(matches!(SecondOrderAmp::new(p, 1e-4), Err(ParamError::OutOfRange("amp2", _))), "{p:?}");
+        }
         assert!(SecondOrderAmp::new(SecondOrderAmpParams::TSMA_002, 1e-4).is_ok());
+    }
+
+    /// At the bound (area 999 A/V, the strong zero above scaled down), the command that drives
+    /// the current highest (±1e4 V, the signs of the time-reversed impulse response) through the
+    /// chain's largest gains (1e7 turns/m, χ = 1e5, λ_s = 1 over M_s = 1e3): finite. With the
+    /// peak gain bounded instead the current reached 2e7 A and M² overflowed.
+    #[test]
+    fn at_its_output_bound_the_amplifier_keeps_the_chain_finite() {
+        use crate::chain::{Actuator, ActuatorParams};
+        let wn = 2.0 * core::f64::consts::PI * 100.0;
+        let unit = SecondOrderAmpParams {
+            k_u: 1.0,
+            a_s: (1e6 / wn) as f32,
+            b_s2: (1.0 / (wn * wn)) as f32,
+            c_s: (200.0 / wn) as f32,
+        };
+        let so = SecondOrderAmpParams { k_u: (999.0 / unit.response_area()) as f32, ..unit };
+        let len = 20_000;
+        let amp = SecondOrderAmp::new(so, 1e-4).unwrap();
+        let mut s = MechState::default();
+        let h: std::vec::Vec<f32> =
+            (0..len).map(|n| amp.step(&mut s, if n == 0 { 1.0 } else { 0.0 })).collect();
+        let mut p = ActuatorParams::TERFENOL_DEMO;
+        p.amp_second_order = Some(so);
+        p.coil = crate::field::CoilField { turns_per_m: 1e7, bias_a_per_m: 1e7 };
+        p.linear = crate::magnetization::LinearMagnetization { offset_a_per_m: 1e7, susceptibility: 1e5 };
+        p.magnetostriction.lambda_s = 1.0;
+        p.magnetostriction.ms_a_per_m = 1e3;
+        let m = Actuator::new(crate::spec::ModelSpec::parse("amp+linear").unwrap(), &p).unwrap();
+        let mut st = m.rest_state();
+        for n in 0..len {
+            let o = m.step(&mut st, 1e4f32.copysign(h[len - 1 - n])).unwrap();
+            assert!(o.strain.is_finite() && o.displacement_m.is_finite(), "sample {n}: {o:?}");
+        }
     }
 }

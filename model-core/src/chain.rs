@@ -13,7 +13,7 @@
 use crate::amplifier::{AmpState, Amplifier, FirstOrderAmpParams, SecondOrderAmp, SecondOrderAmpParams};
 use crate::effects::{Effect, MagnetizationLaw};
 use crate::error::{check, positive, ParamError};
-use crate::field::{CoilField, FirstOrderLag};
+use crate::field::{CoilField, FirstOrderLag, LagState};
 use crate::magnetization::{
     Anhysteretic, AnhystereticParams, JaParams, JaState, JilesAtherton, LinearMagnetization, Preisach,
     PreisachParams, PreisachState, ValidPreisachParams,
@@ -30,8 +30,8 @@ pub const MAX_DELAY_SAMPLES: usize = 64;
 /// a drive signal, and would only push the models towards overflow.
 pub const MAX_INPUT: f32 = 1.0e4;
 
-/// Shortest sample period accepted [s] (10 MHz): below it the discretisations' exponentials of
-/// −dt/τ round to 1 and a recording would need more samples than fit in memory.
+/// Shortest sample period accepted [s] (10 MHz): below it a recording would need more samples
+/// than fit in memory. (Each lag checks its own dt/τ: [`crate::field::MAX_TAU_IN_SAMPLES`].)
 pub const DT_MIN_S: f32 = 1.0e-7;
 /// Longest sample period accepted [s] (0.1 Hz).
 pub const DT_MAX_S: f32 = 10.0;
@@ -41,23 +41,46 @@ pub const DT_MAX_S: f32 = 10.0;
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct ModalMechanics {
-    /// Natural frequency f_n [Hz].
+    /// Natural frequency f_n [Hz]; at a sample period, high enough that the f32 step decays
+    /// ([`ModalMechanics::discretised`]).
     pub natural_frequency_hz: f32,
-    /// Damping ratio ζ.
+    /// Damping ratio ζ, at least [`ModalMechanics::MIN_DAMPING_RATIO`].
     pub damping_ratio: f32,
 }
 
 impl ModalMechanics {
+    /// Smallest damping ratio accepted (a resonance gain of 500; real actuators' modes: 0.01 and
+    /// up). Undamped, the step's f32 transition matrix set the amplitude: a free oscillation grew
+    /// 2.48× over 1e8 samples; and the states stay below 500 times the largest free
+    /// displacement the other bounds allow, so finite.
+    pub const MIN_DAMPING_RATIO: f32 = 1e-3;
+
     /// The unit-stiffness mass-spring-damper with this f_n and ζ (static gain 1).
     pub fn unit_gain(&self) -> Result<MassSpringDamper, ParamError> {
         let fn_hz = positive("mech.natural_frequency_hz", self.natural_frequency_hz)?;
-        let zeta = check("mech.damping_ratio", self.damping_ratio, |z| z >= 0.0, ">= 0")?;
+        let zeta =
+            check("mech.damping_ratio", self.damping_ratio, |z| z >= Self::MIN_DAMPING_RATIO, ">= 1e-3")?;
         let w = 2.0 * core::f32::consts::PI * fn_hz;
         Ok(MassSpringDamper {
             mass_kg: 1.0 / (w * w),
             damping_n_s_per_m: 2.0 * zeta / w,
             stiffness_n_per_m: 1.0,
         })
+    }
+
+    /// [`Self::unit_gain`] discretised at `dt_s`, refused by f_n when a free oscillation would
+    /// not decay in f32: it decays by ζ 2π f_n dt_s per sample, and for a mode far below the
+    /// sample rate (f_n dt_s ≲ 1e-4 at the smallest ζ) the rounding of the step's coefficients
+    /// is as large.
+    pub fn discretised(&self, dt_s: f32) -> Result<SecondOrderZoh, ParamError> {
+        let zoh = SecondOrderZoh::new(self.unit_gain()?, dt_s)?;
+        if !zoh.decays() {
+            return Err(ParamError::OutOfRange(
+                "mech.natural_frequency_hz",
+                "high enough against the sample rate that the f32 step decays (damping_ratio * 2 pi * f_n * dt_s above about 1e-7)",
+            ));
+        }
+        Ok(zoh)
     }
 }
 
@@ -90,7 +113,8 @@ pub struct ActuatorParams {
     pub preisach: PreisachParams,
     /// Quadratic magnetostriction.
     pub magnetostriction: QuadraticParams,
-    /// Active rod length [m]: free displacement = λ L.
+    /// Active rod length [m]: free displacement = λ L. In [1e-4, 10] m: a 0.1 mm rod is
+    /// already a film (the inverse divides the displacement by it).
     pub rod_length_m: f32,
     /// `mechanical_dynamics`.
     pub mech: ModalMechanics,
@@ -208,17 +232,17 @@ pub struct ActuatorState {
     /// Coil current [A] and the amplifier's internal state.
     pub amp: AmpState,
     /// Field in the rod after the eddy lag [A/m].
-    pub rod_field_a_per_m: f32,
+    pub rod_field_a_per_m: LagState,
     /// J–A state (unused by the other magnetization models).
     pub ja: JaState,
     /// Preisach memory (unused by the other magnetization models).
     pub preisach: PreisachState,
     /// Slow magnetization of the aftereffect [A/m].
-    pub m_slow_a_per_m: f32,
+    pub m_slow_a_per_m: LagState,
     /// Coil temperature rise [°C] (what a thermometer on the winding reads).
-    pub temperature_rise_c: f32,
+    pub temperature_rise_c: LagState,
     /// The rod's temperature rise [°C] (behind the coil's by `thermal.rod_tau_s`).
-    pub rod_temperature_rise_c: f32,
+    pub rod_temperature_rise_c: LagState,
     /// Mechanics.
     pub mech: MechState,
     /// Sensor delay line [m].
@@ -228,8 +252,8 @@ pub struct ActuatorState {
 /// State of [`Actuator::thermal_tail_step`] (the coil-heating share of the displacement).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ThermalTailState {
-    temperature_rise_c: f32,
-    rod_temperature_rise_c: f32,
+    temperature_rise_c: LagState,
+    rod_temperature_rise_c: LagState,
     mech: MechState,
     delay: DelayLine<MAX_DELAY_SAMPLES>,
 }
@@ -307,12 +331,9 @@ impl Actuator {
             None
         };
         let magnetostriction = QuadraticMagnetostriction::new(p.magnetostriction)?;
-        let rod_length_m = check("rod_length_m", p.rod_length_m, |l| l > 0.0 && l <= 10.0, "in (0, 10] m")?;
-        let mech = if spec.has(Effect::MechanicalDynamics) {
-            Some(SecondOrderZoh::new(p.mech.unit_gain()?, dt)?)
-        } else {
-            None
-        };
+        let rod_length_m =
+            check("rod_length_m", p.rod_length_m, |l| (1e-4..=10.0).contains(&l), "in [1e-4, 10] m")?;
+        let mech = if spec.has(Effect::MechanicalDynamics) { Some(p.mech.discretised(dt)?) } else { None };
         let thermal =
             if spec.has(Effect::ThermalDrift) { Some(ThermalDrift::new(p.thermal, dt)?) } else { None };
         let delay_samples = if spec.has(Effect::SensorDelay) {
@@ -405,13 +426,13 @@ impl Actuator {
         let delay = DelayLine::clamped(self.delay_samples, y0); // checked ≤ capacity in `new`
         ActuatorState {
             amp: AmpState::default(),
-            rod_field_a_per_m: h0,
+            rod_field_a_per_m: LagState::at(h0),
             ja,
             preisach,
-            m_slow_a_per_m: m0,
-            temperature_rise_c: 0.0,
-            rod_temperature_rise_c: 0.0,
-            mech: MechState { displacement_m: y0, velocity_m_per_s: 0.0 },
+            m_slow_a_per_m: LagState::at(m0),
+            temperature_rise_c: LagState::default(),
+            rod_temperature_rise_c: LagState::default(),
+            mech: MechState { displacement_m: y0, velocity_m_per_rad: 0.0 },
             delay,
         }
     }
@@ -419,8 +440,8 @@ impl Actuator {
     /// The start of [`Actuator::thermal_tail_step`]: cold coil, mechanics and delay line at 0.
     pub fn thermal_tail_rest(&self) -> ThermalTailState {
         ThermalTailState {
-            temperature_rise_c: 0.0,
-            rod_temperature_rise_c: 0.0,
+            temperature_rise_c: LagState::default(),
+            rod_temperature_rise_c: LagState::default(),
             mech: MechState::default(),
             delay: DelayLine::clamped(self.delay_samples, 0.0),
         }
@@ -492,7 +513,7 @@ impl Actuator {
         let h = match &self.eddy {
             Some(lag) => lag.step(&mut s.rod_field_a_per_m, h_coil),
             None => {
-                s.rod_field_a_per_m = h_coil;
+                s.rod_field_a_per_m = LagState::at(h_coil);
                 h_coil
             }
         };

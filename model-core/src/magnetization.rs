@@ -7,7 +7,7 @@ mod preisach;
 
 pub use anhysteretic::{Anhysteretic, AnhystereticParams};
 pub use jiles_atherton::{JaParams, JaState, JaVariant, JilesAtherton, MAX_SUBSTEPS};
-pub use linear::{LinearFit, LinearMagnetization};
+pub use linear::LinearMagnetization;
 pub(crate) use preisach::ValidPreisachParams;
 pub use preisach::{
     EverettTable, InverseCache, Preisach, PreisachParams, PreisachState, PREISACH_LEVELS, PREISACH_MEMORY,

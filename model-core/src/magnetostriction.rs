@@ -4,7 +4,9 @@
 
 use crate::error::{check, non_negative, positive, saturation, ParamError};
 
-/// Static mechanical preload on the rod (002 eq. 3–4).
+/// Static mechanical preload on the rod (002 eq. 3–4). It must leave at least 1 % of the free
+/// strain ([`Preload::MIN_FACTOR`]): at F = F_s + F_max it cancels it, k_λ is 0 and the inverse
+/// divides by it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
@@ -18,6 +20,10 @@ pub struct Preload {
 }
 
 impl Preload {
+    /// Smallest strain factor accepted: a preload that leaves less of the strain is a clamped
+    /// rod, not an actuator.
+    pub const MIN_FACTOR: f32 = 0.01;
+
     /// The strain factor (1 + ½ tanh(2F/F_s)), times (1 − (F − F_s)/F_max) above F_s.
     pub fn factor(&self) -> Result<f32, ParamError> {
         let f = non_negative("magnetostriction.preload.force_n", self.force_n)?;
@@ -25,7 +31,12 @@ impl Preload {
         let fmax = positive("magnetostriction.preload.max_force_n", self.max_force_n)?;
         let base = 1.0 + 0.5 * libm::tanhf(2.0 * f / fs);
         let factor = if f <= fs { base } else { (1.0 - (f - fs) / fmax) * base };
-        check("magnetostriction.preload.force_n", factor, |v| v >= 0.0, "below F_s + F_max")
+        check(
+            "magnetostriction.preload.force_n",
+            factor,
+            |v| v >= Self::MIN_FACTOR,
+            "below F_s + 0.99 F_max (the preload leaves at least 1 % of the strain)",
+        )
     }
 }
 
@@ -34,7 +45,9 @@ impl Preload {
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct QuadraticParams {
-    /// Saturation magnetostriction λ_s (dimensionless, ~1e-3 for Terfenol-D).
+    /// Saturation magnetostriction λ_s (dimensionless, ~1e-3 for Terfenol-D), in [1e-9, 1]: the
+    /// floor is Terfenol-D's strain with displacements in m read as µm (nickel's, among the
+    /// weakest, is 3e-5); below it k_λ loses its digits and the inverse overflows.
     pub lambda_s: f32,
     /// Saturation magnetization M_s [A/m] the strain is normalised by.
     pub ms_a_per_m: f32,
@@ -60,8 +73,8 @@ impl QuadraticMagnetostriction {
         check(
             "magnetostriction.lambda_s",
             p.lambda_s,
-            |v| v > 0.0 && v <= 1.0,
-            "in (0, 1] (a strain, not ppm)",
+            |v| (1e-9..=1.0).contains(&v),
+            "in [1e-9, 1] (a strain, not ppm)",
         )?;
         let ms = saturation("magnetostriction.ms_a_per_m", p.ms_a_per_m)?;
         check("magnetostriction.bias_m_a_per_m", p.bias_m_a_per_m, |b| b.abs() < ms, "|M_b| < M_s")?;
@@ -116,6 +129,32 @@ mod tests {
         let lam = q.strain(m);
         assert!((lam - 1.5 * 1.2e-3 / 7.65e5f32.powi(2) * (m * m - 2.5e5f32.powi(2))).abs() < 1e-9);
         assert!((q.magnetization_for(lam, 1.0) - m).abs() < 1.0);
+    }
+
+    /// The divisors of the inverse have physical floors: a preload that cancels the strain
+    /// (F = F_s + F_max: k_λ = 0, the compensator's state NaN) or a subnormal λ_s (1e-40: k_λ
+    /// = 0) is refused by name; at the floors M for a strain is finite.
+    #[test]
+    fn a_strain_scale_that_vanishes_is_refused_by_name() {
+        let p = QuadraticParams { lambda_s: 1e-3, ms_a_per_m: 6e5, bias_m_a_per_m: 0.0, preload: None };
+        let cancelling = Preload { force_n: 11_000.0, optimal_force_n: 1000.0, max_force_n: 10_000.0 };
+        for bad in
+            [QuadraticParams { preload: Some(cancelling), ..p }, QuadraticParams { lambda_s: 1e-40, ..p }]
+        {
+            let name = QuadraticMagnetostriction::new(bad).err().map(|e| e.name());
+            assert!(
+                matches!(name, Some("magnetostriction.preload.force_n" | "magnetostriction.lambda_s")),
+                "{bad:?}"
+            );
+        }
+        let weakest = Preload { force_n: 10_900.0, ..cancelling };
+        for q in [
+            QuadraticParams { preload: Some(weakest), ..p },
+            QuadraticParams { lambda_s: 1e-9, ms_a_per_m: 1e7, ..p },
+        ] {
+            let q = QuadraticMagnetostriction::new(q).unwrap();
+            assert!(q.k_lambda() > 0.0 && q.magnetization_for(1e-2, 1.0).is_finite(), "{q:?}");
+        }
     }
 
     #[test]

@@ -4,7 +4,10 @@
 //! Discretised exactly for a piecewise-constant input (zero-order hold, 001 eq. 16–23):
 //! `x[n+1] = Φ x[n] + Γ F[n]` with `Φ = e^{AT}`, `Γ = ∫₀ᵀ e^{As} ds B`. Φ and Γ are computed once,
 //! in f64, in a closed form valid for every damping regime (under-, critically and over-damped);
-//! the per-sample step is four multiply-adds in f32.
+//! the per-sample step is four multiply-adds in f32. The state is x = [y, ẏ/ω_n]: with the
+//! velocity over the natural angular frequency every entry of Φ is of order one and the state no
+//! larger than the displacement's swing (ẏ in m/s is ω_n times it: a stiff, fast mode driven
+//! hard overflowed f32 at the first sample while its displacement was finite).
 
 use crate::error::{positive, ParamError};
 
@@ -40,18 +43,22 @@ impl MassSpringDamper {
 /// Exact ZOH discretisation of a mass-spring-damper at a fixed sample period (immutable).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SecondOrderZoh {
+    /// Φ and Γ for the state [y, ẏ/ω_n].
     phi: [[f32; 2]; 2],
     gamma: [f32; 2],
+    /// ω_n [rad/s].
+    omega_n: f32,
     physical: MassSpringDamper,
 }
 
-/// Displacement y [m] and velocity ẏ [m/s] of a [`SecondOrderZoh`] (mutable, stepped per sample).
+/// Displacement and velocity of a [`SecondOrderZoh`] (mutable, stepped per sample).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct MechState {
     /// Displacement y [m].
     pub displacement_m: f32,
-    /// Velocity ẏ [m/s].
-    pub velocity_m_per_s: f32,
+    /// Velocity over the natural angular frequency, ẏ/ω_n [m/rad]: in these units as large as
+    /// the displacement's swing ([`SecondOrderZoh::velocity_m_per_s`] gives ẏ).
+    pub velocity_m_per_rad: f32,
 }
 
 impl SecondOrderZoh {
@@ -62,12 +69,41 @@ impl SecondOrderZoh {
         let k = positive("mech.stiffness_n_per_m", p.stiffness_n_per_m)? as f64;
         let t = positive("dt_s", dt_s)? as f64;
         let (phi, gamma) = zoh_second_order(m, c, k, t);
+        // To the state [y, ẏ/ω_n]: Φ' = D Φ D⁻¹, Γ' = D Γ with D = diag(1, 1/ω_n).
+        let w = libm::sqrt(k / m);
+        let phi = [[phi[0][0], phi[0][1] * w], [phi[1][0] / w, phi[1][1]]];
+        let gamma = [gamma[0], gamma[1] / w];
         let all_finite = phi.iter().flatten().chain(gamma.iter()).all(|v| v.is_finite());
         if !all_finite {
             // Only reachable for absurd combinations (e.g. ω_n T ~ 1e300); say which knob.
             return Err(ParamError::OutOfRange("mech", "such that ω_n·dt and ζ·ω_n·dt are moderate"));
         }
-        Ok(Self { phi: phi.map(|row| row.map(|v| v as f32)), gamma: gamma.map(|v| v as f32), physical: p })
+        Ok(Self {
+            phi: phi.map(|row| row.map(|v| v as f32)),
+            gamma: gamma.map(|v| v as f32),
+            omega_n: w as f32,
+            physical: p,
+        })
+    }
+
+    /// Whether a free oscillation decays as the step runs in f32: the spectral radius of Φ as
+    /// rounded to f32 below 1. A mode very slow against the sample rate decays by ζ ω_n T per
+    /// sample, and below about 1e-7 the rounding of Φ's entries can outweigh that.
+    pub fn decays(&self) -> bool {
+        let [[a, b], [c, d]] = self.phi.map(|row| row.map(f64::from));
+        let (trace, det) = (a + d, a * d - b * c);
+        let disc = trace * trace - 4.0 * det;
+        // Complex pair: |λ|² = det; real pair: the larger |λ|.
+        if disc < 0.0 {
+            det < 1.0
+        } else {
+            0.5 * (libm::fabs(trace) + libm::sqrt(disc)) < 1.0
+        }
+    }
+
+    /// ẏ [m/s] of a state.
+    pub fn velocity_m_per_s(&self, s: &MechState) -> f32 {
+        self.omega_n * s.velocity_m_per_rad
     }
 
     /// The physical parameters this discretisation was built from.
@@ -78,9 +114,9 @@ impl SecondOrderZoh {
     /// One sample with force `force_n` held over the period; returns the new displacement [m].
     #[inline]
     pub fn step(&self, s: &mut MechState, force_n: f32) -> f32 {
-        let (y, v) = (s.displacement_m, s.velocity_m_per_s);
+        let (y, v) = (s.displacement_m, s.velocity_m_per_rad);
         s.displacement_m = self.phi[0][0] * y + self.phi[0][1] * v + self.gamma[0] * force_n;
-        s.velocity_m_per_s = self.phi[1][0] * y + self.phi[1][1] * v + self.gamma[1] * force_n;
+        s.velocity_m_per_rad = self.phi[1][0] * y + self.phi[1][1] * v + self.gamma[1] * force_n;
         s.displacement_m
     }
 
@@ -89,7 +125,7 @@ impl SecondOrderZoh {
     #[inline]
     pub fn acceleration(&self, s: &MechState, force_n: f32) -> f32 {
         let p = &self.physical;
-        (force_n - p.damping_n_s_per_m * s.velocity_m_per_s - p.stiffness_n_per_m * s.displacement_m)
+        (force_n - p.damping_n_s_per_m * self.velocity_m_per_s(s) - p.stiffness_n_per_m * s.displacement_m)
             / p.mass_kg
     }
 }

@@ -2,7 +2,7 @@
 //! expansion of the rod, and the displacement sensor's transport delay.
 
 use crate::error::{check, ParamError};
-use crate::field::FirstOrderLag;
+use crate::field::{FirstOrderLag, LagState};
 
 /// Magnetic aftereffect: a fraction w of every magnetization change arrives with a slow time
 /// constant τ_a (magnetic viscosity): M_out = (1 − w) M + w M_slow, M_slow' = (M − M_slow)/τ_a.
@@ -32,17 +32,19 @@ impl Aftereffect {
 
     /// One sample: returns the observed magnetization.
     #[inline]
-    pub fn step(&self, m_slow: &mut f32, m: f32) -> f32 {
+    pub fn step(&self, m_slow: &mut LagState, m: f32) -> f32 {
         let slow = self.lag.step(m_slow, m);
         (1.0 - self.fraction) * m + self.fraction * slow
     }
 
     /// The instantaneous magnetization that makes the observed one equal `m_out` this sample.
     #[inline]
-    pub fn magnetization_for(&self, m_slow: f32, m_out: f32) -> f32 {
-        // m_out = (1−w) m + w (p s + (1−p) m)  ⇒  m = (m_out − w p s)/(1 − w p)
-        let wp = self.fraction * self.lag.pole();
-        (m_out - wp * m_slow) / (1.0 - wp)
+    pub fn magnetization_for(&self, m_slow: &LagState, m_out: f32) -> f32 {
+        // m_out = (1 − w) m + w (s + f (m − s)) = s + ((1 − w) + w f)(m − s): of a change of M,
+        // the share (1 − w) + w f ≥ 1 − w > 0 shows in the same sample.
+        let f = self.lag.fraction_per_sample();
+        let s = m_slow.value();
+        s + (m_out - s) / ((1.0 - self.fraction) + self.fraction * f)
     }
 }
 
@@ -61,7 +63,7 @@ pub struct ThermalParams {
     pub thermal_resistance_c_per_w: f32,
     /// Thermal time constant τ_th [s].
     pub tau_s: f32,
-    /// Rod length L [m].
+    /// Rod length L [m], in [1e-4, 10] (as the chain's).
     pub rod_length_m: f32,
     /// Expansion coefficient α_T [1/°C].
     pub expansion_per_c: f32,
@@ -102,7 +104,8 @@ impl ThermalDrift {
             |r| (0.0..=1e4).contains(&r),
             "in [0, 1e4] °C/W",
         )?;
-        let l = check("thermal.rod_length_m", p.rod_length_m, |l| l > 0.0 && l <= 10.0, "in (0, 10] m")?;
+        let l =
+            check("thermal.rod_length_m", p.rod_length_m, |l| (1e-4..=10.0).contains(&l), "in [1e-4, 10] m")?;
         let a = check(
             "thermal.expansion_per_c",
             p.expansion_per_c,
@@ -126,13 +129,16 @@ impl ThermalDrift {
     /// One sample at coil current `i`: advances the coil's rise θ and the rod's θ_r, returns
     /// the thermal elongation [m].
     #[inline]
-    pub fn step(&self, theta_c: &mut f32, rod_theta_c: &mut f32, current_a: f32) -> f32 {
+    pub fn step(&self, theta_c: &mut LagState, rod_theta_c: &mut LagState, current_a: f32) -> f32 {
         let coil = self.lag.step(theta_c, current_a * current_a);
-        *rod_theta_c = match &self.rod_lag {
+        let rod = match &self.rod_lag {
             Some(lag) => lag.step(rod_theta_c, coil),
-            None => coil,
+            None => {
+                *rod_theta_c = *theta_c;
+                coil
+            }
         };
-        *rod_theta_c * self.metres_per_c
+        rod * self.metres_per_c
     }
 
     /// Elongation [m] for a rod temperature rise θ_r.
@@ -235,14 +241,14 @@ mod tests {
     #[test]
     fn aftereffect_creeps_and_inverts() {
         let ae = Aftereffect::new(AftereffectParams { fraction: 0.2, tau_s: 0.05 }, 1e-4).unwrap();
-        let mut slow = 0.0;
+        let mut slow = LagState::default();
         let first = ae.step(&mut slow, 1000.0);
         assert!((first - 800.0).abs() < 1.0, "{first}");
         for _ in 0..20_000 {
             ae.step(&mut slow, 1000.0);
         }
         assert!((ae.step(&mut slow, 1000.0) - 1000.0).abs() < 0.1);
-        let m = ae.magnetization_for(slow, 1200.0);
+        let m = ae.magnetization_for(&slow, 1200.0);
         assert!((ae.step(&mut slow, m) - 1200.0).abs() < 0.05);
     }
 
@@ -261,11 +267,12 @@ mod tests {
             1e-3,
         )
         .unwrap();
-        let (mut theta, mut rod) = (0.0, 0.0);
+        let (mut theta, mut rod) = (LagState::default(), LagState::default());
         let mut y = 0.0;
         for _ in 0..20_000 {
             y = th.step(&mut theta, &mut rod, 2.0);
         }
+        let theta = theta.value();
         // θ(20 s) = 10 °C·(1 − e^{−1/3}) = 2.835 °C → 3.66 µm.
         assert!((theta - 2.835).abs() < 0.01 && (y * 1e6 - 3.657).abs() < 0.01, "{theta} °C, {} µm", y * 1e6);
     }
@@ -285,11 +292,12 @@ mod tests {
             rod_tau_s: tau_r as f32,
         };
         let th = ThermalDrift::new(p, dt).unwrap();
-        let (mut coil, mut rod, mut y) = (0.0, 0.0, 0.0);
+        let (mut coil, mut rod, mut y) = (LagState::default(), LagState::default(), 0.0);
         let steps = 2_000; // 20 s
         for _ in 0..steps {
             y = th.step(&mut coil, &mut rod, 2.0);
         }
+        let (coil, rod) = (coil.value(), rod.value());
         let t = steps as f64 * dt as f64;
         let g = 10.0;
         let exact_coil = g * (1.0 - (-t / tau).exp());
@@ -301,5 +309,11 @@ mod tests {
         let bad = ThermalParams { rod_tau_s: -1.0, ..p };
         assert!(ThermalDrift::new(bad, dt).is_err());
         assert!(ThermalDrift::new(ThermalParams { rod_tau_s: f32::NAN, ..p }, dt).is_err());
+        // 1e5 s is a rod's lag at 10 kHz, not at 10 MHz (1e12 samples: it would not move in f32).
+        assert!(ThermalDrift::new(ThermalParams { rod_tau_s: 1e5, ..p }, 1e-4).is_ok());
+        assert!(matches!(
+            ThermalDrift::new(ThermalParams { rod_tau_s: 1e5, ..p }, 1e-7),
+            Err(ParamError::OutOfRange("thermal.rod_tau_s", _))
+        ));
     }
 }

@@ -274,8 +274,7 @@ impl Controller {
     /// 4 KB, and every layer that returned it by value kept a copy on the stack of a `load`
     /// command, the deepest path.
     fn install_compensator(&mut self, spec: ModelSpec, params: &ActuatorParams) -> Result<(), ParamError> {
-        let tick_s = self.cfg.current_loop.tick_s;
-        build_compensator_into(&mut self.compensator, &mut self.model_rest_m, spec, params, tick_s)
+        build_compensator_into(&mut self.compensator, &mut self.model_rest_m, spec, params, &self.cfg)
     }
 
     /// A controller whose parameter set could not even be read: PARAMETERS_INVALID latched, the
@@ -585,18 +584,21 @@ pub fn compensator_model(
     Actuator::new(spec.for_compensator(), &p)
 }
 
-/// The compensator for `spec` with `params` at `tick_s`, moved into `slot` (left as it was when
-/// the set is refused), and the model's rest displacement into `rest_m`. The one build path of
-/// the controller and of a staged load: not inlined, so that its code exists once.
+/// The compensator for `spec` with `params` at `cfg`'s tick, moved into `slot` (left as it was
+/// when the set is refused), and the model's rest displacement into `rest_m`. It asks for no
+/// more than `cfg.max_current_a`, the most the controller applies, so its states never wind up
+/// beyond what the coil gets. The one build path of the controller and of a staged load: not
+/// inlined, so that its code exists once.
 #[inline(never)]
 fn build_compensator_into(
     slot: &mut Option<(Compensator, CompensatorState)>,
     rest_m: &mut f32,
     spec: ModelSpec,
     params: &ActuatorParams,
-    tick_s: f32,
+    cfg: &ControlConfig,
 ) -> Result<(), ParamError> {
-    let c = Compensator::new(compensator_model(spec, params, tick_s)?);
+    let model = compensator_model(spec, params, cfg.current_loop.tick_s)?;
+    let c = Compensator::with_current_limit(model, cfg.max_current_a)?;
     *rest_m = c.model().rest_state().mech.displacement_m;
     let s = c.rest_state();
     *slot = Some((c, s));
@@ -628,10 +630,8 @@ impl StagedParameters {
 
     /// [`StagedParameters::build`] in place (no second copy of the compensator on the stack).
     pub fn rebuild(&mut self, cfg: &ControlConfig, spec: ModelSpec, params: &ActuatorParams) {
-        let tick_s = cfg.current_loop.tick_s;
         self.valid =
-            build_compensator_into(&mut self.compensator, &mut self.model_rest_m, spec, params, tick_s)
-                .is_ok();
+            build_compensator_into(&mut self.compensator, &mut self.model_rest_m, spec, params, cfg).is_ok();
     }
 
     /// Whether the set validated (and has not been installed yet).

@@ -47,14 +47,16 @@ impl Anhysteretic {
         self.p.ms_a_per_m / self.p.a_a_per_m * langevin_slope(h / self.p.a_a_per_m)
     }
 
-    /// H(M): safeguarded Newton on the monotone Langevin function. |M| is limited to
-    /// (1 − 1e-4) M_s, beyond which the field would be unbounded.
+    /// H(M): safeguarded Newton on the monotone Langevin function, from Cohen's approximation
+    /// L⁻¹(t) ≈ t (3 − t²)/(1 − t²) (within 5 % everywhere, exact in both limits): from 3t,
+    /// twelve steps left M 1.4e-4 short of 0.9999 M_s. |M| is limited to (1 − 1e-4) M_s, beyond
+    /// which the field would be unbounded.
     pub fn field_for(&self, m: f32) -> f32 {
         let y = (m / self.p.ms_a_per_m).clamp(-0.9999, 0.9999);
         let t = y.abs();
         // L is increasing; the root lies in [0, 1/(1 − t)] because L(x) ≥ 1 − 1/x.
         let (mut lo, mut hi) = (0.0_f32, 1.0 / (1.0 - t));
-        let mut x = 3.0 * t; // L(x) ≈ x/3 near 0
+        let mut x = t * (3.0 - t * t) / (1.0 - t * t);
         for _ in 0..12 {
             let f = langevin(x) - t;
             if f == 0.0 {
@@ -76,6 +78,20 @@ impl Anhysteretic {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Up to the clamp the inverse meets its target to 2e-5 M_s (M ≈ M_s − M_s a/H there, so
+    /// H carries the target's digits); from 3t the twelve Newton steps stopped at 0.99986 for
+    /// 0.9999.
+    #[test]
+    fn the_inverse_converges_next_to_saturation() {
+        let an = Anhysteretic::new(AnhystereticParams { ms_a_per_m: 6e5, a_a_per_m: 9000.0 }).unwrap();
+        for target in [0.5f32, 0.9, 0.99, 0.999, 0.9995, 0.9998, 0.9999] {
+            for sign in [1.0, -1.0] {
+                let back = an.magnetization(an.field_for(sign * target * 6e5)) / 6e5;
+                assert!((back - sign * target).abs() < 2e-5, "target {}: M/M_s back {back}", sign * target);
+            }
+        }
+    }
 
     #[test]
     fn inverse_round_trips_over_the_curve() {

@@ -410,6 +410,9 @@ impl JilesAtherton {
     fn close_with_irreversible(&self, s: &mut JaState, dh: f32, m_predicted: f32) {
         let p = &self.p;
         s.h_a_per_m += dh;
+        // Within ±M_s as M itself: a huge field step made the prediction infinite, and the mean
+        // field α·∞ NaN for α = 0 (the wrong sign for α < 0).
+        let m_predicted = within(m_predicted, p.ms_a_per_m);
         let (l, dl) = langevin_with_slope((s.h_a_per_m + p.alpha * m_predicted) * self.inv_a);
         s.m_a_per_m = within(self.c_ms * l + self.one_minus_c * s.m_irr_a_per_m, p.ms_a_per_m);
         s.langevin = l;
@@ -419,11 +422,19 @@ impl JilesAtherton {
     /// Moves the applied field to `h` and returns M [A/m]. A non-finite `h` holds the state.
     #[inline]
     pub fn step(&self, s: &mut JaState, h: f32) -> f32 {
+        self.step_in_at_most(s, h, MAX_SUBSTEPS)
+    }
+
+    /// [`Self::step`] in at most `max_substeps` (≥ 1) sub-steps, coarser ones when the field
+    /// change needs more: for a caller with less time per sample (the inverse compensator's
+    /// trial steps).
+    #[inline]
+    pub fn step_in_at_most(&self, s: &mut JaState, h: f32, max_substeps: u32) -> f32 {
         let dh_total = h - s.h_a_per_m;
         if !dh_total.is_finite() {
             return s.m_a_per_m;
         }
-        let n = self.substeps_for(dh_total);
+        let n = self.substeps_for(dh_total).min(max_substeps).max(1);
         let dh = if n == 1 { dh_total } else { dh_total / n as f32 };
         // The form is chosen once per sample, not once per sub-step.
         match self.p.variant {
@@ -450,6 +461,45 @@ mod tests {
         assert_eq!(ja.substeps_for(f32::MAX), MAX_SUBSTEPS);
         assert_eq!(ja.substeps_for(1e12), MAX_SUBSTEPS);
         assert_eq!(ja.substeps_for(0.0), 1);
+    }
+
+    /// A huge but finite field (3e38 A/m, the host API accepts it) gives a finite M of its
+    /// sign: the predicted M overflowed, and with α = 0 the mean field was 0·∞ = NaN, with
+    /// α < 0 −∞ (M of the wrong sign).
+    #[test]
+    fn a_huge_finite_field_saturates_the_rod() {
+        for (alpha, h) in [(0.0, 3.0e38), (-0.5, 1e36), (0.5, -3.0e38)] {
+            let p = JaParams {
+                a_a_per_m: 1.0,
+                k_a_per_m: 1.0,
+                ms_a_per_m: 1e7,
+                c: 0.0,
+                alpha,
+                ..JaParams::TSMA_ROD1_002
+            };
+            for variant in JaVariant::ALL {
+                let ja = JilesAtherton::new(JaParams { variant, ..p }).unwrap();
+                let m = ja.step(&mut JaState::default(), h);
+                assert!(
+                    m.is_finite() && m.signum() == h.signum(),
+                    "{variant}, α = {alpha}: M = {m} at h = {h}"
+                );
+            }
+        }
+    }
+
+    /// A step held to fewer sub-steps than its field change asks for takes exactly that many,
+    /// coarser (the inverse compensator's time budget per sample rests on it).
+    #[test]
+    fn a_step_held_to_n_sub_steps_takes_n() {
+        let ja = JilesAtherton::new(JaParams::TSMA_ROD1_002).unwrap();
+        let dh = 40.0 * ja.max_substep_a_per_m();
+        let (mut capped, mut by_hand) = (JaState::default(), JaState::default());
+        let m = ja.step_in_at_most(&mut capped, dh, 8);
+        (0..8).for_each(|_| ja.substep(&mut by_hand, dh / 8.0));
+        assert_eq!((m, capped.h_a_per_m), (by_hand.m_a_per_m, dh));
+        assert_eq!(capped.m_irr_a_per_m, by_hand.m_irr_a_per_m);
+        assert_eq!(ja.step_in_at_most(&mut JaState::default(), dh, 64), ja.step(&mut JaState::default(), dh));
     }
 
     /// Found by the model_step fuzz target: a subnormal k made 1/k infinite and M NaN. The

@@ -42,7 +42,7 @@
 // Triangular index loops over the Everett table read clearer than iterator chains.
 #![allow(clippy::needless_range_loop)]
 
-use crate::error::{field_scale, positive, saturation, ParamError};
+use crate::error::{field_scale, saturation, ParamError, MS_MAX, MS_MIN};
 
 /// Field levels of the Everett grid (the relay plane has LEVELS·(LEVELS−1)/2 cells).
 pub const PREISACH_LEVELS: usize = 32;
@@ -99,11 +99,14 @@ pub struct EverettTable {
 }
 
 impl EverettTable {
-    /// Validates a measured or fitted table: finite, zero on the diagonal, positive total, and
-    /// non-negative relay weights (every mixed difference ≥ 0, i.e. E grows with α and falls
-    /// with β).
+    /// Validates a measured or fitted table: H_max in [1, 1e7] A/m (as every characteristic
+    /// field: the grid's scale is its inverse), finite entries, zero on the diagonal, a total
+    /// E(H_max, −H_max) (the saturation magnetization) in [1e3, 1e7] A/m, and non-negative relay
+    /// weights (every mixed difference ≥ 0, i.e. E grows with α and falls with β), so that every
+    /// entry lies between 0 and the total. A subnormal H_max gave NaN, a total near f32::MAX an
+    /// infinite output.
     pub fn new(h_max_a_per_m: f32, e: [[f32; PREISACH_LEVELS]; PREISACH_LEVELS]) -> Result<Self, ParamError> {
-        let h_max = positive("preisach.h_max_a_per_m", h_max_a_per_m)?;
+        let h_max = field_scale("preisach.h_max_a_per_m", h_max_a_per_m)?;
         for i in 0..PREISACH_LEVELS {
             for j in 0..=i {
                 if !e[i][j].is_finite() {
@@ -112,8 +115,8 @@ impl EverettTable {
             }
         }
         let total = e[PREISACH_LEVELS - 1][0];
-        if total <= 0.0 {
-            return Err(ParamError::OutOfRange("preisach.everett", "positive at (H_max, -H_max)"));
+        if !(MS_MIN..=MS_MAX).contains(&total) {
+            return Err(ParamError::OutOfRange("preisach.everett", "in [1e3, 1e7] A/m at (H_max, -H_max)"));
         }
         let tol = 1e-5 * total;
         // E at (p, q), zero off the lower triangle.
@@ -124,8 +127,10 @@ impl EverettTable {
                 return Err(ParamError::OutOfRange("preisach.everett", "zero on the diagonal E(h, h)"));
             }
             for j in 0..i {
-                // Weight of the relay cell α ∈ [h_{i−1}, h_i], β ∈ [h_j, h_{j+1}].
-                if at(i, j) - at(i - 1, j) - at(i, j + 1) + at(i - 1, j + 1) < -tol {
+                // Weight of the relay cell α ∈ [h_{i−1}, h_i], β ∈ [h_j, h_{j+1}]; one that
+                // overflows (entries far beyond the total) or is NaN is refused too.
+                let weight = at(i, j) - at(i - 1, j) - at(i, j + 1) + at(i - 1, j + 1);
+                if !(weight.is_finite() && weight >= -tol) {
                     return Err(ParamError::OutOfRange(
                         "preisach.everett",
                         "a table with non-negative relay weights (E rising in alpha, falling in beta)",
@@ -139,16 +144,17 @@ impl EverettTable {
         Ok(Self { h_max, root, total })
     }
 
-    /// Builds the table from a density μ(α, β) ≥ 0 (any scale) and normalises the total to
-    /// `total`. Each grid cell gets the mean of μ over 4 × 4 points inside it (only those with
-    /// α ≥ β on the diagonal cells) times its area.
+    /// Builds the table over ±`h_max_a_per_m` (in [1, 1e7] A/m) from a density μ(α, β) ≥ 0 (any
+    /// scale) and normalises the total to `total` (in [1e3, 1e7] A/m). Each grid cell gets the
+    /// mean of μ over 4 × 4 points inside it (only those with α ≥ β on the diagonal cells) times
+    /// its area.
     pub fn from_density(
         h_max_a_per_m: f32,
         total: f32,
         density: impl Fn(f32, f32) -> f32,
     ) -> Result<Self, ParamError> {
-        let h_max = positive("preisach.h_max_a_per_m", h_max_a_per_m)?;
-        let total = positive("preisach.ms_a_per_m", total)?;
+        let h_max = field_scale("preisach.h_max_a_per_m", h_max_a_per_m)?;
+        let total = saturation("preisach.ms_a_per_m", total)?;
         let mut table = Self::unfilled(h_max);
         table.fill(total, density);
         if !(table.total.is_finite() && table.total > 0.0) {
@@ -604,6 +610,23 @@ impl Preisach {
         let (h, _) = self.solve_field(s, sums, m);
         sums.changed_from(self.advance(s, h));
         h
+    }
+
+    /// [`Self::field_for_with`]'s field, `s` left as it is: the inverse compensator applies
+    /// the field its current limit lets through ([`Self::move_with`]).
+    pub(crate) fn solve_with(&self, s: &PreisachState, sums: &mut InverseCache, m: f32) -> f32 {
+        self.solve_field(s, sums, m).0
+    }
+
+    /// M after a step from `s` to the finite field `h`, evaluated as the solve's trials are (two
+    /// Everett look-ups with the pair `sums`, not the whole staircase); `s` stays.
+    pub(crate) fn output_after_with(&self, s: &PreisachState, sums: &mut InverseCache, h: f32) -> f32 {
+        self.trial_output(s, sums, h).0
+    }
+
+    /// Moves `s`, and the `sums` that follow it, to the finite field `h`.
+    pub(crate) fn move_with(&self, s: &mut PreisachState, sums: &mut InverseCache, h: f32) {
+        sums.changed_from(self.advance(s, h));
     }
 
     /// The field and how many evaluations found it.
@@ -1155,6 +1178,37 @@ mod tests {
         }
         let bad = PreisachParams { reversible_field_a_per_m: Some(0.0), ..P_REV };
         assert!(Preisach::new(bad).is_err());
+    }
+
+    /// A table whose grid or output f32 cannot hold is refused by name: H_max subnormal (1e-40:
+    /// NaN), a total near f32::MAX (2e38: an infinite output), entries far beyond the total
+    /// (relay weights overflowing). At the bounds the output is finite.
+    #[test]
+    fn a_table_beyond_f32_is_refused_by_name() {
+        // E(α_i, β_j) = total ((i − j)/(L − 1))²: a valid table, zero on the diagonal.
+        let table = |total: f32| {
+            let mut e = [[0.0f32; PREISACH_LEVELS]; PREISACH_LEVELS];
+            for i in 0..PREISACH_LEVELS {
+                for j in 0..i {
+                    let d = (i - j) as f32 / (PREISACH_LEVELS - 1) as f32;
+                    e[i][j] = total * d * d;
+                }
+            }
+            e
+        };
+        let name = |h_max, e| EverettTable::new(h_max, e).err().map(|e| e.name());
+        assert_eq!(name(1e-40, table(6e5)), Some("preisach.h_max_a_per_m"));
+        assert_eq!(name(8e4, table(2e38)), Some("preisach.everett"));
+        let mut overflowing = table(6e5);
+        overflowing[20][3] = 3e38;
+        overflowing[20][4] = -3e38;
+        assert_eq!(name(8e4, overflowing), Some("preisach.everett"));
+        for (h_max, total) in [(1.0, 1e3), (1e7, 1e7)] {
+            let p = Preisach::from_table(EverettTable::new(h_max, table(total)).unwrap());
+            let mut s = p.demagnetized();
+            let m = [p.step(&mut s, 0.3 * h_max), p.step(&mut s, h_max), p.step(&mut s, -h_max)];
+            assert!(m.iter().all(|m| m.is_finite() && m.abs() <= total), "{m:?}");
+        }
     }
 
     /// The reversible part: M = (1 − ρ) M_P + ρ M_s tanh(H/h_r) along any path; right after a
