@@ -274,13 +274,7 @@ mod tests {
             );
             assert!((area - fine).abs() <= 2e-3 * area, "{p:?}: area {area}, by a 1 µs step {fine}");
         }
-        let wn = 2.0 * core::f64::consts::PI * 100.0;
-        let unit = SecondOrderAmpParams {
-            k_u: 1.0,
-            a_s: (1e6 / wn) as f32,
-            b_s2: (1.0 / (wn * wn)) as f32,
-            c_s: (200.0 / wn) as f32,
-        };
+        let unit = strong_zero_at_100_hz();
         let strong_zero = SecondOrderAmpParams { k_u: (999.0 / peak_gain(unit)) as f32, ..unit };
         assert!(strong_zero.response_area() > 1.9e3, "{}", strong_zero.response_area());
         let undamped = SecondOrderAmpParams { k_u: 2.0, a_s: 1e-8, b_s2: 1.5221e-41, c_s: 9.004e-41 };
@@ -290,6 +284,18 @@ mod tests {
         assert!(SecondOrderAmp::new(SecondOrderAmpParams::TSMA_002, 1e-4).is_ok());
     }
 
+    /// A 100 Hz amplifier with a strong zero (ζ = 100, A = 1e6/ω_n) at unit gain: its peak
+    /// gain bounds its output poorly (the response's area is twice the peak).
+    fn strong_zero_at_100_hz() -> SecondOrderAmpParams {
+        let wn = 2.0 * core::f64::consts::PI * 100.0;
+        SecondOrderAmpParams {
+            k_u: 1.0,
+            a_s: (1e6 / wn) as f32,
+            b_s2: (1.0 / (wn * wn)) as f32,
+            c_s: (200.0 / wn) as f32,
+        }
+    }
+
     /// At the bound (area 999 A/V, the strong zero above scaled down), the command that drives
     /// the current highest (±1e4 V, the signs of the time-reversed impulse response) through the
     /// chain's largest gains (1e7 turns/m, χ = 1e5, λ_s = 1 over M_s = 1e3): finite. With the
@@ -297,13 +303,7 @@ mod tests {
     #[test]
     fn at_its_output_bound_the_amplifier_keeps_the_chain_finite() {
         use crate::chain::{Actuator, ActuatorParams};
-        let wn = 2.0 * core::f64::consts::PI * 100.0;
-        let unit = SecondOrderAmpParams {
-            k_u: 1.0,
-            a_s: (1e6 / wn) as f32,
-            b_s2: (1.0 / (wn * wn)) as f32,
-            c_s: (200.0 / wn) as f32,
-        };
+        let unit = strong_zero_at_100_hz();
         let so = SecondOrderAmpParams { k_u: (999.0 / unit.response_area()) as f32, ..unit };
         let len = 20_000;
         let amp = SecondOrderAmp::new(so, 1e-4).unwrap();
