@@ -706,14 +706,17 @@ pub(crate) fn estimated_states(spec: ModelSpec, files: usize) -> usize {
 
 /// Σ_f N_eff,f ln(MSE_before,f / MSE_after,f): the Gaussian log-likelihood gain of a refit with
 /// each file's effective sample size (the baseline's).
-fn information_gain(before: &[Scored], after: &[Scored]) -> f64 {
+/// `n_eff` holds each file's effective samples of the baseline's residual (computed once by the
+/// caller, who also needs their sum for the penalty).
+fn information_gain(before: &[Scored], after: &[Scored], n_eff: &[f64]) -> f64 {
     before
         .iter()
         .zip(after)
-        .map(|(b, a)| {
+        .zip(n_eff)
+        .map(|((b, a), n)| {
             let mse =
                 |s: &Scored| s.residual.iter().map(|v| v * v).sum::<f64>() / s.residual.len().max(1) as f64;
-            effective_samples(&b.residual) * (mse(b).max(1e-300) / mse(a).max(1e-300)).ln()
+            n * (mse(b).max(1e-300) / mse(a).max(1e-300)).ln()
         })
         .sum()
 }
@@ -1096,9 +1099,10 @@ pub fn diagnose(
         // Judged on the scored files: with validation files a gain there is one the added
         // parameters could not buy by fitting (the fit files reward any flexibility that absorbs
         // model-form error, and punish a refit that stops doing so).
-        let n_eff_scored: f64 = base_score_s.iter().map(|s| effective_samples(&s.residual)).sum();
-        let delta_bic =
-            information_gain(&base_score_s, &after_score_s) - added as f64 * n_eff_scored.max(2.0).ln();
+        let n_eff_files: Vec<f64> = base_score_s.iter().map(|s| effective_samples(&s.residual)).collect();
+        let n_eff_scored: f64 = n_eff_files.iter().sum();
+        let delta_bic = information_gain(&base_score_s, &after_score_s, &n_eff_files)
+            - added as f64 * n_eff_scored.max(2.0).ln();
         let cut = error_cut(before_c, after_c);
         let evidence = format!(
             "{} explains {:.0} % of the residual variance ({}); adding it and \

@@ -149,7 +149,8 @@ impl Diagnosis {
         let score_files = if val_files.is_empty() { fit_files } else { val_files };
         let skip: Vec<usize> = score_files.iter().map(burn_in).collect();
         let before = displacement_scores(spec, &base.params, score_files, &skip)?;
-        let n_eff: f64 = before.iter().map(|s| effective_samples(&s.residual)).sum();
+        let n_eff_files: Vec<f64> = before.iter().map(|s| effective_samples(&s.residual)).collect();
+        let n_eff: f64 = n_eff_files.iter().sum();
         let base_free = (base.free.len() + estimated_states(spec, score_files.len())) as f64;
         let phase = progress::Phase::start(
             opts.progress,
@@ -178,8 +179,8 @@ impl Diagnosis {
         for (a, scored) in refits {
             let (after, time_limited, free) = scored?;
             self.time_limited |= time_limited;
-            let delta_bic =
-                information_gain(&before, &after) - (free as f64 - base_free) * n_eff.max(2.0).ln();
+            let delta_bic = information_gain(&before, &after, &n_eff_files)
+                - (free as f64 - base_free) * n_eff.max(2.0).ln();
             compared.push(Compared {
                 name: a.name,
                 spec: a.spec,
