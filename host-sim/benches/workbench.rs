@@ -9,7 +9,8 @@
 //! - a J–A fit to a 300-point magnetization loop (target ≤ 10 s);
 //! - `diagnose` on every hidden-effect case (target ≤ 60 s each);
 //! - `diagnose --model ja+mech` on 8 files of 30 000 samples, 4 fit and 4 validation, of a rig
-//!   with eddy currents (issue 13 target ≤ 30 s; `-- diagnose8` runs this part alone).
+//!   with eddy currents (issue 13 target ≤ 30 s; `-- diagnose8` runs this part alone, `-- fit4`
+//!   the `ja+mech` fit alone).
 
 use std::time::Instant;
 
@@ -41,12 +42,15 @@ fn main() {
             );
         }
     }
-    if std::env::args().any(|a| a == "plant") {
+    let only = |part: &str| std::env::args().any(|a| a == part);
+    if only("plant") {
         return; // `cargo bench -p host-sim --bench workbench -- plant`: the plant alone
     }
-    diagnose_eight_files();
-    if std::env::args().any(|a| a == "diagnose8") {
-        return;
+    if !only("fit4") {
+        diagnose_eight_files();
+        if only("diagnose8") {
+            return;
+        }
     }
 
     // Fit ja+mech on 4 files × 30 000 samples.
@@ -83,6 +87,9 @@ fn main() {
         r.evaluations,
         r.fit.mean_nrmse() * 100.0
     );
+    if only("fit4") {
+        return;
+    }
 
     // A J–A major loop of 300 points (Terfenol-D, 0.2 % noise), all five parameters.
     {
