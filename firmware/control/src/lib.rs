@@ -11,6 +11,7 @@
 
 pub mod calibration;
 pub mod command;
+pub mod crash;
 pub mod current;
 pub mod faults;
 pub mod framing;

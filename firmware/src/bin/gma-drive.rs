@@ -47,6 +47,7 @@ use firmware::drive::{
 };
 use firmware::drive_params::{MODEL_SPEC, PARAMS_POSTCARD};
 use gma_control::command::{Reply, MAX_REPLY_ENCODED};
+use gma_control::crash::{Crash, CrashRecord};
 use gma_control::telemetry::{TimedFrame, MAX_ENCODED};
 use gma_control::{Controller, ResetCause};
 use heapless::spsc::{Consumer, Producer};
@@ -98,6 +99,11 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     cortex_m::interrupt::disable();
     bridge_off();
     watchdog_start();
+    let crash = match info.location() {
+        Some(at) => Crash::panic_at(at.file(), at.line(), at.column()),
+        None => Crash::panic_at("", 0, 0),
+    };
+    crash_words::store(&CrashRecord::encode_new(crash));
     error!("gma-drive: panic: {}", defmt::Display2Format(info));
     loop {
         cortex_m::asm::nop();
@@ -113,8 +119,55 @@ extern "C" fn gma_hard_fault() -> ! {
     cortex_m::interrupt::disable();
     bridge_off();
     watchdog_start();
+    let status = firmware::fault::FaultStatus::read();
+    crash_words::store(&CrashRecord::encode_new(Crash::HardFault {
+        cfsr: status.cfsr,
+        hfsr: status.hfsr,
+        bus_fault_address: status.bus_fault_address,
+        // One frame of the deepest call chain lands within 1 KiB below the floor.
+        stack_overflow: status.is_stack_overflow(1024),
+    }));
     loop {
         cortex_m::asm::nop();
+    }
+}
+
+/// Where a crash is kept across the watchdog reset that follows it (`gma_control::crash`): the
+/// TAMP backup registers BKP0R–BKP7R (RM0440 "TAMP backup registers"), which a system reset
+/// leaves alone and a power cycle or a backup-domain reset clears. Register interface only: no
+/// HAL state, so that the panic and HardFault handlers can use it with nothing initialised.
+mod crash_words {
+    use embassy_stm32::pac;
+    use gma_control::crash::CRASH_WORDS;
+
+    /// Clocks PWR and the RTC/TAMP register interface (RCC_APB1ENR1.PWREN, RTCAPBEN) and lifts
+    /// the backup domain's write protection (PWR_CR1.DBP).
+    fn unlock() {
+        pac::RCC.apb1enr1().modify(|w| {
+            w.set_pwren(true);
+            w.set_rtcapben(true);
+        });
+        pac::PWR.cr1().modify(|w| w.set_dbp(true));
+        // DBP takes effect a few cycles later; bounded, as a handler must not hang here.
+        for _ in 0..1000 {
+            if pac::PWR.cr1().read().dbp() {
+                break;
+            }
+        }
+    }
+
+    /// The words as the last run left them.
+    pub fn load() -> [u32; CRASH_WORDS] {
+        unlock();
+        core::array::from_fn(|i| pac::TAMP.bkpr(i).read().bkp())
+    }
+
+    /// Writes the words, first to last.
+    pub fn store(words: &[u32; CRASH_WORDS]) {
+        unlock();
+        for (i, &w) in words.iter().enumerate() {
+            pac::TAMP.bkpr(i).write(|r| r.set_bkp(w));
+        }
     }
 }
 
@@ -283,6 +336,12 @@ async fn main(spawner: Spawner) {
     pac::DBGMCU.apb2fzr().modify(|w| w.set_tim1(true));
     pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
     let reset_cause = take_reset_cause();
+    // Before the HAL's clock set-up: it resets the backup domain when the RTC clock settings there
+    // are not its own (after a power cycle, when the words hold nothing anyway).
+    let last_crash = CrashRecord::decode(&crash_words::load());
+    if let Some(record) = last_crash {
+        crash_words::store(&record.aged());
+    }
     let p = embassy_stm32::init(clocks());
     // System break sources on TIM1's break input, in hardware (RM0440 §9.1.2 SYSCFG_CFGR2;
     // set-once bits, cleared only by reset): a core lockup (a fault the HardFault handler could
@@ -299,6 +358,9 @@ async fn main(spawner: Spawner) {
         MODEL_SPEC,
         defmt::Debug2Format(&reset_cause)
     );
+    if let Some(record) = last_crash {
+        warn!("gma-drive: {}", defmt::Display2Format(&record));
+    }
     // FLASH_OPTR.SRAM_PE (RM0440 "FLASH option register"; 0 = parity checked): whether SYSCFG_CFGR2.SPL above
     // guards anything. When it is on, `__pre_init` zeroed CCM SRAM and SRAM1 at reset.
     if pac::FLASH.optr().read().sram_pe() {
