@@ -10,7 +10,7 @@
 //! - `diagnose` on every hidden-effect case (target ≤ 60 s each);
 //! - `diagnose --model ja+mech` on 8 files of 30 000 samples, 4 fit and 4 validation, of a rig
 //!   with eddy currents (issue 13 target ≤ 30 s; `-- diagnose8` runs this part alone, `-- fit4`
-//!   the `ja+mech` fit alone).
+//!   the `ja+mech` fit alone; `BENCH_PROGRESS=1` in front shows its phases on stderr).
 
 use std::time::Instant;
 
@@ -157,7 +157,7 @@ fn diagnose_eight_files() {
         &ActuatorParams::TERFENOL_DEMO,
         &fit_files,
         &val_files,
-        FitOptions::default(),
+        FitOptions { progress: std::env::var_os("BENCH_PROGRESS").is_some(), ..FitOptions::default() },
     )
     .unwrap();
     println!(
