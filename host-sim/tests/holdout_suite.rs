@@ -12,7 +12,8 @@
 //! Recordings are cached under `target/holdout-suite/` (keyed by a hash of the rig and drive).
 //! The rig logs its coil's temperature too; the suite gives `gma` the command, current and
 //! displacement only, unless `HOLDOUT_THERMOMETER=on` (then coil heating is judged on the
-//! temperature).
+//! temperature). `HOLDOUT_FIT_SEED=N` passes `--seed N` to every diagnosis (the searches' seed;
+//! default 1), to see how far the figures move with the starting points alone.
 
 use std::collections::hash_map::DefaultHasher;
 use std::fs;
@@ -269,6 +270,9 @@ fn run_law(law: Law) -> Vec<Row> {
         let (fit, val) = files(anhysteretic);
         let mut args: Vec<String> = vec!["diagnose".into(), "--model".into(), model.clone()];
         args.extend(["--params".into(), params.display().to_string(), "--json".into()]);
+        if let Ok(seed) = std::env::var("HOLDOUT_FIT_SEED") {
+            args.extend(["--seed".into(), seed]);
+        }
         for v in &val {
             args.extend(["--val".into(), v.display().to_string()]);
         }
