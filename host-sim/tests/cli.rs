@@ -492,7 +492,13 @@ fn simulate_says_the_drive_levels_with_their_unit() {
 fn diagnose_names_the_missing_effect_in_the_json_contract() {
     let dir = tempfile::tempdir().unwrap();
     let (fit, fit2, val) = rig(dir.path());
-    let d = json(&gma(&["diagnose", "--model", "ja", "--json", "--val", &val, &fit, &fit2]));
+    let o = gma(&["diagnose", "--model", "ja", "--json", "--val", &val, &fit, &fit2]);
+    let d = json(&o);
+    // The progress lines' figures are whole-file ones, not the table's (after each burn-in):
+    // labelled so, or a reader takes them for the candidates' `nrmse_after`.
+    let e = String::from_utf8_lossy(&o.stderr);
+    let refits: Vec<&str> = e.lines().filter(|l| l.contains(" done: `+")).collect();
+    assert!(!refits.is_empty() && refits.iter().all(|l| l.contains("whole files")), "{e}");
     for key in ["model", "nrmse_fit", "nrmse_val", "candidates", "verdict"] {
         assert!(d.get(key).is_some(), "missing `{key}` in {d}");
     }
