@@ -593,6 +593,35 @@ fn malformed_csv_is_refused_with_file_line_and_column() {
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("none.csv"));
 }
 
+/// `mechanics` prints its step response so that every sample can be read back: distinct time
+/// stamps at any sample rate (10 MHz: 1e-7 s apart, which six decimals print as 0.000000), a
+/// small displacement not rounded to zero, and the JSON's times k/FS, not their f32 image.
+#[test]
+fn mechanics_prints_a_step_response_that_reads_back() {
+    let o = gma(&["mechanics", "--sample-rate-hz", "1e7", "--force-n", "0.001"]);
+    assert!(o.status.success(), "{}", common::err(&o));
+    let text = String::from_utf8(o.stdout).unwrap();
+    let rows: Vec<(f64, f64)> = text
+        .lines()
+        .skip_while(|l| *l != "time_s,displacement_um")
+        .skip(1)
+        .map(|l| {
+            let (t, y) = l.split_once(',').unwrap();
+            (t.parse().unwrap(), y.parse().unwrap())
+        })
+        .collect();
+    assert_eq!(rows.len(), 20, "{text}");
+    for (k, (t, y)) in rows.iter().enumerate() {
+        assert!((t - (k + 1) as f64 * 1e-7).abs() < 1e-12, "row {k}: time {t}\n{text}");
+        assert!(*y > 0.0, "row {k}: displacement {y}\n{text}");
+    }
+    let o = gma(&["mechanics", "--json"]);
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let times: Vec<f64> =
+        j["step_response"].as_array().unwrap().iter().map(|s| s["time_s"].as_f64().unwrap()).collect();
+    assert_eq!(times[..4], [1e-4, 2e-4, 3e-4, 4e-4]);
+}
+
 #[test]
 fn every_command_explains_its_options_with_units() {
     for cmd in ["demo", "fit", "compare", "diagnose", "report", "record", "simulate", "mechanics"] {
