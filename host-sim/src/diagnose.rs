@@ -965,7 +965,8 @@ pub fn diagnose(
             let note = match &r {
                 Ok((_, after)) => {
                     format!(
-                        "diagnose: refit {k}/{} done: `+{}`, mean NRMSE of the scored files and channels {:.2} %",
+                        "diagnose: refit {k}/{} done: `+{}`, mean NRMSE of the scored files and channels {:.2} % \
+                         (whole files; the candidates' figures leave out each file's burn-in)",
                         cands.len(),
                         e.name(),
                         after * 100.0

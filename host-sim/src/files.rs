@@ -374,7 +374,8 @@ pub fn persist(tmp: tempfile::NamedTempFile, path: &Path) -> Result<()> {
         use std::os::unix::fs::PermissionsExt;
         tmp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
     }
-    tmp.persist(path).with_context(|| format!("cannot write {}", display(path)))?;
+    // The rename's own error, once (a `PersistError` prints it and names it again as its source).
+    tmp.persist(path).map_err(|e| e.error).with_context(|| format!("cannot write {}", display(path)))?;
     Ok(())
 }
 

@@ -97,21 +97,184 @@ where
     let pad = |a: f64, b: f64| if b > a { 0.04 * (b - a) } else { 0.5 * a.abs().max(1e-9) };
     let py = pad(y0, y1);
     let y = (y0 - py)..(y1 + py);
-    let y_format = linear_format(&y);
+    let title = fitted_title(area, &c.title)?;
     match scale {
         XScale::Linear => {
             let px = pad(x0, x1);
             let x = (x0 - px)..(x1 + px);
-            draw_on(area, c, x.clone(), &linear_format(&x), y, &y_format, shown)
+            let (legend, y) = place_legend(area, c, &title, x.clone(), y, &shown)?;
+            let y_format = linear_format(&y);
+            draw_on(area, c, &title, legend, x.clone(), &linear_format(&x), y, &y_format, shown)
         }
         XScale::Log => {
             let (lo, hi) = if x1 > x0 { (x0 / 1.1, x1 * 1.1) } else { (x0 / 2.0, x0 * 2.0) };
             let (bold, light) = log_ticks(lo, hi);
+            let (legend, y) = place_legend(area, c, &title, (lo..hi).log_scale(), y, &shown)?;
+            let y_format = linear_format(&y);
             let x = (lo..hi).log_scale().with_key_points(bold).with_light_points(light);
-            draw_on(area, c, x, &log_label, y, &y_format, shown)
+            draw_on(area, c, &title, legend, x, &log_label, y, &y_format, shown)
         }
     }
 }
+
+/// Caption size and the chart's margins (in pixels), as [`chart_on`] lays them out.
+const CAPTION_FONT: u32 = 18;
+const MARGIN: u32 = 12;
+
+/// `title`, shortened at its start (`…`) until it fits the area's width: a long input path
+/// would otherwise be cut off at both ends, and with it what the chart shows.
+fn fitted_title<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, title: &str) -> Result<String>
+where
+    DB::ErrorType: 'static,
+{
+    let style = TextStyle::from(("sans-serif", CAPTION_FONT).into_font());
+    let room = area.dim_in_pixel().0.saturating_sub(2 * MARGIN);
+    let chars: Vec<char> = title.chars().collect();
+    for cut in 0..chars.len() {
+        let text: String = if cut == 0 {
+            title.to_string()
+        } else {
+            std::iter::once('…').chain(chars[cut..].iter().copied()).collect()
+        };
+        let (w, _) = area.estimate_text_size(&text, &style).map_err(|e| anyhow!("{e}"))?;
+        if w <= room {
+            return Ok(text);
+        }
+    }
+    Ok(String::new())
+}
+
+/// The chart frame every plot uses: caption, margins, label areas.
+fn chart_on<'a, DB: DrawingBackend, X: plotters::coord::ranged1d::AsRangedCoord<Value = f64>>(
+    area: &'a DrawingArea<DB, Shift>,
+    title: &str,
+    x: X,
+    y: std::ops::Range<f64>,
+) -> Result<ChartContext<'a, DB, Cartesian2d<X::CoordDescType, RangedCoordf64>>>
+where
+    DB::ErrorType: 'static,
+{
+    ChartBuilder::on(area)
+        .caption(title, ("sans-serif", CAPTION_FONT))
+        .margin(MARGIN)
+        .x_label_area_size(42)
+        .y_label_area_size(64)
+        .build_cartesian_2d(x, y)
+        .map_err(|e| anyhow!("{e}"))
+}
+
+/// Where the legend goes, and the y range that keeps it off the data: the first corner whose
+/// legend box no curve crosses (upper left, upper right, lower left, lower right), else the
+/// upper left with the y range raised until the curves pass below the box. Laid out on a scratch
+/// SVG of the area's size, with plotters' own legend metrics.
+fn place_legend<DB: DrawingBackend, X: plotters::coord::ranged1d::AsRangedCoord<Value = f64>>(
+    area: &DrawingArea<DB, Shift>,
+    c: &Chart,
+    title: &str,
+    x: X,
+    y: std::ops::Range<f64>,
+    shown: &impl Fn(f64, f64) -> bool,
+) -> Result<(SeriesLabelPosition, std::ops::Range<f64>)>
+where
+    DB::ErrorType: 'static,
+{
+    let labels: Vec<&str> = c.series.iter().map(|s| s.label.as_str()).filter(|l| !l.is_empty()).collect();
+    if labels.is_empty() {
+        return Ok((SeriesLabelPosition::UpperLeft, y));
+    }
+    let mut scratch = String::new();
+    let root = SVGBackend::with_string(&mut scratch, area.dim_in_pixel()).into_drawing_area();
+    let chart = chart_on(&root, title, x, y.clone())?;
+    // The legend's size as plotters lays it out: text lines, a 30 px swatch, 10 px margins.
+    let font = TextStyle::from(("sans-serif", LEGEND_FONT).into_font());
+    let mut text = MultiLineText::<_, &str>::new((0, 0), &font);
+    for l in &labels {
+        text.push_line(*l);
+    }
+    let (w, h) = text.estimate_dimension().map_err(|e| anyhow!("{e}"))?;
+    let (w, h) = (f64::from(w + 30 + 20), f64::from(h + 20));
+    let (px, py) = chart.plotting_area().get_base_pixel();
+    let (pw, ph) = chart.plotting_area().dim_in_pixel();
+    let (px, py, pw, ph) = (f64::from(px), f64::from(py), f64::from(pw), f64::from(ph));
+    // A few pixels of air around the box.
+    let gap = 4.0;
+    let corner = |right: bool, low: bool| {
+        let x0 = if right { px + pw - w - 5.0 } else { px + 5.0 };
+        let y0 = if low { py + ph - h - 5.0 } else { py + 5.0 };
+        (x0 - gap, y0 - gap, x0 + w + gap, y0 + h + gap)
+    };
+    let segments: Vec<((f64, f64), (f64, f64))> = c
+        .series
+        .iter()
+        .flat_map(|s| {
+            let pts: Vec<(f64, f64)> = s
+                .points
+                .iter()
+                .filter(|p| shown(p.0, p.1))
+                .map(|p| {
+                    let (bx, by) = chart.backend_coord(p);
+                    (f64::from(bx), f64::from(by))
+                })
+                .collect();
+            let single = (pts.len() == 1).then(|| (pts[0], pts[0]));
+            pts.windows(2).map(|w| (w[0], w[1])).chain(single).collect::<Vec<_>>()
+        })
+        .collect();
+    for (pos, right, low) in [
+        (SeriesLabelPosition::UpperLeft, false, false),
+        (SeriesLabelPosition::UpperRight, true, false),
+        (SeriesLabelPosition::LowerLeft, false, true),
+        (SeriesLabelPosition::LowerRight, true, true),
+    ] {
+        let b = corner(right, low);
+        if !segments.iter().any(|(a, e)| segment_hits_box(*a, *e, b)) {
+            return Ok((pos, y));
+        }
+    }
+    // Raise the top so that the highest curve point lies below the upper-left box: with the
+    // box's bottom a share f of the plot height down from the top, top' = (y_max − f·lo)/(1 − f).
+    let f = (corner(false, false).3 - py) / ph;
+    if !(f > 0.0 && f < 0.6) {
+        return Ok((SeriesLabelPosition::UpperLeft, y));
+    }
+    let y_max = c
+        .series
+        .iter()
+        .flat_map(|s| s.points.iter())
+        .filter(|p| shown(p.0, p.1))
+        .map(|p| p.1)
+        .fold(f64::NEG_INFINITY, f64::max)
+        .min(y.end);
+    let top = (y_max - f * y.start) / (1.0 - f);
+    Ok((SeriesLabelPosition::UpperLeft, y.start..top.max(y.end)))
+}
+
+/// Whether the segment a–e (pixels) meets the box (x0, y0, x1, y1) (Liang–Barsky clipping).
+fn segment_hits_box(a: (f64, f64), e: (f64, f64), b: (f64, f64, f64, f64)) -> bool {
+    let (dx, dy) = (e.0 - a.0, e.1 - a.1);
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for (p, q) in [(-dx, a.0 - b.0), (dx, b.2 - a.0), (-dy, a.1 - b.1), (dy, b.3 - a.1)] {
+        if p == 0.0 {
+            if q < 0.0 {
+                return false;
+            }
+        } else {
+            let t = q / p;
+            if p < 0.0 {
+                t0 = t0.max(t);
+            } else {
+                t1 = t1.min(t);
+            }
+            if t0 > t1 {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// Font size of the legend's text.
+const LEGEND_FONT: u32 = 13;
 
 /// How many labels the mesh asks each axis' key points for (at most).
 const LABELS: usize = 11;
@@ -158,9 +321,12 @@ fn log_label(v: &f64) -> String {
     format!("{v:.decimals$}")
 }
 
+#[allow(clippy::too_many_arguments)]
 fn draw_on<DB: DrawingBackend, X>(
     area: &DrawingArea<DB, Shift>,
     c: &Chart,
+    title: &str,
+    legend: SeriesLabelPosition,
     x: X,
     x_format: &dyn Fn(&f64) -> String,
     y: std::ops::Range<f64>,
@@ -172,13 +338,7 @@ where
     X: plotters::coord::ranged1d::AsRangedCoord<Value = f64>,
     X::CoordDescType: plotters::coord::ranged1d::ValueFormatter<f64>,
 {
-    let mut chart = ChartBuilder::on(area)
-        .caption(&c.title, ("sans-serif", 18))
-        .margin(12)
-        .x_label_area_size(42)
-        .y_label_area_size(64)
-        .build_cartesian_2d(x, y)
-        .map_err(|e| anyhow!("{e}"))?;
+    let mut chart = chart_on(area, title, x, y)?;
     chart
         .configure_mesh()
         .x_desc(&c.x_label)
@@ -210,8 +370,8 @@ where
         .configure_series_labels()
         .background_style(WHITE.mix(0.85))
         .border_style(RGBColor(200, 200, 200))
-        .label_font(("sans-serif", 13))
-        .position(SeriesLabelPosition::UpperLeft)
+        .label_font(("sans-serif", LEGEND_FONT))
+        .position(legend)
         .draw()
         .map_err(|e| anyhow!("{e}"))?;
     Ok(())
@@ -445,6 +605,117 @@ mod tests {
         );
         assert_eq!(linear_format(&(-0.46..1.04))(&-1e-17), "0.0");
         assert_eq!(labels(-180.0..-20.0)[0], "-180.0");
+    }
+
+    /// The legend box (x0, y0, x1, y1) of each panel and the polylines of the curves (1 px wide;
+    /// axes and ticks are black, curves in the palette's other colours or its near-black).
+    type LegendBox = (f64, f64, f64, f64);
+    type Curve = Vec<(f64, f64)>;
+
+    fn legends_and_curves(svg: &str) -> (Vec<LegendBox>, Vec<Curve>) {
+        let attr = |e: &str, name: &str| -> f64 {
+            let at = e.find(&format!(" {name}=\"")).unwrap() + name.len() + 3;
+            e[at..].split('"').next().unwrap().parse().unwrap()
+        };
+        let boxes = svg
+            .split("<rect")
+            .skip(1)
+            .map(|r| r.split('>').next().unwrap())
+            .filter(|r| r.contains("stroke=\"#C8C8C8\""))
+            .map(|r| {
+                let (x, y) = (attr(r, "x"), attr(r, "y"));
+                (x, y, x + attr(r, "width"), y + attr(r, "height"))
+            })
+            .collect();
+        let curves = svg
+            .split("<polyline")
+            .skip(1)
+            .map(|l| l.split('>').next().unwrap())
+            .filter(|l| l.contains("stroke-width=\"1\"") && !l.contains("stroke=\"#000000\""))
+            .map(|l| {
+                let pts = l.split("points=\"").nth(1).unwrap().split('"').next().unwrap();
+                pts.split_whitespace()
+                    .map(|p| {
+                        let (x, y) = p.split_once(',').unwrap();
+                        (x.parse().unwrap(), y.parse().unwrap())
+                    })
+                    .collect()
+            })
+            .collect();
+        (boxes, curves)
+    }
+
+    #[test]
+    fn the_legend_covers_no_curve() {
+        let series =
+            |label: &str, points: Vec<(f64, f64)>, color| Series { label: label.into(), points, color };
+        let chart = |title: &str, series: Vec<Series>, y_range| Chart {
+            title: title.into(),
+            x_label: "x".into(),
+            y_label: "y".into(),
+            series,
+            y_range,
+        };
+        // Ten cycles of a sine over the whole width (a time series), a straight line from the
+        // upper left through where the legend sat (a Bode plot over two bins), a coherence at 1
+        // on its fixed 0–1 axis.
+        let sine = |phase: f64| {
+            (0..500).map(move |k| (k as f64, (0.13 * k as f64 + phase).sin())).collect::<Vec<_>>()
+        };
+        let cases = [
+            vec![chart(
+                "time",
+                vec![series("measured", sine(0.0), 0), series("model ja+mech", sine(0.1), 1)],
+                None,
+            )],
+            vec![
+                chart("gain", vec![series("measured", vec![(156.0, -33.6), (312.0, -34.3)], 0)], None),
+                chart("", vec![series("measured", vec![(156.0, 0.99), (312.0, 0.995)], 2)], Some((0.0, 1.0))),
+            ],
+        ];
+        for charts in cases {
+            let svg =
+                svg_panels(&charts, (800, 500 + 300 * (charts.len() as u32 - 1)), XScale::Linear).unwrap();
+            let (boxes, curves) = legends_and_curves(&svg);
+            assert_eq!(boxes.len(), charts.len(), "one legend per panel");
+            for (x0, y0, x1, y1) in boxes {
+                for c in &curves {
+                    for w in c.windows(2) {
+                        for k in 0..=50 {
+                            let t = k as f64 / 50.0;
+                            let (x, y) = (w[0].0 + t * (w[1].0 - w[0].0), w[0].1 + t * (w[1].1 - w[0].1));
+                            assert!(
+                                !(x0..=x1).contains(&x) || !(y0..=y1).contains(&y),
+                                "{}: the legend ({x0}, {y0})–({x1}, {y1}) covers the curve at ({x}, {y})",
+                                charts[0].title
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_long_title_is_shortened_at_its_start_to_fit_the_width() {
+        let title =
+            format!("{}/sine-200Hz-run3.csv — time series", "/home/lab/rig-recordings/november".repeat(4));
+        let chart = Chart {
+            title: title.clone(),
+            x_label: "time [s]".into(),
+            y_label: "displacement [µm]".into(),
+            series: vec![Series { label: "m".into(), points: vec![(0.0, 0.0), (1.0, 1.0)], color: 0 }],
+            y_range: None,
+        };
+        let t = texts(&svg(&chart, (800, 500)).unwrap());
+        let caption =
+            t.iter().find(|s| s.ends_with("sine-200Hz-run3.csv — time series")).unwrap_or_else(|| {
+                panic!("the caption lost its end: {t:?}");
+            });
+        assert!(caption.starts_with('…') && caption.chars().count() < title.chars().count(), "{caption}");
+        // A title that fits is left alone.
+        let short = Chart { title: "demo-val1.csv — time series".into(), ..chart };
+        assert!(texts(&svg(&short, (800, 500)).unwrap()).contains(&"demo-val1.csv — time series".to_string()));
     }
 
     #[test]

@@ -87,6 +87,14 @@ pub enum Warning {
         /// The fit file with the same bytes.
         fit: String,
     },
+    /// Two inputs of one command with the same content (the same file given twice, or a copy):
+    /// it counts twice in a mean over the files.
+    SameInputTwice {
+        /// The input given first.
+        first: String,
+        /// The later one with the same bytes.
+        again: String,
+    },
     /// A fit file typed right after a `--val` file: `--val` takes one file, so it is fitted.
     FitFileAfterVal {
         /// The `--val` file.
@@ -219,6 +227,10 @@ impl fmt::Display for Warning {
             Warning::ValidationIsFitFile { val, fit } => write!(
                 f,
                 "{val} is also a fit file (same content as {fit}): its validation figure is not independent"
+            ),
+            Warning::SameInputTwice { first, again } => write!(
+                f,
+                "{again} has the same content as {first}: it counts twice in the mean NRMSE"
             ),
             Warning::FitFileAfterVal { val, fit } => write!(
                 f,

@@ -439,6 +439,46 @@ fn simulate_says_its_sample_period_limits_in_the_stated_numbers() {
     assert!(!Path::new(&out).exists());
 }
 
+/// `demo` checks its outputs before the simulation and the fits, as every command does: a
+/// folder or a link where a file goes is refused at once, by name, and nothing is written.
+#[test]
+fn demo_refuses_an_output_it_cannot_write_before_any_work() {
+    for (name, make) in [
+        ("report.html", (|p: &Path| std::fs::create_dir(p).unwrap()) as fn(&Path)),
+        ("demo-val2.csv", |p: &Path| std::fs::create_dir(p).unwrap()),
+        ("demo-fit1.csv", |p: &Path| {
+            let target = p.with_file_name("elsewhere.csv");
+            std::fs::write(&target, "kept\n").unwrap();
+            std::os::unix::fs::symlink(&target, p).unwrap();
+        }),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        make(&dir.path().join(name));
+        let t = std::time::Instant::now();
+        let o = gma(&["demo", "--out-dir", dir.path().to_str().unwrap()]);
+        let e = stderr(&o);
+        refused(
+            &o,
+            &[&format!("cannot write {}", dir.path().join(name).display())],
+            &format!("demo, {name}"),
+        );
+        // Said once, plainly (not the temporary file's error twice).
+        assert!(!e.contains("persist") && e.matches("os error").count() <= 1, "{e}");
+        assert!(t.elapsed().as_secs_f64() < 5.0, "refused only after the work: {:?}", t.elapsed());
+        let written: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|d| d.unwrap().file_name().to_string_lossy().to_string())
+            .filter(|n| n.starts_with("demo-") || n.starts_with("params-") || n.starts_with(".gma-"))
+            .filter(|n| n != name)
+            .collect();
+        assert!(written.is_empty(), "demo, {name}: wrote {written:?} although it failed");
+        assert_eq!(
+            std::fs::read_to_string(dir.path().join("elsewhere.csv")).ok().as_deref().unwrap_or("kept\n"),
+            "kept\n"
+        );
+    }
+}
+
 #[test]
 fn a_file_longer_than_max_samples_is_checked_to_the_end_and_the_cut_is_announced() {
     let dir = tempfile::tempdir().unwrap();

@@ -492,7 +492,13 @@ fn simulate_says_the_drive_levels_with_their_unit() {
 fn diagnose_names_the_missing_effect_in_the_json_contract() {
     let dir = tempfile::tempdir().unwrap();
     let (fit, fit2, val) = rig(dir.path());
-    let d = json(&gma(&["diagnose", "--model", "ja", "--json", "--val", &val, &fit, &fit2]));
+    let o = gma(&["diagnose", "--model", "ja", "--json", "--val", &val, &fit, &fit2]);
+    let d = json(&o);
+    // The progress lines' figures are whole-file ones, not the table's (after each burn-in):
+    // labelled so, or a reader takes them for the candidates' `nrmse_after`.
+    let e = String::from_utf8_lossy(&o.stderr);
+    let refits: Vec<&str> = e.lines().filter(|l| l.contains(" done: `+")).collect();
+    assert!(!refits.is_empty() && refits.iter().all(|l| l.contains("whole files")), "{e}");
     for key in ["model", "nrmse_fit", "nrmse_val", "candidates", "verdict"] {
         assert!(d.get(key).is_some(), "missing `{key}` in {d}");
     }
@@ -585,6 +591,35 @@ fn malformed_csv_is_refused_with_file_line_and_column() {
     let missing = dir.path().join("none.csv");
     let o = gma(&["diagnose", "--model", "ja", missing.to_str().unwrap()]);
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("none.csv"));
+}
+
+/// `mechanics` prints its step response so that every sample can be read back: distinct time
+/// stamps at any sample rate (10 MHz: 1e-7 s apart, which six decimals print as 0.000000), a
+/// small displacement not rounded to zero, and the JSON's times k/FS, not their f32 image.
+#[test]
+fn mechanics_prints_a_step_response_that_reads_back() {
+    let o = gma(&["mechanics", "--sample-rate-hz", "1e7", "--force-n", "0.001"]);
+    assert!(o.status.success(), "{}", common::err(&o));
+    let text = String::from_utf8(o.stdout).unwrap();
+    let rows: Vec<(f64, f64)> = text
+        .lines()
+        .skip_while(|l| *l != "time_s,displacement_um")
+        .skip(1)
+        .map(|l| {
+            let (t, y) = l.split_once(',').unwrap();
+            (t.parse().unwrap(), y.parse().unwrap())
+        })
+        .collect();
+    assert_eq!(rows.len(), 20, "{text}");
+    for (k, (t, y)) in rows.iter().enumerate() {
+        assert!((t - (k + 1) as f64 * 1e-7).abs() < 1e-12, "row {k}: time {t}\n{text}");
+        assert!(*y > 0.0, "row {k}: displacement {y}\n{text}");
+    }
+    let o = gma(&["mechanics", "--json"]);
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let times: Vec<f64> =
+        j["step_response"].as_array().unwrap().iter().map(|s| s["time_s"].as_f64().unwrap()).collect();
+    assert_eq!(times[..4], [1e-4, 2e-4, 3e-4, 4e-4]);
 }
 
 #[test]

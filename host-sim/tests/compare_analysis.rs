@@ -181,3 +181,29 @@ fn bad_analysis_options_are_refused_before_any_work() {
     assert!(std::fs::read_to_string(&rec).unwrap().starts_with("time_s"), "the input was replaced");
     assert!(!out.join("rec-loop.svg").exists(), "plots written before the refusal");
 }
+
+/// One recording given twice (or a copy of it) counts twice in the mean NRMSE: compared as
+/// asked, and said, in the JSON's `warnings` and on stderr.
+#[test]
+fn a_recording_given_twice_is_said_to_count_twice_in_the_mean() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("rec.csv");
+    let other = dir.path().join("other.csv");
+    simulate(&rec, "ja+mech", "sine", "100", "0.1");
+    simulate(&other, "ja+mech", "sine", "200", "0.1");
+    let copy = dir.path().join("copy.csv");
+    std::fs::copy(&rec, &copy).unwrap();
+    let out = dir.path().join("o");
+    let (r, c, x) = (rec.to_str().unwrap(), copy.to_str().unwrap(), other.to_str().unwrap());
+    for (files, twice) in [(vec![r, x, r], true), (vec![r, c], true), (vec![r, x], false)] {
+        let mut args = vec!["compare", "--model", "ja+mech", "--json", "--out-dir", out.to_str().unwrap()];
+        args.extend(&files);
+        let o = gma(&args);
+        let j = json(&o);
+        let warnings: Vec<&str> =
+            j["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap()).collect();
+        let said = warnings.iter().any(|w| w.contains("same content") && w.contains("counts twice"));
+        assert_eq!(said, twice, "{files:?}: {warnings:?}");
+        assert_eq!(said, err(&o).contains("counts twice"), "{}", err(&o));
+    }
+}

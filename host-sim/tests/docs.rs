@@ -78,3 +78,21 @@ fn effects_text_lists_every_identified_parameter() {
     let rod = md.lines().find(|l| l.contains("`thermal.rod_tau_s`")).unwrap();
     assert!(rod.contains("0 = no lag") && rod.contains("[0.01, 3000] when a file logs"), "{rod}");
 }
+
+/// The JSON's defaults are the numbers the tables print and a parameter file states (0.0002),
+/// not the digits of their single-precision image (0.00019999999494757503).
+#[test]
+fn effects_json_gives_defaults_as_the_tables_state_them() {
+    let o = Command::new(env!("CARGO_BIN_EXE_gma")).args(["effects", "--json"]).output().unwrap();
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let params: Vec<&serde_json::Value> =
+        j["identified"].as_array().unwrap().iter().flat_map(|r| r["params"].as_array().unwrap()).collect();
+    let default = |key: &str| params.iter().find(|p| p["key"] == key).unwrap()["default"].as_f64().unwrap();
+    assert_eq!(default("amp.tau_s"), 0.0002);
+    assert_eq!(default("eddy_tau_s"), 0.00015);
+    assert_eq!(default("ja.alpha"), -0.035);
+    for p in params {
+        let d = p["default"].as_f64().unwrap();
+        assert_eq!(d, (d as f32).to_string().parse::<f64>().unwrap(), "{p}");
+    }
+}

@@ -6,7 +6,7 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 
-use crate::files::{display, output_folder, write_atomic};
+use crate::files::{check_outputs, display, output_folder, write_atomic};
 use crate::fit::FitOptions;
 use crate::{cases, params, report};
 
@@ -37,9 +37,14 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         case.model
     );
     let (fit_files, val_files) = case.recordings(a.seed)?;
-    for r in fit_files.iter().chain(&val_files) {
-        let p = a.out_dir.join(&r.name);
-        r.write(&p)?;
+    let html = a.out_dir.join("report.html");
+    // Every output is checked before the fits, as every command does; the parameter files'
+    // names come from the ladder, so they are checked once it is climbed, before any is written.
+    let recordings: Vec<PathBuf> =
+        fit_files.iter().chain(&val_files).map(|r| a.out_dir.join(&r.name)).collect();
+    check_outputs(&recordings.iter().chain([&html]).map(PathBuf::as_path).collect::<Vec<_>>(), &[])?;
+    for (r, p) in fit_files.iter().chain(&val_files).zip(&recordings) {
+        r.write(p)?;
     }
     say!(
         j,
@@ -73,13 +78,17 @@ pub fn run(a: &DemoArgs) -> Result<()> {
             None => say!(j, "    → nothing significant is missing"),
         }
     })?;
+    let param_paths: Vec<PathBuf> = rungs
+        .iter()
+        .enumerate()
+        .map(|(k, r)| a.out_dir.join(format!("params-{k}-{}.toml", r.spec.to_string().replace('+', "_"))))
+        .collect();
+    check_outputs(&param_paths.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &[])?;
     let mut param_files = Vec::new();
-    for (k, r) in rungs.iter().enumerate() {
-        let p = a.out_dir.join(format!("params-{k}-{}.toml", r.spec.to_string().replace('+', "_")));
-        write_atomic(&p, params::to_toml(&r.params, &format!("gma demo, model {}", r.spec))?.as_bytes())?;
-        param_files.push(display(&p));
+    for (r, p) in rungs.iter().zip(&param_paths) {
+        write_atomic(p, params::to_toml(&r.params, &format!("gma demo, model {}", r.spec))?.as_bytes())?;
+        param_files.push(display(p));
     }
-    let html = a.out_dir.join("report.html");
     let note = format!(
         "Simulated rig with {}; the engineer starts from `{}`. Every number below comes from the fits in this run.",
         case.plant.describe(),

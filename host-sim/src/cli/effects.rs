@@ -250,7 +250,9 @@ fn effect_row(e: &EffectInfo) -> String {
 }
 
 fn to_json() -> serde_json::Value {
-    let param = |p: &Param| json!({"key": p.key, "unit": p.unit, "lo": p.lo, "hi": p.hi, "scale": scale(p), "default": default(p), "note": json_note(p)});
+    // The default as the tables print it (a JSON number from an f32 would carry its binary digits).
+    let stated = |v: f32| v.to_string().parse::<f64>().unwrap_or(f64::from(v));
+    let param = |p: &Param| json!({"key": p.key, "unit": p.unit, "lo": p.lo, "hi": p.hi, "scale": scale(p), "default": stated(default(p)), "note": json_note(p)});
     json!({
         "effects": EFFECTS.iter().map(|e| json!({
             "name": e.name, "alias": e.alias, "adds": e.adds, "stage": stage(e.stage),

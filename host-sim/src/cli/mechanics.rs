@@ -55,18 +55,22 @@ pub fn run(a: &MechanicsArgs) -> Result<()> {
     };
     let zoh = SecondOrderZoh::new(p, 1.0 / a.sample_rate_hz).context("mechanics parameters")?;
     let j = a.json;
-    let compliance_m_per_n = 1.0 / a.stiffness_n_per_m;
+    let compliance_m_per_n = 1.0 / f64::from(a.stiffness_n_per_m);
     say!(j, "natural frequency f_n = {:.1} Hz", p.natural_frequency_hz());
     say!(j, "damping ratio     ζ   = {:.3}", p.damping_ratio());
     say!(j, "static compliance     = {compliance_m_per_n:.4e} m/N");
     say!(j, "time_s,displacement_um");
+    // The rows as `gma` writes recordings: time with the decimals that resolve the sample period,
+    // the displacement in its shortest single-precision form (a fixed 6 decimals printed 1e-7 s
+    // steps and sub-pm displacements as 0).
+    let decimals = crate::recording::time_decimals(1.0 / f64::from(a.sample_rate_hz));
     let mut s = MechState::default();
     let mut step = Vec::new();
     for n in 0..STEP_SAMPLES {
         let y_um = zoh.step(&mut s, a.force_n) * 1e6;
-        let t_s = (n + 1) as f32 / a.sample_rate_hz;
-        say!(j, "{t_s:.6},{y_um:.6}");
-        step.push(json!({"time_s": t_s, "displacement_um": y_um}));
+        let t_s = f64::from(n + 1) / f64::from(a.sample_rate_hz);
+        say!(j, "{t_s:.decimals$},{y_um:?}");
+        step.push(json!({"time_s": t_s, "displacement_um": stated(y_um)}));
     }
     if j {
         out!(
@@ -75,11 +79,16 @@ pub fn run(a: &MechanicsArgs) -> Result<()> {
                 "natural_frequency_hz": p.natural_frequency_hz(),
                 "damping_ratio": p.damping_ratio(),
                 "static_compliance_m_per_n": compliance_m_per_n,
-                "sample_rate_hz": a.sample_rate_hz,
-                "force_n": a.force_n,
+                "sample_rate_hz": stated(a.sample_rate_hz),
+                "force_n": stated(a.force_n),
                 "step_response": step,
             })
         );
     }
     Ok(())
+}
+
+/// A single-precision value as its shortest decimal (0.0002, not 0.00019999999494757503).
+fn stated(v: f32) -> f64 {
+    v.to_string().parse().unwrap_or(f64::from(v))
 }

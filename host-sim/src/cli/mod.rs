@@ -85,7 +85,8 @@ enum Command {
     /// parameters a fit identifies for it (units, ranges, defaults).
     Effects(effects::EffectsArgs),
     /// Natural frequency, damping ratio and step response of the actuator mechanics
-    /// (m ÿ + c ẏ + k y = F, 001 eq. 14–15), discretised exactly at the loop rate.
+    /// (m ÿ + c ẏ + k y = F; paper 001 eq. 14–15, cited in docs/references.md), discretised
+    /// exactly at the loop rate.
     #[command(allow_negative_numbers = true)]
     Mechanics(mechanics::MechanicsArgs),
     /// The drive's command channel: encode a command (arm, disarm, clear, ping, reference,
