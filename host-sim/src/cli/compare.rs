@@ -256,8 +256,8 @@ fn write_time_series(
     Ok(())
 }
 
-/// Writes every chart (only now that all were drawn: a failing file leaves no partial set of
-/// plots) and the `--out-csv` table, and hands back the summary.
+/// Draws and writes every chart (only now that every file's chart data exists: a bad input
+/// leaves no partial set of plots) and the `--out-csv` table, and hands back the summary.
 fn report_all(
     a: &CompareArgs,
     charts: &[(PathBuf, Vec<Chart>, XScale)],
