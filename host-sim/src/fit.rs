@@ -1181,10 +1181,23 @@ fn fit_planned(
     held.fixed.push(ROD_THERMAL_LAG.key);
     let nested = searched(&held)?;
     let mut freed = fit_searched(spec, &[nested.params], files, opts, constraints, &REFINE)?;
-    freed.evaluations += nested.evaluations;
-    freed.time_limited |= nested.time_limited;
-    // The start the user gave, not the nested optimum the local search began from.
-    freed.start = nested.start;
+    let evaluations = nested.evaluations + freed.evaluations;
+    let time_limited = nested.time_limited || freed.time_limited;
+    // The freed search starts the lag inside its range, not at the nested optimum's (a start of
+    // 0, no lag, is off the log scale), so it can end above the start values the nested fit
+    // kept: then the nested result stands, and a fit never ends worse than its start.
+    if nested.start.nrmse.is_some_and(|start| freed.fit.mean_nrmse() > start) {
+        return Ok(FitResult { evaluations, time_limited, ..nested });
+    }
+    (freed.evaluations, freed.time_limited) = (evaluations, time_limited);
+    // The start the user gave, not the nested optimum the local search began from: its score,
+    // with `kept` false (this set is not it), and its values moved into their ranges, and the
+    // lag's own when it was not the "no lag" 0 the nested fit held.
+    freed.start = StartScore { kept: false, ..nested.start };
+    let lag_moved = freed.start_moved.into_iter().filter(
+        |w| matches!(w, Warning::StartMoved { param, given, .. } if *param == ROD_THERMAL_LAG.key && *given != 0.0),
+    );
+    freed.start_moved = nested.start_moved.into_iter().chain(lag_moved).collect();
     Ok(freed)
 }
 
