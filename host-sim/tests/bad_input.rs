@@ -375,6 +375,45 @@ fn errors_after_the_format_version_line_point_at_the_right_place_and_parameter()
     assert!(!Path::new(&out).exists());
 }
 
+/// NaN and ±inf are refused everywhere (docs/formats.md), also in a table the model does not
+/// use: read as given, such a value went on into `fit --params-out`, to break the next command
+/// that uses the stage. A number beyond f32's range (1e39) is as infinite as `inf`.
+#[test]
+fn a_non_finite_value_in_a_table_the_model_does_not_use_is_refused_with_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(dir.path(), "good.csv", &csv(HEADER, &good_rows()));
+    let demo = toml::to_string(&model_core::ActuatorParams::TERFENOL_DEMO).unwrap();
+    let line_of = |key: &str| demo.lines().position(|l| l.starts_with(&format!("{key} ="))).unwrap() + 1;
+    let out = dir.path().join("out.toml").to_str().unwrap().to_string();
+    let sim = dir.path().join("x.csv").to_str().unwrap().to_string();
+    for (name, key, value, param) in [
+        ("nan_mech.toml", "natural_frequency_hz", "nan", "mech.natural_frequency_hz"),
+        ("inf_damping.toml", "damping_ratio", "-inf", "mech.damping_ratio"),
+        ("huge_eddy.toml", "eddy_tau_s", "1e39", "eddy_tau_s"),
+    ] {
+        let p = params_with(dir.path(), name, |t| replace_line(t, key, &format!("{key} = {value}")));
+        let place = format!("{name}:{}: ", line_of(key));
+        let what = format!("parameter `{param}` is not a finite number");
+        for args in [
+            vec!["fit", "--model", "ja", "--params", &p, "--params-out", &out, &good],
+            vec![
+                "compare",
+                "--model",
+                "ja",
+                "--params",
+                &p,
+                "--out-dir",
+                dir.path().to_str().unwrap(),
+                &good,
+            ],
+            vec!["simulate", "--model", "ja", "--params", &p, "--out", &sim],
+        ] {
+            refused(&gma(&args), &[&place, &what], &format!("{} --params {name}", args[0]));
+        }
+        assert!(!Path::new(&out).exists() && !Path::new(&sim).exists(), "{name}: wrote an output");
+    }
+}
+
 #[test]
 fn out_of_range_arguments_are_refused_with_the_option_named() {
     let dir = tempfile::tempdir().unwrap();
