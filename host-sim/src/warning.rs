@@ -103,6 +103,11 @@ pub enum Warning {
         /// The extent advised [A/m].
         advised: f64,
     },
+    /// The parameters' uncertainty could not be estimated (e.g. fewer residuals than unknowns).
+    NoUncertainty {
+        /// Why.
+        why: String,
+    },
     /// `--time-limit` stopped the search: the best point so far.
     TimeLimit {
         /// The limit [s].
@@ -248,6 +253,7 @@ impl fmt::Display for Warning {
                     advised / reach
                 )
             }
+            Warning::NoUncertainty { why } => write!(f, "no parameter uncertainty: {why}"),
             Warning::TimeLimit { seconds } => write!(
                 f,
                 "--time-limit {seconds} s reached: the result is the best found so far, not a converged fit"

@@ -414,6 +414,24 @@ fn a_non_finite_value_in_a_table_the_model_does_not_use_is_refused_with_its_line
     }
 }
 
+/// A recording too short to estimate the uncertainty (3 samples for 5 parameters and an
+/// offset) is fitted, but the doubt goes where `--json` readers look: its `warnings`, not only
+/// stderr.
+#[test]
+fn a_fit_without_an_uncertainty_says_so_in_its_json_warnings() {
+    let dir = tempfile::tempdir().unwrap();
+    let short = write(dir.path(), "short.csv", &csv(HEADER, &good_rows()[..3]));
+    let o = gma(&["fit", "--model", "ja", "--json", &short]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(j.get("uncertainty").is_none(), "{j}");
+    let said = j["warnings"].as_array().unwrap().iter().any(|w| {
+        let w = w.as_str().unwrap();
+        w.starts_with("no parameter uncertainty") && w.contains("3 residuals for 5 parameters")
+    });
+    assert!(said, "{:#}", j["warnings"]);
+}
+
 #[test]
 fn out_of_range_arguments_are_refused_with_the_option_named() {
     let dir = tempfile::tempdir().unwrap();
