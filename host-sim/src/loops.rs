@@ -772,7 +772,9 @@ pub fn fit_shown(
     let progress = Progress::new(&format!("loop fit ({points} points)"), planned, show);
     let found = minimize(&bounds, &cost, None, &(), &starts, &PLAN, opts, &progress)?;
     progress.finish_and_clear();
-    let mut best = model.model_values(&found.best);
+    // As a parameter set holds them (f32), and as the model runs them: what is reported is what
+    // `--params-out` writes, at the NRMSE it was scored at.
+    let mut best: Vec<f64> = model.model_values(&found.best).iter().map(|&v| v as f32 as f64).collect();
     let mut warnings = Vec::new();
     let mut per_file = Vec::new();
     for f in files {
