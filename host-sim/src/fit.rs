@@ -1010,6 +1010,10 @@ impl Constraints {
                     bail!("--fix {}={v}: outside its range [{}, {}]", f.name(), b.lo, b.hi);
                 }
                 (f.set)(init, v);
+                // Inside its own range, but it may not fit the file's other values.
+                if let Err(e) = Actuator::new(spec, init) {
+                    bail!("--fix {}={v}: with the start set's other values: {e}", f.name());
+                }
             }
             c.fixed.push(f.name());
         }
@@ -1037,6 +1041,14 @@ impl Constraints {
                     b.lo,
                     b.hi
                 );
+            }
+            // The start is moved into the range: it may not fit the file's other values there.
+            let mut moved = *init;
+            let narrowed = Bound { lo, hi, ..b };
+            let used = narrowed.from_unit(narrowed.to_unit((f.get)(init)));
+            (f.set)(&mut moved, used);
+            if let Err(e) = Actuator::new(spec, &moved) {
+                bail!("--bound {}={lo}:{hi}: the start value moved into it, {used:.4e}, with the start set's other values: {e}", f.name());
             }
             c.bounds.push((f.name(), lo, hi));
         }

@@ -432,6 +432,28 @@ fn a_fit_without_an_uncertainty_says_so_in_its_json_warnings() {
     assert!(said, "{:#}", j["warnings"]);
 }
 
+/// A `--fix` value or `--bound` range inside its registry range can still make the set invalid
+/// with the parameter file's other values (a Preisach coercive field beyond the plane's
+/// extent): refused naming the option, not as a bare parameter error the user cannot place.
+#[test]
+fn a_fix_or_bound_that_invalidates_the_start_set_is_refused_naming_the_option() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(dir.path(), "good.csv", &csv(HEADER, &good_rows()));
+    let p = params_with(dir.path(), "narrow-plane.toml", |t| {
+        replace_line(t, "h_max_a_per_m", "h_max_a_per_m = 20000.0")
+    });
+    for (opt, arg) in
+        [("--fix", "preisach.coercive_a_per_m=25000"), ("--bound", "preisach.coercive_a_per_m=21000:29000")]
+    {
+        let o = gma(&["fit", "--model", "preisach", "--params", &p, opt, arg, &good]);
+        refused(
+            &o,
+            &[&format!("{opt} preisach.coercive_a_per_m"), "must be below preisach.h_max_a_per_m"],
+            &format!("{opt} {arg}"),
+        );
+    }
+}
+
 #[test]
 fn out_of_range_arguments_are_refused_with_the_option_named() {
     let dir = tempfile::tempdir().unwrap();
