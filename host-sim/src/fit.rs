@@ -64,14 +64,33 @@ pub fn drive_for(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
             span(y)
         );
     }
-    let drive = rec.current_a.as_deref().or(rec.command_v.as_deref()).unwrap_or_default();
-    if span(drive) <= 0.0 {
+    // The column the model is driven by (`command_V` with an amplifier model, though the file
+    // has `current_A`), then those it is scored on: a constant one has no span for its NRMSE.
+    let drive = model_input(spec, rec)?;
+    let input = match drive {
+        Drive::Current => rec.current_a.as_deref(),
+        Drive::CommandIdeal | Drive::CommandDynamic => rec.command_v.as_deref(),
+    };
+    if span(input.unwrap_or_default()) <= 0.0 {
         bail!(
-            "{}: the drive (current_A/command_V) is constant: the model's response cannot be identified",
+            "{}: the drive column `{}` never changes: the model's response cannot be identified",
+            rec.name,
+            drive.column()
+        );
+    }
+    let scored = [
+        ("current_A", rec.current_a.as_deref().filter(|_| drive == Drive::CommandDynamic)),
+        ("flux_density_T", rec.flux_density_t.as_deref()),
+        ("temperature_C", rec.temperature_c.as_deref().filter(|_| spec.has(Effect::ThermalDrift))),
+    ];
+    if let Some((column, _)) = scored.iter().find(|(_, v)| v.is_some_and(|v| span(v) <= 0.0)) {
+        bail!(
+            "{}: `{column}` never changes, and the model is scored on it: a constant channel has no span for \
+             its NRMSE (sensor unplugged or stuck?); leave the column out of the file if it carries nothing",
             rec.name
         );
     }
-    model_input(spec, rec)
+    Ok(drive)
 }
 
 /// Which of `rec`'s columns drives `spec`: `command_V` through the amplifier dynamics when the

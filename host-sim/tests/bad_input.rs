@@ -134,7 +134,7 @@ fn bad_csvs() -> Vec<(&'static str, Vec<u8>, Vec<&'static str>)> {
                 HEADER,
                 &(0..400).map(|k| format!("{:.4},1.0,{}", k as f64 * 1e-4, k % 7)).collect::<Vec<_>>(),
             ),
-            vec!["constant_drive.csv", "drive (current_A/command_V) is constant"],
+            vec!["constant_drive.csv", "the drive column `current_A` never changes"],
         ),
         (
             "zero_displacement.csv",
@@ -451,6 +451,58 @@ fn a_fix_or_bound_that_invalidates_the_start_set_is_refused_naming_the_option() 
             &[&format!("{opt} preisach.coercive_a_per_m"), "must be below preisach.h_max_a_per_m"],
             &format!("{opt} {arg}"),
         );
+    }
+}
+
+/// A channel the model is scored on (or driven by) that never changes is refused, naming the
+/// file and the column: the drive the model actually takes (`command_V` with an amplifier model,
+/// though `current_A` varies), and a constant measured current, flux density or temperature,
+/// whose NRMSE's span is 0 (it was floored at 1e-12: a 1e10 NRMSE that swamped the fit's cost).
+#[test]
+fn a_constant_channel_the_model_uses_is_refused_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let with = |column: &str, value: &dyn Fn(usize, &str) -> String| -> Vec<u8> {
+        let rows: Vec<String> =
+            good_rows().iter().enumerate().map(|(k, r)| format!("{r},{}", value(k, r))).collect();
+        csv(&format!("{HEADER},{column}"), &rows)
+    };
+    let dead_current: Vec<String> = good_rows()
+        .iter()
+        .map(|r| {
+            let f: Vec<&str> = r.split(',').collect();
+            format!("{},0.0,{},{}", f[0], f[2], f[1])
+        })
+        .collect();
+    let cases: [(&str, Vec<u8>, &str, &str); 4] = [
+        ("flat_command.csv", with("command_V", &|_, _| "0.5".into()), "amp+ja", "`command_V` never changes"),
+        (
+            "dead_current.csv",
+            csv("time_s,current_A,displacement_um,command_V", &dead_current),
+            "amp+ja",
+            "`current_A` never changes",
+        ),
+        (
+            "flat_flux.csv",
+            with("flux_density_T", &|_, _| "0.5".into()),
+            "ja",
+            "`flux_density_T` never changes",
+        ),
+        (
+            "flat_temperature.csv",
+            with("temperature_C", &|_, _| "23.0".into()),
+            "ja+thermal",
+            "`temperature_C` never changes",
+        ),
+    ];
+    let out = dir.path().join("plots").to_str().unwrap().to_string();
+    for (name, bytes, model, what) in cases {
+        let file = write(dir.path(), name, &bytes);
+        for args in [
+            vec!["fit", "--model", model, &file],
+            vec!["compare", "--model", model, "--out-dir", &out, &file],
+        ] {
+            refused(&gma(&args), &[name, what], &format!("{} --model {model} {name}", args[0]));
+        }
     }
 }
 
