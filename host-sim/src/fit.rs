@@ -261,6 +261,16 @@ pub fn run_model(
 ) -> Result<Simulation> {
     let (rec, drive) = (prep.rec, prep.drive);
     let p = at_rate_of(spec, params, prep)?;
+    // The ideal amplifier's gain is used without `amplifier_dynamics` too, which model-core
+    // then does not check.
+    let gain = p.amp.gain_a_per_v;
+    if drive == Drive::CommandIdeal && !(gain > 0.0 && gain <= 1e3) {
+        bail!(
+            "{}: parameter `amp.gain_a_per_v` = {gain} is out of range (0, 1e3] A/V: it is the ideal \
+             amplifier's gain, which turns this file's `command_V` into the coil current",
+            rec.name
+        );
+    }
     let model = Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
     let n = rec.len();
     let all_channels = all_channels || rec.flux_density_t.is_some();

@@ -506,6 +506,43 @@ fn a_constant_channel_the_model_uses_is_refused_naming_it() {
     }
 }
 
+/// `amp.gain_a_per_v` is the ideal amplifier's gain whenever a file gives the command but not the
+/// current, with or without `amplifier_dynamics` (docs/formats.md: (0, 1e3]); a model without
+/// that effect did not check it, and ran a command-only file through a gain of 0 or −2.
+#[test]
+fn an_ideal_amplifier_gain_out_of_range_is_refused_for_a_command_only_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let command_only =
+        write(dir.path(), "command.csv", &csv("time_s,command_V,displacement_um", &good_rows()));
+    let sim = dir.path().join("x.csv").to_str().unwrap().to_string();
+    for gain in ["0.0", "-2.0"] {
+        let name = format!("gain{gain}.toml");
+        let p = params_with(dir.path(), &name, |t| {
+            replace_line(t, "gain_a_per_v", &format!("gain_a_per_v = {gain}"))
+        });
+        for args in [
+            vec![
+                "compare",
+                "--model",
+                "ja",
+                "--params",
+                &p,
+                "--out-dir",
+                dir.path().to_str().unwrap(),
+                &command_only,
+            ],
+            vec!["simulate", "--model", "ja", "--params", &p, "--drive", &command_only, "--out", &sim],
+        ] {
+            refused(
+                &gma(&args),
+                &["command.csv", "`amp.gain_a_per_v`", "(0, 1e3]"],
+                &format!("{} with gain {gain}", args[0]),
+            );
+        }
+        assert!(!Path::new(&sim).exists());
+    }
+}
+
 #[test]
 fn out_of_range_arguments_are_refused_with_the_option_named() {
     let dir = tempfile::tempdir().unwrap();
