@@ -1228,7 +1228,9 @@ fn fit_planned(
     // 0, no lag, is off the log scale), so it can end above the start values the nested fit
     // kept: then the nested result stands, and a fit never ends worse than its start.
     if nested.start.nrmse.is_some_and(|start| freed.fit.mean_nrmse() > start) {
-        return Ok(FitResult { evaluations, time_limited, ..nested });
+        // Its lag was held by this fit, not by --fix: `fixed` lists the user's alone.
+        let fixed = nested.fixed.iter().copied().filter(|(name, _)| constraints.is_fixed(name)).collect();
+        return Ok(FitResult { evaluations, time_limited, fixed, ..nested });
     }
     (freed.evaluations, freed.time_limited) = (evaluations, time_limited);
     // The start the user gave, not the nested optimum the local search began from: its score,

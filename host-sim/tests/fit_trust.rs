@@ -206,6 +206,8 @@ fn a_fit_that_frees_the_rods_thermal_lag_never_ends_worse_than_its_start() {
     if fit.start.kept {
         assert_eq!(fit.params.thermal, truth.thermal, "`kept` but not the start values");
     }
+    // Held by the first run, not by --fix: not listed as fixed (JSON `fixed`, `# fixed:` lines).
+    assert!(fit.fixed.is_empty(), "{:?}", fit.fixed);
     assert!(fit.start_moved.iter().all(|w| !w.to_string().contains("rod_tau_s")), "{:?}", fit.start_moved);
     // A start value outside its range (c = 0.97 > 0.95) is said, whichever run the set came from.
     let mut off = truth;
