@@ -191,7 +191,10 @@ pub fn parse_file(file: &str, text: &str, spec: ModelSpec) -> Result<ParamFile> 
         None => 1,
         Some(toml::Value::Integer(v)) if (1..=FORMAT_VERSION).contains(&v) => v,
         Some(v) => {
-            located!(file; "format_version = {v}: this gma reads formats 1 to {FORMAT_VERSION} (a newer gma wrote it?)")
+            let line = line_of(text, "format_version").map(|(line, _)| line);
+            // Only a whole number can be a format a newer gma wrote.
+            let why = if v.is_integer() { "a newer gma wrote it?" } else { "it is not an integer" };
+            located!(file, line, None; "format_version = {v}: this gma reads formats 1 to {FORMAT_VERSION} ({why})")
         }
     };
     let missing: Vec<&'static str> = parameter_tables().filter(|t| !table.contains_key(*t)).collect();

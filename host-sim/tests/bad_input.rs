@@ -543,6 +543,27 @@ fn an_ideal_amplifier_gain_out_of_range_is_refused_for_a_command_only_file() {
     }
 }
 
+/// A `format_version` that is not an integer is a typing mistake, not a file from a newer gma:
+/// said so, with its line.
+#[test]
+fn a_format_version_that_is_not_an_integer_is_named_as_such_with_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = toml::to_string(&model_core::ActuatorParams::TERFENOL_DEMO).unwrap();
+    let out = dir.path().join("x.csv").to_str().unwrap().to_string();
+    for (name, value, what) in [
+        ("text.toml", "\"2\"", "it is not an integer"),
+        ("float.toml", "2.0", "it is not an integer"),
+        ("newer.toml", "99", "a newer gma wrote it?"),
+    ] {
+        let p = write(dir.path(), name, format!("# a comment\nformat_version = {value}\n{demo}").as_bytes());
+        let o = gma(&["simulate", "--model", "ja", "--params", &p, "--out", &out]);
+        refused(&o, &[&format!("{name}:2: format_version = {value}"), what], name);
+        if what == "it is not an integer" {
+            assert!(!stderr(&o).contains("newer gma"), "{name}: {}", stderr(&o));
+        }
+    }
+}
+
 #[test]
 fn out_of_range_arguments_are_refused_with_the_option_named() {
     let dir = tempfile::tempdir().unwrap();
