@@ -564,6 +564,23 @@ fn a_format_version_that_is_not_an_integer_is_named_as_such_with_its_line() {
     }
 }
 
+/// The loop checks hold for the points kept: a loop whose first points are flat, cut there by
+/// `--max-samples`, is refused like a flat file (it was fitted to a 5e15 NRMSE and exit 0).
+#[test]
+fn a_loop_cut_by_max_samples_to_flat_points_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows: String = (0..20)
+        .map(|k| if k < 6 { format!("{},1000\n", k * 100) } else { format!("{},{}\n", k * 1000, k * 20000) })
+        .collect();
+    let f = write(dir.path(), "flat-start.csv", format!("H(A/m),M(A/m)\n{rows}").as_bytes());
+    let out = dir.path().join("out.toml").to_str().unwrap().to_string();
+    let o = gma(&["fit", "--model", "anhysteretic", "--max-samples", "5", "--params-out", &out, &f]);
+    refused(&o, &["flat-start.csv", "M does not vary", "--max-samples"], "a flat head");
+    assert!(!Path::new(&out).exists());
+    // The whole file fits.
+    assert!(gma(&["fit", "--model", "anhysteretic", "--effort", "0.2", &f]).status.success());
+}
+
 #[test]
 fn out_of_range_arguments_are_refused_with_the_option_named() {
     let dir = tempfile::tempdir().unwrap();
