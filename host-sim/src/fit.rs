@@ -64,14 +64,33 @@ pub fn drive_for(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
             span(y)
         );
     }
-    let drive = rec.current_a.as_deref().or(rec.command_v.as_deref()).unwrap_or_default();
-    if span(drive) <= 0.0 {
+    // The column the model is driven by (`command_V` with an amplifier model, though the file
+    // has `current_A`), then those it is scored on: a constant one has no span for its NRMSE.
+    let drive = model_input(spec, rec)?;
+    let input = match drive {
+        Drive::Current => rec.current_a.as_deref(),
+        Drive::CommandIdeal | Drive::CommandDynamic => rec.command_v.as_deref(),
+    };
+    if span(input.unwrap_or_default()) <= 0.0 {
         bail!(
-            "{}: the drive (current_A/command_V) is constant: the model's response cannot be identified",
+            "{}: the drive column `{}` never changes: the model's response cannot be identified",
+            rec.name,
+            drive.column()
+        );
+    }
+    let scored = [
+        ("current_A", rec.current_a.as_deref().filter(|_| drive == Drive::CommandDynamic)),
+        ("flux_density_T", rec.flux_density_t.as_deref()),
+        ("temperature_C", rec.temperature_c.as_deref().filter(|_| spec.has(Effect::ThermalDrift))),
+    ];
+    if let Some((column, _)) = scored.iter().find(|(_, v)| v.is_some_and(|v| span(v) <= 0.0)) {
+        bail!(
+            "{}: `{column}` never changes, and the model is scored on it: a constant channel has no span for \
+             its NRMSE (sensor unplugged or stuck?); leave the column out of the file if it carries nothing",
             rec.name
         );
     }
-    model_input(spec, rec)
+    Ok(drive)
 }
 
 /// Which of `rec`'s columns drives `spec`: `command_V` through the amplifier dynamics when the
@@ -242,6 +261,16 @@ pub fn run_model(
 ) -> Result<Simulation> {
     let (rec, drive) = (prep.rec, prep.drive);
     let p = at_rate_of(spec, params, prep)?;
+    // The ideal amplifier's gain is used without `amplifier_dynamics` too, which model-core
+    // then does not check.
+    let gain = p.amp.gain_a_per_v;
+    if drive == Drive::CommandIdeal && !(gain > 0.0 && gain <= 1e3) {
+        bail!(
+            "{}: parameter `amp.gain_a_per_v` = {gain} is out of range (0, 1e3] A/V: it is the ideal \
+             amplifier's gain, which turns this file's `command_V` into the coil current",
+            rec.name
+        );
+    }
     let model = Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
     let n = rec.len();
     let all_channels = all_channels || rec.flux_density_t.is_some();
@@ -1010,6 +1039,10 @@ impl Constraints {
                     bail!("--fix {}={v}: outside its range [{}, {}]", f.name(), b.lo, b.hi);
                 }
                 (f.set)(init, v);
+                // Inside its own range, but it may not fit the file's other values.
+                if let Err(e) = Actuator::new(spec, init) {
+                    bail!("--fix {}={v}: with the start set's other values: {e}", f.name());
+                }
             }
             c.fixed.push(f.name());
         }
@@ -1037,6 +1070,14 @@ impl Constraints {
                     b.lo,
                     b.hi
                 );
+            }
+            // The start is moved into the range: it may not fit the file's other values there.
+            let mut moved = *init;
+            let narrowed = Bound { lo, hi, ..b };
+            let used = narrowed.from_unit(narrowed.to_unit((f.get)(init)));
+            (f.set)(&mut moved, used);
+            if let Err(e) = Actuator::new(spec, &moved) {
+                bail!("--bound {}={lo}:{hi}: the start value moved into it, {used:.4e}, with the start set's other values: {e}", f.name());
             }
             c.bounds.push((f.name(), lo, hi));
         }
@@ -1181,10 +1222,25 @@ fn fit_planned(
     held.fixed.push(ROD_THERMAL_LAG.key);
     let nested = searched(&held)?;
     let mut freed = fit_searched(spec, &[nested.params], files, opts, constraints, &REFINE)?;
-    freed.evaluations += nested.evaluations;
-    freed.time_limited |= nested.time_limited;
-    // The start the user gave, not the nested optimum the local search began from.
-    freed.start = nested.start;
+    let evaluations = nested.evaluations + freed.evaluations;
+    let time_limited = nested.time_limited || freed.time_limited;
+    // The freed search starts the lag inside its range, not at the nested optimum's (a start of
+    // 0, no lag, is off the log scale), so it can end above the start values the nested fit
+    // kept: then the nested result stands, and a fit never ends worse than its start.
+    if nested.start.nrmse.is_some_and(|start| freed.fit.mean_nrmse() > start) {
+        // Its lag was held by this fit, not by --fix: `fixed` lists the user's alone.
+        let fixed = nested.fixed.iter().copied().filter(|(name, _)| constraints.is_fixed(name)).collect();
+        return Ok(FitResult { evaluations, time_limited, fixed, ..nested });
+    }
+    (freed.evaluations, freed.time_limited) = (evaluations, time_limited);
+    // The start the user gave, not the nested optimum the local search began from: its score,
+    // with `kept` false (this set is not it), and its values moved into their ranges, and the
+    // lag's own when it was not the "no lag" 0 the nested fit held.
+    freed.start = StartScore { kept: false, ..nested.start };
+    let lag_moved = freed.start_moved.into_iter().filter(
+        |w| matches!(w, Warning::StartMoved { param, given, .. } if *param == ROD_THERMAL_LAG.key && *given != 0.0),
+    );
+    freed.start_moved = nested.start_moved.into_iter().chain(lag_moved).collect();
     Ok(freed)
 }
 

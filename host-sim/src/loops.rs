@@ -166,8 +166,12 @@ pub fn read_input(input: Input, max_points: usize) -> Result<(LoopFile, Option<W
         kept_s: None,
         after_trim_start: false,
     });
-    f.h.truncate(max_points);
-    f.value.truncate(max_points);
+    if cut.is_some() {
+        f.h.truncate(max_points);
+        f.value.truncate(max_points);
+        // What the whole file passed, its first points may not.
+        check_content(&f, &format!(" in the first {max_points} points (--max-samples)"))?;
+    }
     Ok((f, cut))
 }
 
@@ -227,10 +231,6 @@ pub fn parse(name: &str, text: &str) -> Result<LoopFile> {
     };
     let ncols = cells.len();
     let (mut h, mut v) = (Vec::new(), Vec::new());
-    let what = match channel {
-        LoopChannel::FluxDensity => "B",
-        LoopChannel::Magnetization => "M",
-    };
     for (idx, line) in lines {
         let lineno = idx + 1;
         let f: Vec<&str> = line.split(sep).map(str::trim).collect();
@@ -258,20 +258,27 @@ pub fn parse(name: &str, text: &str) -> Result<LoopFile> {
         located!(name; "{} points; a loop fit needs at least 5", h.len());
     }
     let f = LoopFile { name: name.to_string(), h, value: v, channel };
+    check_content(&f, "")?;
+    Ok(f)
+}
+
+/// The checks on a loop's points as a whole (`kept`: where they were cut, said in the message).
+fn check_content(f: &LoopFile, kept: &str) -> Result<()> {
+    let (name, what) = (&f.name, if f.channel == LoopChannel::FluxDensity { "B" } else { "M" });
     let (lo, hi) =
         f.value.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), x| (l.min(*x), u.max(*x)));
     if hi - lo <= 1e-9 * lo.abs().max(hi.abs()) {
-        located!(name; "{what} does not vary (every point {lo:e}): a loop's {what} follows the field");
+        located!(name; "{what} does not vary{kept} (every point {lo:e}): a loop's {what} follows the field");
     }
     // A ferro- or ferrimagnet's magnetization rises with the field along a loop as a whole.
     let rho = crate::analysis::correlation(&f.h, &f.magnetization());
     if rho < -0.5 {
         located!(name;
-            "M falls as H rises (correlation {rho:.2}): a magnetic material's magnetization follows the \
+            "M falls as H rises{kept} (correlation {rho:.2}): a magnetic material's magnetization follows the \
              field; is the search coil or its integrator wired reversed, or the field's sign? negate {what} \
              (or H) in the file");
     }
-    Ok(f)
+    Ok(())
 }
 
 /// A loop driven symmetrically (H from −H_max to H_max within 5 %) whose magnetization is not
@@ -772,7 +779,9 @@ pub fn fit_shown(
     let progress = Progress::new(&format!("loop fit ({points} points)"), planned, show);
     let found = minimize(&bounds, &cost, None, &(), &starts, &PLAN, opts, &progress)?;
     progress.finish_and_clear();
-    let mut best = model.model_values(&found.best);
+    // As a parameter set holds them (f32), and as the model runs them: what is reported is what
+    // `--params-out` writes, at the NRMSE it was scored at.
+    let mut best: Vec<f64> = model.model_values(&found.best).iter().map(|&v| v as f32 as f64).collect();
     let mut warnings = Vec::new();
     let mut per_file = Vec::new();
     for f in files {

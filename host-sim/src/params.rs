@@ -191,7 +191,10 @@ pub fn parse_file(file: &str, text: &str, spec: ModelSpec) -> Result<ParamFile> 
         None => 1,
         Some(toml::Value::Integer(v)) if (1..=FORMAT_VERSION).contains(&v) => v,
         Some(v) => {
-            located!(file; "format_version = {v}: this gma reads formats 1 to {FORMAT_VERSION} (a newer gma wrote it?)")
+            let line = line_of(text, "format_version").map(|(line, _)| line);
+            // Only a whole number can be a format a newer gma wrote.
+            let why = if v.is_integer() { "a newer gma wrote it?" } else { "it is not an integer" };
+            located!(file, line, None; "format_version = {v}: this gma reads formats 1 to {FORMAT_VERSION} ({why})")
         }
     };
     let missing: Vec<&'static str> = parameter_tables().filter(|t| !table.contains_key(*t)).collect();
@@ -228,17 +231,47 @@ pub fn parse_file(file: &str, text: &str, spec: ModelSpec) -> Result<ParamFile> 
             None => Located::file(file, what),
         }
     })?;
+    // model-core checks the stages the model uses; a NaN or ±inf elsewhere (or a number beyond
+    // f32's range) would be kept as read and written on by `fit --params-out`.
+    if let Some(name) = non_finite(&toml::Table::try_from(params).context("serialising the parameters")?, "")
+    {
+        let what = format!("parameter `{name}` is not a finite number");
+        return Err(match line_of(text, &name) {
+            Some((line, value)) => Located::at(file, line, None, format!("{what}; found `{}`", echo(value))),
+            None => Located::file(file, what),
+        }
+        .into());
+    }
     let used = tables_used(spec);
     let defaulted = missing.into_iter().filter(|t| used.contains(t)).collect();
     Ok(ParamFile { params, format_version, defaulted })
 }
 
+/// The dotted name (`table.key`) of the first non-finite number in `table`, if any.
+fn non_finite(table: &toml::Table, prefix: &str) -> Option<String> {
+    table.iter().find_map(|(key, value)| {
+        let name = if prefix.is_empty() { key.clone() } else { format!("{prefix}.{key}") };
+        match value {
+            toml::Value::Float(x) if !x.is_finite() => Some(name),
+            toml::Value::Table(t) => non_finite(t, &name),
+            _ => None,
+        }
+    })
+}
+
 /// The line (1-based) and value text of parameter `name` in parameter-file text: `table.key`
 /// under `[table]`, a top-level `key`, or a table's `[name]` header (value empty).
-fn line_of<'t>(text: &'t str, name: &'static str) -> Option<(u64, &'t str)> {
+fn line_of<'t>(text: &'t str, name: &str) -> Option<(u64, &'t str)> {
     // model-core names the second-order amplifier's table by its short name.
-    let table_name = |t: &'static str| if t == "amp2" { "amp_second_order" } else { t };
-    let (table, key) = match name.split_once('.') {
+    fn table_name(t: &str) -> &str {
+        if t == "amp2" {
+            "amp_second_order"
+        } else {
+            t
+        }
+    }
+    // The key is after the last dot: a nested table's name has dots of its own.
+    let (table, key) = match name.rsplit_once('.') {
         Some((t, k)) => (Some(table_name(t)), Some(k)),
         None => (None, Some(table_name(name))),
     };

@@ -111,6 +111,11 @@ pub enum Warning {
         /// The extent advised [A/m].
         advised: f64,
     },
+    /// The parameters' uncertainty could not be estimated (e.g. fewer residuals than unknowns).
+    NoUncertainty {
+        /// Why.
+        why: String,
+    },
     /// `--time-limit` stopped the search: the best point so far.
     TimeLimit {
         /// The limit [s].
@@ -219,11 +224,20 @@ impl fmt::Display for Warning {
                 found_nrmse * 100.0,
                 start_nrmse * 100.0
             ),
-            Warning::StartMoved { param, given, used, lo, hi } => write!(
-                f,
-                "start value `{param}` = {given:.4e} lies outside its search range [{lo:.3e}, {hi:.3e}]: the \
-                 search began at {used:.4e}, that range's nearest end"
-            ),
+            Warning::StartMoved { param, given, used, lo, hi } => {
+                // A value a log scale cannot place (0, negative) starts in the range's middle.
+                let at_end = [*lo, *hi].iter().any(|end| (used - end).abs() <= 1e-9 * end.abs());
+                let where_ = if at_end {
+                    "that range's nearest end"
+                } else {
+                    "the middle of that range (its scale is logarithmic: a value ≤ 0 has no place on it)"
+                };
+                write!(
+                    f,
+                    "start value `{param}` = {given:.4e} lies outside its search range [{lo:.3e}, {hi:.3e}]: the \
+                     search began at {used:.4e}, {where_}"
+                )
+            }
             Warning::ValidationIsFitFile { val, fit } => write!(
                 f,
                 "{val} is also a fit file (same content as {fit}): its validation figure is not independent"
@@ -251,6 +265,7 @@ impl fmt::Display for Warning {
                     advised / reach
                 )
             }
+            Warning::NoUncertainty { why } => write!(f, "no parameter uncertainty: {why}"),
             Warning::TimeLimit { seconds } => write!(
                 f,
                 "--time-limit {seconds} s reached: the result is the best found so far, not a converged fit"
@@ -310,5 +325,25 @@ impl fmt::Display for Warning {
                  displacement_um=NAME:mm` converts mm, `:nm` nm) and `rod_length_m` the rod's active length?"
             ),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A start value is moved to the nearest end of its range, except a value a log scale cannot
+    /// place (0, negative: a file's "no heating", "no creep"), which starts in the range's
+    /// geometric middle: the warning must say which, not call the middle an end.
+    #[test]
+    fn a_moved_start_says_where_the_search_began() {
+        let (lo, hi) = (1e-3, 0.6);
+        let above = Warning::StartMoved { param: "aftereffect.fraction", given: 0.9, used: hi, lo, hi };
+        assert!(above.to_string().contains("began at 6.0000e-1, that range's nearest end"), "{above}");
+        let middle = (lo * hi).sqrt();
+        let zero = Warning::StartMoved { param: "aftereffect.fraction", given: 0.0, used: middle, lo, hi };
+        let text = zero.to_string();
+        assert!(!text.contains("nearest end"), "{text}");
+        assert!(text.contains("began at 2.4495e-2, the middle of that range"), "{text}");
     }
 }

@@ -134,7 +134,7 @@ fn bad_csvs() -> Vec<(&'static str, Vec<u8>, Vec<&'static str>)> {
                 HEADER,
                 &(0..400).map(|k| format!("{:.4},1.0,{}", k as f64 * 1e-4, k % 7)).collect::<Vec<_>>(),
             ),
-            vec!["constant_drive.csv", "drive (current_A/command_V) is constant"],
+            vec!["constant_drive.csv", "the drive column `current_A` never changes"],
         ),
         (
             "zero_displacement.csv",
@@ -373,6 +373,212 @@ fn errors_after_the_format_version_line_point_at_the_right_place_and_parameter()
         }
     }
     assert!(!Path::new(&out).exists());
+}
+
+/// NaN and ±inf are refused everywhere (docs/formats.md), also in a table the model does not
+/// use: read as given, such a value went on into `fit --params-out`, to break the next command
+/// that uses the stage. A number beyond f32's range (1e39) is as infinite as `inf`.
+#[test]
+fn a_non_finite_value_in_a_table_the_model_does_not_use_is_refused_with_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(dir.path(), "good.csv", &csv(HEADER, &good_rows()));
+    let demo = toml::to_string(&model_core::ActuatorParams::TERFENOL_DEMO).unwrap();
+    let line_of = |key: &str| demo.lines().position(|l| l.starts_with(&format!("{key} ="))).unwrap() + 1;
+    let out = dir.path().join("out.toml").to_str().unwrap().to_string();
+    let sim = dir.path().join("x.csv").to_str().unwrap().to_string();
+    for (name, key, value, param) in [
+        ("nan_mech.toml", "natural_frequency_hz", "nan", "mech.natural_frequency_hz"),
+        ("inf_damping.toml", "damping_ratio", "-inf", "mech.damping_ratio"),
+        ("huge_eddy.toml", "eddy_tau_s", "1e39", "eddy_tau_s"),
+    ] {
+        let p = params_with(dir.path(), name, |t| replace_line(t, key, &format!("{key} = {value}")));
+        let place = format!("{name}:{}: ", line_of(key));
+        let what = format!("parameter `{param}` is not a finite number");
+        for args in [
+            vec!["fit", "--model", "ja", "--params", &p, "--params-out", &out, &good],
+            vec![
+                "compare",
+                "--model",
+                "ja",
+                "--params",
+                &p,
+                "--out-dir",
+                dir.path().to_str().unwrap(),
+                &good,
+            ],
+            vec!["simulate", "--model", "ja", "--params", &p, "--out", &sim],
+        ] {
+            refused(&gma(&args), &[&place, &what], &format!("{} --params {name}", args[0]));
+        }
+        assert!(!Path::new(&out).exists() && !Path::new(&sim).exists(), "{name}: wrote an output");
+    }
+}
+
+/// A recording too short to estimate the uncertainty (3 samples for 5 parameters and an
+/// offset) is fitted, but the doubt goes where `--json` readers look: its `warnings`, not only
+/// stderr.
+#[test]
+fn a_fit_without_an_uncertainty_says_so_in_its_json_warnings() {
+    let dir = tempfile::tempdir().unwrap();
+    let short = write(dir.path(), "short.csv", &csv(HEADER, &good_rows()[..3]));
+    let o = gma(&["fit", "--model", "ja", "--json", &short]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(j.get("uncertainty").is_none(), "{j}");
+    let said = j["warnings"].as_array().unwrap().iter().any(|w| {
+        let w = w.as_str().unwrap();
+        w.starts_with("no parameter uncertainty") && w.contains("3 residuals for 5 parameters")
+    });
+    assert!(said, "{:#}", j["warnings"]);
+}
+
+/// A `--fix` value or `--bound` range inside its registry range can still make the set invalid
+/// with the parameter file's other values (a Preisach coercive field beyond the plane's
+/// extent): refused naming the option, not as a bare parameter error the user cannot place.
+#[test]
+fn a_fix_or_bound_that_invalidates_the_start_set_is_refused_naming_the_option() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(dir.path(), "good.csv", &csv(HEADER, &good_rows()));
+    let p = params_with(dir.path(), "narrow-plane.toml", |t| {
+        replace_line(t, "h_max_a_per_m", "h_max_a_per_m = 20000.0")
+    });
+    for (opt, arg) in
+        [("--fix", "preisach.coercive_a_per_m=25000"), ("--bound", "preisach.coercive_a_per_m=21000:29000")]
+    {
+        let o = gma(&["fit", "--model", "preisach", "--params", &p, opt, arg, &good]);
+        refused(
+            &o,
+            &[&format!("{opt} preisach.coercive_a_per_m"), "must be below preisach.h_max_a_per_m"],
+            &format!("{opt} {arg}"),
+        );
+    }
+}
+
+/// A channel the model is scored on (or driven by) that never changes is refused, naming the
+/// file and the column: the drive the model actually takes (`command_V` with an amplifier model,
+/// though `current_A` varies), and a constant measured current, flux density or temperature,
+/// whose NRMSE's span is 0 (it was floored at 1e-12: a 1e10 NRMSE that swamped the fit's cost).
+#[test]
+fn a_constant_channel_the_model_uses_is_refused_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let with = |column: &str, value: &dyn Fn(usize, &str) -> String| -> Vec<u8> {
+        let rows: Vec<String> =
+            good_rows().iter().enumerate().map(|(k, r)| format!("{r},{}", value(k, r))).collect();
+        csv(&format!("{HEADER},{column}"), &rows)
+    };
+    let dead_current: Vec<String> = good_rows()
+        .iter()
+        .map(|r| {
+            let f: Vec<&str> = r.split(',').collect();
+            format!("{},0.0,{},{}", f[0], f[2], f[1])
+        })
+        .collect();
+    let cases: [(&str, Vec<u8>, &str, &str); 4] = [
+        ("flat_command.csv", with("command_V", &|_, _| "0.5".into()), "amp+ja", "`command_V` never changes"),
+        (
+            "dead_current.csv",
+            csv("time_s,current_A,displacement_um,command_V", &dead_current),
+            "amp+ja",
+            "`current_A` never changes",
+        ),
+        (
+            "flat_flux.csv",
+            with("flux_density_T", &|_, _| "0.5".into()),
+            "ja",
+            "`flux_density_T` never changes",
+        ),
+        (
+            "flat_temperature.csv",
+            with("temperature_C", &|_, _| "23.0".into()),
+            "ja+thermal",
+            "`temperature_C` never changes",
+        ),
+    ];
+    let out = dir.path().join("plots").to_str().unwrap().to_string();
+    for (name, bytes, model, what) in cases {
+        let file = write(dir.path(), name, &bytes);
+        for args in [
+            vec!["fit", "--model", model, &file],
+            vec!["compare", "--model", model, "--out-dir", &out, &file],
+        ] {
+            refused(&gma(&args), &[name, what], &format!("{} --model {model} {name}", args[0]));
+        }
+    }
+}
+
+/// `amp.gain_a_per_v` is the ideal amplifier's gain whenever a file gives the command but not the
+/// current, with or without `amplifier_dynamics` (docs/formats.md: (0, 1e3]); a model without
+/// that effect did not check it, and ran a command-only file through a gain of 0 or −2.
+#[test]
+fn an_ideal_amplifier_gain_out_of_range_is_refused_for_a_command_only_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let command_only =
+        write(dir.path(), "command.csv", &csv("time_s,command_V,displacement_um", &good_rows()));
+    let sim = dir.path().join("x.csv").to_str().unwrap().to_string();
+    for gain in ["0.0", "-2.0"] {
+        let name = format!("gain{gain}.toml");
+        let p = params_with(dir.path(), &name, |t| {
+            replace_line(t, "gain_a_per_v", &format!("gain_a_per_v = {gain}"))
+        });
+        for args in [
+            vec![
+                "compare",
+                "--model",
+                "ja",
+                "--params",
+                &p,
+                "--out-dir",
+                dir.path().to_str().unwrap(),
+                &command_only,
+            ],
+            vec!["simulate", "--model", "ja", "--params", &p, "--drive", &command_only, "--out", &sim],
+        ] {
+            refused(
+                &gma(&args),
+                &["command.csv", "`amp.gain_a_per_v`", "(0, 1e3]"],
+                &format!("{} with gain {gain}", args[0]),
+            );
+        }
+        assert!(!Path::new(&sim).exists());
+    }
+}
+
+/// A `format_version` that is not an integer is a typing mistake, not a file from a newer gma:
+/// said so, with its line.
+#[test]
+fn a_format_version_that_is_not_an_integer_is_named_as_such_with_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = toml::to_string(&model_core::ActuatorParams::TERFENOL_DEMO).unwrap();
+    let out = dir.path().join("x.csv").to_str().unwrap().to_string();
+    for (name, value, what) in [
+        ("text.toml", "\"2\"", "it is not an integer"),
+        ("float.toml", "2.0", "it is not an integer"),
+        ("newer.toml", "99", "a newer gma wrote it?"),
+    ] {
+        let p = write(dir.path(), name, format!("# a comment\nformat_version = {value}\n{demo}").as_bytes());
+        let o = gma(&["simulate", "--model", "ja", "--params", &p, "--out", &out]);
+        refused(&o, &[&format!("{name}:2: format_version = {value}"), what], name);
+        if what == "it is not an integer" {
+            assert!(!stderr(&o).contains("newer gma"), "{name}: {}", stderr(&o));
+        }
+    }
+}
+
+/// The loop checks hold for the points kept: a loop whose first points are flat, cut there by
+/// `--max-samples`, is refused like a flat file (it was fitted to a 5e15 NRMSE and exit 0).
+#[test]
+fn a_loop_cut_by_max_samples_to_flat_points_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows: String = (0..20)
+        .map(|k| if k < 6 { format!("{},1000\n", k * 100) } else { format!("{},{}\n", k * 1000, k * 20000) })
+        .collect();
+    let f = write(dir.path(), "flat-start.csv", format!("H(A/m),M(A/m)\n{rows}").as_bytes());
+    let out = dir.path().join("out.toml").to_str().unwrap().to_string();
+    let o = gma(&["fit", "--model", "anhysteretic", "--max-samples", "5", "--params-out", &out, &f]);
+    refused(&o, &["flat-start.csv", "M does not vary", "--max-samples"], "a flat head");
+    assert!(!Path::new(&out).exists());
+    // The whole file fits.
+    assert!(gma(&["fit", "--model", "anhysteretic", "--effort", "0.2", &f]).status.success());
 }
 
 #[test]

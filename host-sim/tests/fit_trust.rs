@@ -179,3 +179,39 @@ fn a_fractional_sensor_delay_is_identified() {
     let d = fit.params.delay_samples;
     assert!((d - 2.6).abs() < 0.05, "delay identified as {d} samples (rig 2.6)");
 }
+
+/// With the rod's thermal lag freed (a file logs `temperature_C`), the fit runs twice: the lag
+/// held at its start value, then freed from that optimum. The second run must not end worse than
+/// the start values either, `start.kept` must say whether the returned set is the start, and the
+/// warnings about the start are the user's: a start value the first run moved into its range is
+/// said, and the lag's own start of 0 (the documented "no lag", which the first run holds) is not.
+#[test]
+fn a_fit_that_frees_the_rods_thermal_lag_never_ends_worse_than_its_start() {
+    let spec = ModelSpec::parse("ja+thermal").unwrap();
+    let truth = ActuatorParams::TERFENOL_DEMO;
+    assert_eq!(truth.thermal.rod_tau_s, 0.0);
+    let mut rec = Plant::new(spec, truth)
+        .record("hot.csv", &Excitation::Sine { freq_hz: 20.0, amplitude: 1.0, bias: 1.0 }, 1.0, 1)
+        .unwrap();
+    let dt = rec.dt_s();
+    rec.temperature_c =
+        Some((0..rec.len()).map(|k| 23.0 + 0.5 * (1.0 - (-(k as f64) * dt / 0.3).exp())).collect());
+    let files = std::slice::from_ref(&rec);
+    let opts = host_sim::fit::FitOptions::default();
+    // From the rig's own values: the search has nothing to improve.
+    let fit = host_sim::fit::fit(spec, &truth, files, opts).unwrap();
+    let start = fit.start.nrmse.expect("the start is scored");
+    let end = fit.fit.mean_nrmse();
+    assert!(end <= start, "fit NRMSE {end} above its start's {start} ({:?})", fit.start);
+    if fit.start.kept {
+        assert_eq!(fit.params.thermal, truth.thermal, "`kept` but not the start values");
+    }
+    // Held by the first run, not by --fix: not listed as fixed (JSON `fixed`, `# fixed:` lines).
+    assert!(fit.fixed.is_empty(), "{:?}", fit.fixed);
+    assert!(fit.start_moved.iter().all(|w| !w.to_string().contains("rod_tau_s")), "{:?}", fit.start_moved);
+    // A start value outside its range (c = 0.97 > 0.95) is said, whichever run the set came from.
+    let mut off = truth;
+    off.ja.c = 0.97;
+    let fit = host_sim::fit::fit(spec, &off, files, opts).unwrap();
+    assert!(fit.start_moved.iter().any(|w| w.to_string().contains("`ja.c`")), "{:?}", fit.start_moved);
+}

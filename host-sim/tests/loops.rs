@@ -134,3 +134,20 @@ fn the_laws_without_hysteresis_fit_a_loop() {
         an.nrmse[0]
     );
 }
+
+/// What a loop fit reports (`params` in the JSON, the values its NRMSE was scored at) is what
+/// `--params-out` writes: the parameter set holds f32, and the model runs on f32 values, so the
+/// reported values are those, not the search's f64 between them.
+#[test]
+fn a_loop_fit_reports_the_values_it_writes() {
+    let m = &MATERIALS[0];
+    let f = loop_file(m, false, 3);
+    let model = LoopModel::JilesAtherton(JaVariant::Bulk);
+    let opts = SearchOptions { effort: 0.2, ..SearchOptions::default() };
+    let fit = loops::fit(model, std::slice::from_ref(&f), &ActuatorParams::TERFENOL_DEMO, opts).unwrap();
+    assert!(!fit.start.kept, "{:?}", fit.start);
+    let written = model.values_of(&fit.apply_to(&ActuatorParams::TERFENOL_DEMO));
+    assert_eq!(fit.values(), written, "reported vs written");
+    let again = loops::run(model, &written, &f.h, m.h_max).unwrap();
+    assert_eq!(fit.nrmse[0], host_sim::fit::nrmse(&f.value, &again), "the NRMSE of the written set");
+}

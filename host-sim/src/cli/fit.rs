@@ -128,10 +128,8 @@ pub(crate) fn fit_recordings(
             let w = u.warnings();
             (Some(u), w)
         }
-        Err(e) => {
-            warn(format_args!("no parameter uncertainty: {e}"));
-            (None, Vec::new())
-        }
+        // A doubt like the others: on stderr and in the JSON's `warnings`.
+        Err(e) => (None, vec![Warning::NoUncertainty { why: e.to_string() }]),
     };
     // First the doubts about the inputs (a `--val` file that is a fit file), then the start's.
     warnings.splice(0..0, p.input_warnings.iter().chain(&res.start_moved).cloned());
