@@ -1001,6 +1001,7 @@ pub fn diagnose(
     let mut candidates = Vec::new();
     let mut skipped = Vec::new();
     let mut failed_refits = Vec::new();
+    let mut errored_refits = Vec::new();
     let mut unpinned = Vec::new();
     for (e, r) in results {
         let Some(r) = r else {
@@ -1029,7 +1030,13 @@ pub fn diagnose(
             _ => (base_fit_disp.clone(), base_score_disp.clone(), evidence(e, &sigs)),
         };
         let n_eff: f64 = base_fit_s.iter().map(|s| effective_samples(&s.residual)).sum();
-        let refit = r.ok().map(|(f, _)| f);
+        let refit = match r {
+            Ok((f, _)) => Some(f),
+            Err(why) => {
+                errored_refits.push(format!("`{e}` ({why:#})"));
+                None
+            }
+        };
         // The refit contains the given structure (the effect switched off or negligible), so a
         // fit cost above the baseline's is a failed search, not evidence against the effect.
         // Compared only where both costs weigh the same channels (not when `amp` adds the current
@@ -1151,6 +1158,13 @@ pub fn diagnose(
             "refits that ended worse on the fit files than the structure they extend (rms of the fit cost): {}: the \
              search failed there, so these candidates are not judged fairly",
             failed_refits.join(", ")
+        ));
+    }
+    if !errored_refits.is_empty() {
+        findings.push(format!(
+            "refits that could not be run: {}: these candidates are not judged (their rows show the baseline's \
+             error before and after)",
+            errored_refits.join(", ")
         ));
     }
     // Candidates that pass every test first, then by the size of their cut.

@@ -1227,7 +1227,10 @@ fn fit_planned(
     // The freed search starts the lag inside its range, not at the nested optimum's (a start of
     // 0, no lag, is off the log scale), so it can end above the start values the nested fit
     // kept: then the nested result stands, and a fit never ends worse than its start.
-    if nested.start.nrmse.is_some_and(|start| freed.fit.mean_nrmse() > start) {
+    // Nor above the nested optimum it started from: the larger model contains that one.
+    if freed.fit.cost() > nested.fit.cost()
+        || nested.start.nrmse.is_some_and(|start| freed.fit.mean_nrmse() > start)
+    {
         // Its lag was held by this fit, not by --fix: `fixed` lists the user's alone.
         let fixed = nested.fixed.iter().copied().filter(|(name, _)| constraints.is_fixed(name)).collect();
         return Ok(FitResult { evaluations, time_limited, fixed, ..nested });
@@ -1288,8 +1291,12 @@ fn weak_end_restarts(
         let evaluations = best.evaluations + r.evaluations;
         let time_limited = best.time_limited || r.time_limited;
         let from = best.fit.cost().sqrt();
-        if r.fit.cost() < best.fit.cost() {
-            best = FitResult { evaluations, time_limited, start: best.start, ..r };
+        // Cost and mean NRMSE can disagree (several files, extra channels): a retry must not
+        // end above the start's NRMSE either, and once taken the start set is no longer it.
+        let within_start = best.start.nrmse.is_none_or(|start| r.fit.mean_nrmse() <= start);
+        if r.fit.cost() < best.fit.cost() && within_start {
+            best =
+                FitResult { evaluations, time_limited, start: StartScore { kept: false, ..best.start }, ..r };
         } else {
             (best.evaluations, best.time_limited) = (evaluations, time_limited);
         }

@@ -506,6 +506,24 @@ fn a_constant_channel_the_model_uses_is_refused_naming_it() {
     }
 }
 
+/// A candidate whose refit cannot run (coil heating on a file whose temperature never changes:
+/// the refit refuses that channel) is said in a finding, not dropped without a word.
+#[test]
+fn diagnose_says_which_candidate_refits_could_not_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows: Vec<String> = good_rows().iter().map(|r| format!("{r},23.0")).collect();
+    let file = write(dir.path(), "flat_temperature.csv", &csv(&format!("{HEADER},temperature_C"), &rows));
+    let o = gma(&["diagnose", "--model", "ja", "--time-limit", "20", "--json", &file]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let said = j["findings"].as_array().unwrap().iter().filter_map(|f| f.as_str()).any(|f| {
+        f.starts_with("refits that could not be run")
+            && f.contains("`thermal_drift`")
+            && f.contains("`temperature_C` never changes")
+    });
+    assert!(said, "{:#}", j["findings"]);
+}
+
 /// `amp.gain_a_per_v` is the ideal amplifier's gain whenever a file gives the command but not the
 /// current, with or without `amplifier_dynamics` (docs/formats.md: (0, 1e3]); a model without
 /// that effect did not check it, and ran a command-only file through a gain of 0 or −2.
