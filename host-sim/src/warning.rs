@@ -94,6 +94,8 @@ pub enum Warning {
         first: String,
         /// The later one with the same bytes.
         again: String,
+        /// Where it counts twice.
+        counts_in: &'static str,
     },
     /// A fit file typed right after a `--val` file: `--val` takes one file, so it is fitted.
     FitFileAfterVal {
@@ -242,10 +244,9 @@ impl fmt::Display for Warning {
                 f,
                 "{val} is also a fit file (same content as {fit}): its validation figure is not independent"
             ),
-            Warning::SameInputTwice { first, again } => write!(
-                f,
-                "{again} has the same content as {first}: it counts twice in the mean NRMSE"
-            ),
+            Warning::SameInputTwice { first, again, counts_in } => {
+                write!(f, "{again} has the same content as {first}: it counts twice in {counts_in}")
+            }
             Warning::FitFileAfterVal { val, fit } => write!(
                 f,
                 "{fit} follows `--val {val}` and is read as a fit file: `--val` takes one file; repeat it \

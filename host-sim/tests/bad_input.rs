@@ -506,6 +506,28 @@ fn a_constant_channel_the_model_uses_is_refused_naming_it() {
     }
 }
 
+/// A fit file given twice (or a copy) weighs twice in the fit: said in the warnings, as `compare`
+/// says it of its mean; the same for a validation file given twice.
+#[test]
+fn a_fit_file_given_twice_is_said_to_count_twice() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(dir.path(), "good.csv", &csv(HEADER, &good_rows()));
+    let copy = write(dir.path(), "copy.csv", &csv(HEADER, &good_rows()));
+    let o = gma(&["fit", "--model", "ja", "--time-limit", "5", "--json", &good, &copy]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let warned = |what: &str| {
+        j["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter_map(|w| w.as_str())
+            .any(|w| w.contains(&format!("{copy} has the same content as {good}")) && w.contains(what))
+    };
+    assert!(warned("counts twice in the fit's cost"), "{:#}", j["warnings"]);
+    assert!(stderr(&o).contains("counts twice in the fit's cost"), "{}", stderr(&o));
+}
+
 /// A candidate whose refit cannot run (coil heating on a file whose temperature never changes:
 /// the refit refuses that channel) is said in a finding, not dropped without a word.
 #[test]

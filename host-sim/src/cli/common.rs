@@ -32,14 +32,16 @@ pub struct ModelFiles {
     /// Recordings (CSV) or magnetization-loop files to fit; `-` reads standard input.
     #[arg(required = true, value_name = "FILE")]
     pub files: Vec<PathBuf>,
-    /// A validation recording: scored, never fitted (repeat `--val` for several files).
+    /// A validation recording (or loop file, with loop files to fit): scored, never fitted
+    /// (repeat `--val` for several files).
     #[arg(long, value_name = "FILE")]
     pub val: Vec<PathBuf>,
     /// Start values and fixed parameters (TOML as `--params-out` writes, e.g. from a loop fit);
     /// default: a Terfenol-D demo set.
     #[arg(long, visible_alias = "init", value_name = "P.toml")]
     pub params: Option<PathBuf>,
-    /// Seed of the global search (same seed, same result).
+    /// Seed of the global search (same seed and inputs, same result, unless `--time-limit` cuts
+    /// the search short).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Search effort (1 = default; 2 doubles the swarm iterations, simplex steps and
@@ -257,9 +259,9 @@ pub fn check_max_samples(n: usize) -> Result<()> {
     Ok(())
 }
 
-/// As [`read_data`], and says which validation input has a fit input's content (the same file
-/// given twice, or a copy; compared by the SHA-256 of the bytes read): its validation figure
-/// would be a fit figure.
+/// As [`read_data`], and says which input repeats an earlier one's content (it counts twice), and
+/// which validation input has a fit input's content (its validation figure would be a fit
+/// figure); the same file given twice or a copy, compared by the SHA-256 of the bytes read.
 pub fn read_inputs(
     fit_in: Vec<Input>,
     val_in: Vec<Input>,
@@ -272,12 +274,27 @@ pub fn read_inputs(
     let (data, mut warnings) = read_data(fit_in, val_in, max_samples, opts)?;
     // Every input has been read to its end: the digests are final.
     let fit_sha: Vec<(String, String)> = fit_digests.into_iter().map(|(n, d)| (n, d.sha256())).collect();
-    warnings.extend(val_digests.into_iter().filter_map(|(val, d)| {
-        let sha = d.sha256();
+    warnings.extend(repeated_inputs(&fit_sha, "the fit's cost and its mean NRMSE"));
+    let val_sha: Vec<(String, String)> = val_digests.into_iter().map(|(n, d)| (n, d.sha256())).collect();
+    warnings.extend(repeated_inputs(&val_sha, "the validation files' mean NRMSE"));
+    warnings.extend(val_sha.into_iter().filter_map(|(val, sha)| {
         let (fit, _) = fit_sha.iter().find(|(_, s)| *s == sha)?;
         Some(Warning::ValidationIsFitFile { val, fit: fit.clone() })
     }));
     Ok((data, warnings))
+}
+
+/// The inputs with the content of an earlier one (name, SHA-256 of the bytes read): each counts
+/// again `counts_in` (a mean over the files, a fit's cost).
+pub fn repeated_inputs(inputs: &[(String, String)], counts_in: &'static str) -> Vec<Warning> {
+    inputs
+        .iter()
+        .enumerate()
+        .filter_map(|(k, (again, sha))| {
+            let (first, _) = inputs[..k].iter().find(|(_, s)| s == sha)?;
+            Some(Warning::SameInputTwice { first: first.clone(), again: again.clone(), counts_in })
+        })
+        .collect()
 }
 
 /// Reads opened inputs: all recordings or all loop files (decided by each first line; a first

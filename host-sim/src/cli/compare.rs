@@ -8,7 +8,7 @@ use clap::Args;
 use model_core::{ActuatorParams, ModelSpec};
 use tempfile::NamedTempFile;
 
-use super::common::{check_max_samples, read_data, Data, ReadArgs};
+use super::common::{check_max_samples, read_data, repeated_inputs, Data, ReadArgs};
 use crate::analysis;
 use crate::files::{
     check_outputs, display, open_all, output_dir, output_folder, partial_file, persist, unique_stems, Input,
@@ -21,7 +21,6 @@ use crate::provenance::Provenance;
 use crate::recording::Recording;
 use crate::report;
 use crate::results::{CompareSummary, FileScoreRow};
-use crate::warning::Warning;
 
 /// Options of `gma compare`.
 #[derive(Args)]
@@ -87,7 +86,10 @@ pub fn run(a: &CompareArgs) -> Result<()> {
     let digests: Vec<_> = inputs.iter().map(|i| (i.name.clone(), i.digest())).collect();
     let (data, mut cut) = read_data(inputs, Vec::new(), a.read.max_samples, &read_opts)?;
     // Every input has been read to its end: the digests are final.
-    cut.extend(repeated_inputs(digests.into_iter().map(|(n, d)| (n, d.sha256())).collect()));
+    cut.extend(repeated_inputs(
+        &digests.into_iter().map(|(n, d)| (n, d.sha256())).collect::<Vec<_>>(),
+        "the mean NRMSE",
+    ));
     for w in &cut {
         crate::warning::warn(w);
     }
@@ -111,19 +113,6 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         out!("{}", super::merged_json(&summary, &super::context_json(&source, &Provenance::now(None)))?);
     }
     Ok(())
-}
-
-/// The inputs with the content of an earlier one (name, SHA-256 of the bytes read): each counts
-/// again in the mean NRMSE.
-fn repeated_inputs(inputs: Vec<(String, String)>) -> Vec<Warning> {
-    inputs
-        .iter()
-        .enumerate()
-        .filter_map(|(k, (again, sha))| {
-            let (first, _) = inputs[..k].iter().find(|(_, s)| s == sha)?;
-            Some(Warning::SameInputTwice { first: first.clone(), again: again.clone() })
-        })
-        .collect()
 }
 
 /// The plots of one recording, by file-name suffix.
