@@ -640,6 +640,12 @@ fn out_of_range_arguments_are_refused_with_the_option_named() {
         refused(&gma(&args), &[expected], &args.join(" "));
     }
     assert!(!Path::new(&out).exists());
+    // A number beyond f32's range is refused as typed, not as the inf it would round to.
+    let o = gma(&["mechanics", "--mass-kg", "1e39"]);
+    assert!(!o.status.success());
+    for said in ["--mass-kg", "1e39 is beyond single precision"] {
+        assert!(stderr(&o).contains(said), "{}", stderr(&o));
+    }
     // Outputs that cannot be written are refused before any work.
     let nodir = dir.path().join("no/such/dir/p.toml").to_str().unwrap().to_string();
     let a_file = good.clone();

@@ -9,23 +9,33 @@ use serde_json::json;
 #[derive(Args)]
 pub struct MechanicsArgs {
     /// Moving mass m [kg].
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = 0.1, value_parser = f32_as_typed)]
     pub mass_kg: f32,
     /// Viscous damping c [N s/m].
-    #[arg(long, default_value_t = 3000.0)]
+    #[arg(long, default_value_t = 3000.0, value_parser = f32_as_typed)]
     pub damping_n_s_per_m: f32,
     /// Stiffness k [N/m].
-    #[arg(long, default_value_t = 9.9e6)]
+    #[arg(long, default_value_t = 9.9e6, value_parser = f32_as_typed)]
     pub stiffness_n_per_m: f32,
     /// Sample rate [Hz] of the discretisation.
-    #[arg(long, default_value_t = 10_000.0)]
+    #[arg(long, default_value_t = 10_000.0, value_parser = f32_as_typed)]
     pub sample_rate_hz: f32,
     /// Step force [N] for the printed step response.
-    #[arg(long, default_value_t = 100.0)]
+    #[arg(long, default_value_t = 100.0, value_parser = f32_as_typed)]
     pub force_n: f32,
     /// Print exactly one JSON object on stdout (the text goes to stderr).
     #[arg(long)]
     pub json: bool,
+}
+
+/// A number for an f32 option, refused as typed when beyond f32's range (parsed straight to f32,
+/// 1e39 became inf and the refusal said "got inf").
+fn f32_as_typed(s: &str) -> std::result::Result<f32, String> {
+    let v: f64 = s.trim().parse().map_err(|e| format!("{e}"))?;
+    if v.is_finite() && v.abs() > f64::from(f32::MAX) {
+        return Err(format!("{s} is beyond single precision (at most 3.4e38 in magnitude)"));
+    }
+    Ok(v as f32)
 }
 
 /// Samples of the printed step response.
