@@ -278,6 +278,8 @@ const LEGEND_FONT: u32 = 13;
 
 /// How many labels the mesh asks each axis' key points for (at most).
 const LABELS: usize = 11;
+/// Series of at most this many points are drawn with each point marked.
+const FEW_POINTS: usize = 12;
 
 /// Tick labels of a linear axis over `range`: as many decimals as the tick step needs (at least
 /// one), and 0 for a tick that rounding leaves at −0.
@@ -353,12 +355,16 @@ where
         .map_err(|e| anyhow!("{e}"))?;
     for s in &c.series {
         let color = PALETTE[s.color % PALETTE.len()];
-        let drawn = chart
-            .draw_series(LineSeries::new(
-                s.points.iter().copied().filter(|p| shown(p.0, p.1)),
-                color.stroke_width(1),
-            ))
-            .map_err(|e| anyhow!("{e}"))?;
+        let points: Vec<(f64, f64)> = s.points.iter().copied().filter(|p| shown(p.0, p.1)).collect();
+        // A series of a few points (a Bode plot of sine recordings: one per excited line) gets
+        // them marked: a bare straight line between two would read as a measured curve.
+        if points.len() <= FEW_POINTS {
+            chart
+                .draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled())))
+                .map_err(|e| anyhow!("{e}"))?;
+        }
+        let drawn =
+            chart.draw_series(LineSeries::new(points, color.stroke_width(1))).map_err(|e| anyhow!("{e}"))?;
         // An unlabelled series (a second bound line) shares its neighbour's legend entry.
         if !s.label.is_empty() {
             drawn
@@ -694,6 +700,26 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A three-point series (a Bode plot of three sine recordings) has its points marked; a
+    /// time series of hundreds of points does not.
+    #[test]
+    fn a_series_of_few_points_has_them_marked() {
+        let chart = |n: usize| Chart {
+            title: String::new(),
+            x_label: "f [Hz]".into(),
+            y_label: "gain [dB]".into(),
+            series: vec![Series {
+                label: "measured".into(),
+                points: (0..n).map(|k| (k as f64, (k as f64).sin())).collect(),
+                color: 0,
+            }],
+            y_range: None,
+        };
+        let circles = |n| svg(&chart(n), (800, 500)).unwrap().matches("<circle").count();
+        assert_eq!(circles(3), 3);
+        assert_eq!(circles(400), 0);
     }
 
     #[test]
