@@ -14,6 +14,11 @@
 //! displacement only, unless `HOLDOUT_THERMOMETER=on` (then coil heating is judged on the
 //! temperature). `HOLDOUT_FIT_SEED=N` passes `--seed N` to every diagnosis (the searches' seed;
 //! default 1), to see how far the figures move with the starting points alone.
+//!
+//! The engineer does not know the rig's magnetization law. As on the independent rig, where the
+//! J–A form is asked first, the first step asks which law fits: `gma diagnose --laws` on the
+//! complete structure given with `ja`. Every case with a hysteresis law then uses the law it
+//! names (`ja` where it names none). `HOLDOUT_LAW_STEP=off` skips the step and keeps `ja`.
 
 use std::collections::hash_map::DefaultHasher;
 use std::fs;
@@ -37,30 +42,27 @@ fn cache_dir() -> PathBuf {
 /// The complete structure of the issue: `ja` + every dynamic effect.
 const DYNAMICS: [&str; 6] = ["eddy", "mech", "amp", "aftereffect", "thermal", "delay"];
 
-/// (effect hidden, the engineer's model, rig run anhysteretic?). `none`: the complete structure;
-/// on the Preisach-like law also `none-preisach`, the complete structure with `preisach` in place
-/// of `ja` (not a hidden-effect case: diagnose never proposes `preisach`).
-fn cases(law: Law) -> Vec<(&'static str, String, bool)> {
-    let with_dynamics = |law: &str, skip: Option<&str>| {
-        let mut parts = vec![law];
-        parts.extend(DYNAMICS.iter().copied().filter(|d| Some(*d) != skip));
-        parts.join("+")
-    };
-    let mut cases = vec![
+/// The model with `law` and every dynamic effect but `skip`.
+fn with_dynamics(law: &str, skip: Option<&str>) -> String {
+    let mut parts = vec![law];
+    parts.extend(DYNAMICS.iter().copied().filter(|d| Some(*d) != skip));
+    parts.join("+")
+}
+
+/// (effect hidden, the engineer's model, rig run anhysteretic?), the hysteresis law being
+/// `law` (the one the law step named). `none`: the complete structure.
+fn cases(law: &str) -> Vec<(&'static str, String, bool)> {
+    vec![
         ("saturation", with_dynamics("linear", None), true),
         ("hysteresis", with_dynamics("anhysteretic", None), false),
-        ("eddy_current", with_dynamics("ja", Some("eddy")), false),
-        ("mechanical_dynamics", with_dynamics("ja", Some("mech")), false),
-        ("amplifier_dynamics", with_dynamics("ja", Some("amp")), false),
-        ("magnetic_aftereffect", with_dynamics("ja", Some("aftereffect")), false),
-        ("thermal_drift", with_dynamics("ja", Some("thermal")), false),
-        ("sensor_delay", with_dynamics("ja", Some("delay")), false),
-        ("none", with_dynamics("ja", None), false),
-    ];
-    if law == Law::LorentzPreisach {
-        cases.push(("none-preisach", with_dynamics("preisach", None), false));
-    }
-    cases
+        ("eddy_current", with_dynamics(law, Some("eddy")), false),
+        ("mechanical_dynamics", with_dynamics(law, Some("mech")), false),
+        ("amplifier_dynamics", with_dynamics(law, Some("amp")), false),
+        ("magnetic_aftereffect", with_dynamics(law, Some("aftereffect")), false),
+        ("thermal_drift", with_dynamics(law, Some("thermal")), false),
+        ("sensor_delay", with_dynamics(law, Some("delay")), false),
+        ("none", with_dynamics(law, None), false),
+    ]
 }
 
 /// Fit drives: broadband, slow and hot, and a chirp through the first rod mode.
@@ -250,62 +252,137 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
-fn run_law(law: Law) -> Vec<Row> {
+/// One `gma diagnose` of `model` on the rig's files, with `extra` arguments; its row and JSON
+/// (kept under the cache directory as `{law}-{hidden}-diagnose.json`).
+fn diagnose_case(
+    law: Law,
+    hidden: &'static str,
+    model: &str,
+    anhysteretic: bool,
+    params: &Path,
+    extra: &[&str],
+) -> (Row, Value) {
+    let r = rig(law, anhysteretic);
+    let fit: Vec<PathBuf> = fit_drives().iter().map(|(n, d)| recording(&r, n, d)).collect();
+    let val: Vec<PathBuf> = validation_drives().iter().map(|(n, d)| recording(&r, n, d)).collect();
+    let mut args: Vec<String> = vec!["diagnose".into(), "--model".into(), model.to_string()];
+    args.extend(["--params".into(), params.display().to_string(), "--json".into()]);
+    args.extend(extra.iter().map(|a| a.to_string()));
+    if let Ok(seed) = std::env::var("HOLDOUT_FIT_SEED") {
+        args.extend(["--seed".into(), seed]);
+    }
+    for v in &val {
+        args.extend(["--val".into(), v.display().to_string()]);
+    }
+    args.extend(fit.iter().map(|f| f.display().to_string()));
+    let started = std::time::Instant::now();
+    let argv: Vec<&str> = args.iter().map(String::as_str).collect();
+    let (ok, json) = run_json(&argv);
+    let seconds = started.elapsed().as_secs_f64();
+    assert!(ok, "{} {hidden}: diagnose failed: {json}", law.name());
+    fs::write(cache_dir().join(format!("{}-{hidden}-diagnose.json", law.name())), json.to_string()).unwrap();
+    let verdict = json["verdict"].as_str().unwrap_or("null").to_string();
+    let candidate = json["candidates"].as_array().and_then(|c| c.iter().find(|c| c["effect"] == hidden));
+    let (before, after) = candidate
+        .map(|c| (number(&c["nrmse_before"]), number(&c["nrmse_after"])))
+        .unwrap_or((f64::NAN, f64::NAN));
+    let row = Row {
+        hidden,
+        model: model.to_string(),
+        verdict,
+        baseline_val: number(&json["nrmse_val"]),
+        before,
+        after,
+        seconds,
+    };
+    (row, json)
+}
+
+fn print_row(law: Law, row: &Row) {
+    println!(
+        "| {} | {} | `{}` | {} | {:.3} % | {:.3} % | {:.3} % | {:.2}× | {:.0} s |",
+        law.name(),
+        row.hidden,
+        row.model,
+        row.verdict,
+        100.0 * row.baseline_val,
+        100.0 * row.before,
+        100.0 * row.after,
+        row.cut(),
+        row.seconds
+    );
+}
+
+/// The law step's outcome: the law every case then uses, and a line saying what `--laws` found.
+struct LawStep {
+    law: String,
+    said: String,
+}
+
+/// `gma diagnose --laws` on the complete structure given with `ja` (the engineer does not know
+/// the rig's law): the law it names as fitting better, else `ja`. Its row is the complete case
+/// when `ja` stays (the laws' comparison is a finding; it leaves the verdict alone).
+fn law_step(law: Law, params: &Path) -> (LawStep, Row) {
+    let model = with_dynamics("ja", None);
+    let (row, json) = diagnose_case(law, "law-step", &model, false, params, &["--laws"]);
+    let laws =
+        json["laws"].as_array().unwrap_or_else(|| panic!("{}: --laws gave no laws[]: {json}", law.name()));
+    let figures: Vec<String> = laws
+        .iter()
+        .map(|l| {
+            format!(
+                "`{}` {:.3} %{}",
+                l["law"].as_str().unwrap_or("?"),
+                100.0 * number(&l["nrmse"]),
+                if l["fits_better"] == true { " (named)" } else { "" }
+            )
+        })
+        .collect();
+    let named = laws.iter().find(|l| l["fits_better"] == true).and_then(|l| l["law"].as_str());
+    let chosen = named.unwrap_or("ja").to_string();
+    let said = format!(
+        "law step on the {} law (`diagnose --laws`, complete structure given with `ja`, scored files): {}; cases use `{chosen}`",
+        law.name(),
+        figures.join(", ")
+    );
+    (LawStep { law: chosen, said }, row)
+}
+
+fn run_law(law: Law) -> (Vec<Row>, String) {
     let only: Option<Vec<String>> =
         std::env::var("HOLDOUT_CASES").ok().map(|s| s.split(',').map(str::to_string).collect());
-    let files = |anhysteretic: bool| {
-        let r = rig(law, anhysteretic);
-        let fit: Vec<PathBuf> = fit_drives().iter().map(|(n, d)| recording(&r, n, d)).collect();
-        let val: Vec<PathBuf> = validation_drives().iter().map(|(n, d)| recording(&r, n, d)).collect();
-        (fit, val)
-    };
-    let (fit_full, _) = files(false);
+    let fit_full: Vec<PathBuf> =
+        fit_drives().iter().map(|(n, d)| recording(&rig(law, false), n, d)).collect();
     let params = engineer_params(&fit_full[0], law);
     plane_as_advised(&params, &fit_full);
+    let (step, given_complete) = if std::env::var("HOLDOUT_LAW_STEP").is_ok_and(|v| v == "off") {
+        (
+            LawStep {
+                law: "ja".into(),
+                said: format!("law step skipped on the {} law: cases use `ja`", law.name()),
+            },
+            None,
+        )
+    } else {
+        let (step, row) = law_step(law, &params);
+        (step, Some(row))
+    };
     let mut rows = Vec::new();
-    for (hidden, model, anhysteretic) in cases(law) {
+    for (hidden, model, anhysteretic) in cases(&step.law) {
         if only.as_ref().is_some_and(|o| !o.iter().any(|c| c == hidden)) {
             continue;
         }
-        let (fit, val) = files(anhysteretic);
-        let mut args: Vec<String> = vec!["diagnose".into(), "--model".into(), model.clone()];
-        args.extend(["--params".into(), params.display().to_string(), "--json".into()]);
-        if let Ok(seed) = std::env::var("HOLDOUT_FIT_SEED") {
-            args.extend(["--seed".into(), seed]);
-        }
-        for v in &val {
-            args.extend(["--val".into(), v.display().to_string()]);
-        }
-        args.extend(fit.iter().map(|f| f.display().to_string()));
-        let started = std::time::Instant::now();
-        let argv: Vec<&str> = args.iter().map(String::as_str).collect();
-        let (ok, json) = run_json(&argv);
-        let seconds = started.elapsed().as_secs_f64();
-        assert!(ok, "{} {hidden}: diagnose failed: {json}", law.name());
-        fs::write(cache_dir().join(format!("{}-{hidden}-diagnose.json", law.name())), json.to_string())
-            .unwrap();
-        let verdict = json["verdict"].as_str().unwrap_or("null").to_string();
-        let candidate = json["candidates"].as_array().and_then(|c| c.iter().find(|c| c["effect"] == hidden));
-        let (before, after) = candidate
-            .map(|c| (number(&c["nrmse_before"]), number(&c["nrmse_after"])))
-            .unwrap_or((f64::NAN, f64::NAN));
-        let row =
-            Row { hidden, model, verdict, baseline_val: number(&json["nrmse_val"]), before, after, seconds };
-        println!(
-            "| {} | {} | `{}` | {} | {:.3} % | {:.3} % | {:.3} % | {:.2}× | {:.0} s |",
-            law.name(),
-            row.hidden,
-            row.model,
-            row.verdict,
-            100.0 * row.baseline_val,
-            100.0 * row.before,
-            100.0 * row.after,
-            row.cut(),
-            row.seconds
-        );
+        let row = match &given_complete {
+            // The law step's own run is this case when the law stayed `ja`.
+            Some(given) if hidden == "none" && given.model == model => {
+                Row { hidden, model, verdict: given.verdict.clone(), ..*given }
+            }
+            _ => diagnose_case(law, hidden, &model, anhysteretic, &params, &[]).0,
+        };
+        print_row(law, &row);
         rows.push(row);
     }
-    rows
+    (rows, step.said)
 }
 
 #[test]
@@ -316,21 +393,14 @@ fn hidden_effects_on_the_holdout_rig() {
     );
     println!("|---|---|---|---|---|---|---|---|---|");
     let mut summaries = Vec::new();
-    let mut preisach_complete = String::new();
+    let mut steps = Vec::new();
     for law in [Law::ColemanHodgdon, Law::LorentzPreisach] {
-        let rows = run_law(law);
-        let hidden: Vec<&Row> = rows.iter().filter(|r| !r.hidden.starts_with("none")).collect();
+        let (rows, step) = run_law(law);
+        steps.push(step);
+        let hidden: Vec<&Row> = rows.iter().filter(|r| r.hidden != "none").collect();
         let named = hidden.iter().filter(|r| r.verdict == r.hidden).count();
         let cuts: Vec<f64> = hidden.iter().map(|r| r.cut()).filter(|c| c.is_finite()).collect();
         let complete = rows.iter().find(|r| r.hidden == "none");
-        if let Some(p) = rows.iter().find(|r| r.hidden == "none-preisach") {
-            preisach_complete = format!(
-                "complete structure with `preisach` for `ja` on the {} law: verdict {}, val NRMSE {:.3} %",
-                law.name(),
-                p.verdict,
-                100.0 * p.baseline_val
-            );
-        }
         summaries.push(format!(
             "| {} | {named} of {} | {:.2}× | {:.2}× | {} | {} |",
             law.name(),
@@ -342,7 +412,7 @@ fn hidden_effects_on_the_holdout_rig() {
         ));
         for r in &rows {
             assert!(r.baseline_val.is_finite() && r.seconds.is_finite(), "{}: non-finite figures", r.hidden);
-            if !r.hidden.starts_with("none") {
+            if r.hidden != "none" {
                 assert!(r.before.is_finite() && r.after.is_finite(), "{}: no candidate row", r.hidden);
             }
         }
@@ -353,7 +423,10 @@ fn hidden_effects_on_the_holdout_rig() {
     for s in summaries {
         println!("{s}");
     }
-    println!("\n{preisach_complete}");
+    println!();
+    for step in steps {
+        println!("{step}");
+    }
 }
 
 #[test]
