@@ -87,9 +87,11 @@ fn other_law(spec: ModelSpec) -> Result<((&'static str, &'static str), ModelSpec
     }
 }
 
-/// Refuses `--laws` on a structure without a hysteresis law.
-pub fn check_laws(spec: ModelSpec) -> Result<()> {
-    other_law(spec).map(|_| ())
+/// The structure `--laws` refits: `spec` with the other hysteresis law (its start values come
+/// from the same parameter file, so the CLI checks the file for it before any fit), or why there
+/// is none (a structure without a hysteresis law is refused).
+pub fn other_law_structure(spec: ModelSpec) -> Result<ModelSpec> {
+    other_law(spec).map(|(_, other)| other)
 }
 
 /// An alternative structure and where its fit starts.
