@@ -46,7 +46,7 @@ mod alternatives;
 use crate::progress;
 use crate::recording::Recording;
 pub(crate) use crate::spectral::effective_samples;
-pub use alternatives::{check_ja_variants, check_laws, LawScore, VariantScore};
+pub use alternatives::{check_ja_variants, other_law_structure, LawScore, VariantScore};
 
 /// A candidate must cut the scored NRMSE at least this much to be the verdict (the issue's
 /// smallest useful cut: below it, adding the effect is not worth its parameters to a user).

@@ -132,6 +132,18 @@ pub fn load_input(
     spec: ModelSpec,
     role: &str,
 ) -> Result<(ActuatorParams, ParamSource)> {
+    load_input_also_for(input, spec, None, role)
+}
+
+/// As [`load_input`], the file also checked for `also`: a structure the command fits from the
+/// same start values (`diagnose --laws`'s other law), named by its role. Its tables must be
+/// valid too, and those the file leaves out are said and listed, as the model's own are.
+pub fn load_input_also_for(
+    input: Option<Input>,
+    spec: ModelSpec,
+    also: Option<(ModelSpec, &str)>,
+    role: &str,
+) -> Result<(ActuatorParams, ParamSource)> {
     match input {
         None => {
             eprintln!("gma: note: no --params: {role} are the built-in Terfenol-D demo set");
@@ -140,9 +152,24 @@ pub fn load_input(
         }
         Some(input) => {
             let name = input.name.clone();
-            let f = parse_file(&name, &input.into_text(MAX_PARAM_FILE_BYTES)?, spec)?;
+            let text = input.into_text(MAX_PARAM_FILE_BYTES)?;
+            let mut f = parse_file(&name, &text, spec)?;
             if let Some(note) = defaulted_note(&name, &f.defaulted) {
                 eprintln!("gma: note: {note}");
+            }
+            if let Some((other, what)) = also {
+                let extra: Vec<&'static str> = parse_file(&name, &text, other)?
+                    .defaulted
+                    .into_iter()
+                    .filter(|t| !f.defaulted.contains(t))
+                    .collect();
+                if !extra.is_empty() {
+                    eprintln!(
+                        "gma: note: {name} has no {} for `{other}` ({what}): the demo set's values stand in",
+                        extra.iter().map(|t| format!("`{t}`")).collect::<Vec<_>>().join(", ")
+                    );
+                }
+                f.defaulted.extend(extra);
             }
             // Valid to model-core (it steps), but not a J–A model: said wherever the file is used.
             if let Some(why) = crate::fit::multivalued_ja(spec, &f.params) {

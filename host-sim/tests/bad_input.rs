@@ -1013,3 +1013,39 @@ fn fit_on_data_no_model_can_follow_gives_finite_parameters_or_says_so() {
         println!("{name}: {}", if o.status.success() { "finite parameters".into() } else { err });
     }
 }
+
+/// `diagnose --laws` refits the structure with the other hysteresis law from the same parameter
+/// file, so the file is checked for that structure too, before any fit: a `[preisach]` value out
+/// of range is refused with its line (it ended the run after the whole diagnosis, without the
+/// file's name), and a file without `[preisach]` says that the demo set's values stand in (they
+/// did, without a word).
+#[test]
+fn laws_checks_the_parameter_file_for_the_other_law_before_any_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(dir.path(), "good.csv", &csv(HEADER, &good_rows()));
+    let demo = toml::to_string(&model_core::ActuatorParams::TERFENOL_DEMO).unwrap();
+    let line = demo.lines().position(|l| l.starts_with("h_max_a_per_m =")).unwrap() + 1;
+    let bad = params_with(dir.path(), "bad_plane.toml", |t| {
+        replace_line(t, "h_max_a_per_m", "h_max_a_per_m = -1.0")
+    });
+    let o = gma(&["diagnose", "--model", "ja", "--laws", "--params", &bad, &good]);
+    let at = format!("bad_plane.toml:{line}: ");
+    refused(&o, &[&at, "`preisach.h_max_a_per_m` is out of range", "preisach"], "--laws, bad [preisach]");
+    assert!(!stderr(&o).contains("fitting the given model"), "refused after a fit:\n{}", stderr(&o));
+
+    let without: String = {
+        let start = demo.find("[preisach]").unwrap();
+        let end = demo[start + 1..].find("\n[").map_or(demo.len(), |k| start + 1 + k + 1);
+        format!("{}{}", &demo[..start], &demo[end..])
+    };
+    let p = write(dir.path(), "no_plane.toml", without.as_bytes());
+    let o = gma(&["diagnose", "--model", "ja", "--laws", "--json", "--params", &p, &good]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["parameters_defaulted"], serde_json::json!(["preisach"]), "{j:#}");
+    assert!(stderr(&o).contains("no_plane.toml has no `preisach`"), "{}", stderr(&o));
+    // Without --laws the table is not used, and not said.
+    let o = gma(&["diagnose", "--model", "ja", "--json", "--params", &p, &good]);
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["parameters_defaulted"], serde_json::json!([]), "{j:#}");
+}

@@ -205,7 +205,20 @@ impl ModelFiles {
     /// Parses the spec, opens every input once (files, `-`, pipes), checks the `outputs` (none
     /// may be an input, a link or a device; their folders must take files), then reads the data.
     pub fn prepare(&self, outputs: &[&Path]) -> Result<Prepared> {
+        self.prepare_also_for(outputs, |_| Ok(None))
+    }
+
+    /// As [`ModelFiles::prepare`], the parameter file (and the Preisach plane's advice) also
+    /// checked for the structure `also` gives from the spec, with its role: one the command
+    /// fits from the same start values (`diagnose --laws`: the other law). `also` refuses a spec
+    /// it has no structure for, before any file is read.
+    pub fn prepare_also_for(
+        &self,
+        outputs: &[&Path],
+        also: impl Fn(ModelSpec) -> Result<Option<(ModelSpec, &'static str)>>,
+    ) -> Result<Prepared> {
         let spec = params::parse_spec(&self.model)?;
+        let also = also(spec)?;
         check_max_samples(self.read.max_samples)?;
         if !(self.effort.is_finite() && self.effort > 0.0 && self.effort <= 20.0) {
             bail!("--effort must be in (0, 20], got {}", self.effort);
@@ -216,13 +229,16 @@ impl ModelFiles {
         let (fit_in, val_in) = (open_all(&self.files)?, open_all(&self.val)?);
         let all: Vec<_> = fit_in.iter().chain(&val_in).chain(params_input.as_ref()).map(Input::id).collect();
         check_outputs(outputs, &all)?;
-        let (init, params_source) = params::load_input(params_input, spec, "start values")?;
+        let (init, params_source) = params::load_input_also_for(params_input, spec, also, "start values")?;
         let (data, mut input_warnings) = read_inputs(fit_in, val_in, self.read.max_samples, &read_opts)?;
         if let Data::Recordings(fit_files, val_files) = &data {
             for r in fit_files.iter().chain(val_files) {
                 fit::drive_for(spec, r)?;
             }
             input_warnings.extend(fit::preisach_plane_advice(spec, &init, fit_files));
+            if let Some((other, _)) = also {
+                input_warnings.extend(fit::preisach_plane_advice(other, &init, fit_files));
+            }
         }
         let args: Vec<std::ffi::OsString> = std::env::args_os().collect();
         input_warnings.extend(fit_files_after_val(&args, &self.files).into_iter().map(|(val, fit)| {

@@ -4,7 +4,7 @@ use anyhow::{bail, Result};
 use clap::Args;
 
 use super::common::{Data, ModelFiles};
-use crate::diagnose::{check_ja_variants, check_laws, diagnose};
+use crate::diagnose::{check_ja_variants, diagnose, other_law_structure};
 use crate::provenance::Provenance;
 
 /// Options of `gma diagnose`. Its files are displacement recordings only (the shared `FILE`
@@ -29,16 +29,18 @@ pub struct DiagnoseArgs {
 
 /// Runs `gma diagnose`.
 pub fn run(a: &DiagnoseArgs) -> Result<()> {
-    let p = a.mf.prepare(&[])?;
+    // The other law's fit starts from the same parameter file: checked for it, before any fit.
+    let p = a.mf.prepare_also_for(&[], |spec| {
+        a.laws
+            .then(|| other_law_structure(spec).map(|o| (o, "the other law, refitted by --laws")))
+            .transpose()
+    })?;
     p.warn_about_inputs();
     let Data::Recordings(fit_files, val_files) = &p.data else {
         bail!("diagnose works on displacement recordings; for magnetization loops use `gma fit` and `gma compare`");
     };
     if a.ja_variants {
         check_ja_variants(p.spec)?;
-    }
-    if a.laws {
-        check_laws(p.spec)?;
     }
     let mut d = diagnose(p.spec, &p.init, fit_files, val_files, p.opts)?;
     // Mechanics is always a candidate (or in the model): said first when no file can show it.

@@ -87,9 +87,11 @@ fn other_law(spec: ModelSpec) -> Result<((&'static str, &'static str), ModelSpec
     }
 }
 
-/// Refuses `--laws` on a structure without a hysteresis law.
-pub fn check_laws(spec: ModelSpec) -> Result<()> {
-    other_law(spec).map(|_| ())
+/// The structure `--laws` refits: `spec` with the other hysteresis law (its start values come
+/// from the same parameter file, so the CLI checks the file for it before any fit), or why there
+/// is none (a structure without a hysteresis law is refused).
+pub fn other_law_structure(spec: ModelSpec) -> Result<ModelSpec> {
+    other_law(spec).map(|(_, other)| other)
 }
 
 /// An alternative structure and where its fit starts.
@@ -116,9 +118,20 @@ struct Comparison {
     /// "validation files" or "fit files".
     on: &'static str,
     alternatives: Vec<Compared>,
+    /// Alternatives not refitted: `--time-limit` (or Ctrl-C) came first. Their start values
+    /// are no fit, so they are left out, as candidates are.
+    not_refitted: Vec<&'static str>,
 }
 
 impl Comparison {
+    /// The alternatives left out, in words ("" when none).
+    fn not_refitted_words(&self) -> String {
+        if self.not_refitted.is_empty() {
+            return String::new();
+        }
+        format!("; not refitted (--time-limit reached first), left out: `{}`", self.not_refitted.join("`, `"))
+    }
+
     /// The lowest alternative that passes the rule (ΔBIC > 0 too when `bic`).
     fn better(&self, bic: bool) -> Option<&Compared> {
         self.alternatives
@@ -158,9 +171,13 @@ impl Diagnosis {
             alternatives.len() as u64,
         );
         type Refit = (Vec<Scored>, bool, usize);
-        let refits: Vec<(Alternative, Result<Refit>)> = alternatives
+        let refits: Vec<(Alternative, Option<Result<Refit>>)> = alternatives
             .into_par_iter()
             .map(|a| {
+                // Past the deadline an alternative is not refitted at all (and said so).
+                if fit::time_left(opts.deadline).is_some_and(|t| t.is_zero()) {
+                    return (a, None);
+                }
                 let refit =
                     fit::fit_from(a.spec, &a.starts, fit_files, FitOptions { progress: false, ..opts });
                 let scored = refit.and_then(|f| {
@@ -171,12 +188,18 @@ impl Diagnosis {
                     ))
                 });
                 phase.step(&format!("diagnose: `{}` refitted", a.name));
-                (a, scored)
+                (a, Some(scored))
             })
             .collect();
         phase.finish();
         let mut compared = Vec::new();
+        let mut not_refitted = Vec::new();
         for (a, scored) in refits {
+            let Some(scored) = scored else {
+                self.time_limited = true;
+                not_refitted.push(a.name);
+                continue;
+            };
             let (after, time_limited, free) = scored?;
             self.time_limited |= time_limited;
             let delta_bic = information_gain(&before, &after, &n_eff_files)
@@ -195,6 +218,7 @@ impl Diagnosis {
             files_scored: before.len(),
             on: if val_files.is_empty() { "fit files" } else { "validation files" },
             alternatives: compared,
+            not_refitted,
         })
     }
 
@@ -252,10 +276,11 @@ impl Diagnosis {
         let on = c.on;
         let listed =
             rows.iter().map(|r| format!("`{}` {:.2} %", r.variant, r.nrmse * 100.0)).collect::<Vec<_>>();
+        let not_refitted = c.not_refitted_words();
         self.findings.push(match rows.iter().find(|r| r.fits_better) {
             Some(b) => format!(
                 "J–A form: `{}` fits better than the given `{}` ({:.2} % against {:.2} % on the {on}, {:.2}× lower, on {} of {}; \
-                 all forms: {}): set `[ja] variant = \"{}\"`",
+                 all forms: {}{not_refitted}): set `[ja] variant = \"{}\"`",
                 b.variant,
                 rows[0].variant,
                 b.nrmse * 100.0,
@@ -266,8 +291,14 @@ impl Diagnosis {
                 listed.join(", "),
                 b.variant
             ),
+            None if c.alternatives.is_empty() => format!(
+                "J–A form: no other form was compared with the given `{}` ({:.2} % on the {on}){not_refitted}",
+                rows[0].variant,
+                rows[0].nrmse * 100.0
+            ),
             None => format!(
-                "J–A form: no form fits clearly better than the given `{}` (cut ≥ {MIN_CUT}× on {} of the {on}): {}",
+                "J–A form: no form fits clearly better than the given `{}` (cut ≥ {MIN_CUT}× on {} of the {on}): \
+                 {}{not_refitted}",
                 rows[0].variant,
                 required_wins(rows[0].files_scored),
                 listed.join(", ")
@@ -302,8 +333,26 @@ impl Diagnosis {
             "with the other law",
         )?;
         let better = c.better(true).is_some();
-        let a = &c.alternatives[0];
         let on = c.on;
+        let given_row = LawScore {
+            law: given,
+            model: spec.to_string(),
+            given: true,
+            nrmse: c.given_nrmse,
+            files_improved: 0,
+            files_scored: c.files_scored,
+            delta_bic: 0.0,
+            fits_better: false,
+        };
+        let Some(a) = c.alternatives.first() else {
+            self.findings.push(format!(
+                "hysteresis law: `{other}` was not compared with the given `{given}` ({:.2} % on the {on}){}",
+                c.given_nrmse * 100.0,
+                c.not_refitted_words()
+            ));
+            self.laws = Some(vec![given_row]);
+            return Ok(());
+        };
         self.findings.push(if better {
             format!(
                 "hysteresis law: `{other}` fits better than the given `{given}` ({:.2} % against {:.2} % on the {on}, \
@@ -329,16 +378,7 @@ impl Diagnosis {
             )
         });
         self.laws = Some(vec![
-            LawScore {
-                law: given,
-                model: spec.to_string(),
-                given: true,
-                nrmse: c.given_nrmse,
-                files_improved: 0,
-                files_scored: c.files_scored,
-                delta_bic: 0.0,
-                fits_better: false,
-            },
+            given_row,
             LawScore {
                 law: other,
                 model: a.spec.to_string(),
