@@ -627,9 +627,24 @@ impl Channel {
 /// The channels besides the displacement that every file measured.
 #[derive(Clone, Copy)]
 struct Measured {
+    /// `current_A` and `command_V`: the amplifier is judged command → current.
     current: bool,
+    /// `flux_density_T` (a search coil).
     flux: bool,
+    /// `temperature_C` (the coil's).
     temperature: bool,
+}
+
+impl Measured {
+    /// What every fit and scored file logs.
+    fn in_every(fit_files: &[Recording], score_files: &[Recording]) -> Self {
+        let all = |has: fn(&Recording) -> bool| fit_files.iter().chain(score_files).all(has);
+        Measured {
+            current: all(|r| r.current_a.is_some() && r.command_v.is_some()),
+            flux: all(|r| r.flux_density_t.is_some()),
+            temperature: all(|r| r.temperature_c.is_some()),
+        }
+    }
 }
 
 /// Per file, the scored residual on `channel` after the file's burn-in `skip`.
@@ -857,7 +872,7 @@ pub fn diagnose(
     let evidence_phase =
         progress::Phase::start(opts.progress, "diagnose: residual evidence and trends across files", 0);
     // With a search coil on every file, the stages before the strain are judged on its flux.
-    let flux_measured = fit_files.iter().chain(score_files).all(|r| r.flux_density_t.is_some());
+    let flux_measured = Measured::in_every(fit_files, score_files).flux;
     let base_sims: Vec<Simulation> =
         fit_files.iter().map(|rec| simulate(spec, &base.params, rec)).collect::<Result<_>>()?;
     let signals_on = |flux: bool| -> Vec<Signals> {
@@ -981,15 +996,8 @@ pub fn diagnose(
     refitting.finish();
     // With `current_A` and `command_V` in every file, amplifier dynamics is judged on the current
     // channel: command → current by a static gain (the baseline) against the refit's amplifier.
-    let current_measured =
-        fit_files.iter().chain(score_files).all(|r| r.current_a.is_some() && r.command_v.is_some());
-    let static_amp = current_measured.then(|| StaticGain::fit(fit_files, &fit_skip));
-    // With `temperature_C` in every file, coil heating is judged on the temperature.
-    let measured = Measured {
-        current: current_measured,
-        flux: flux_measured,
-        temperature: fit_files.iter().chain(score_files).all(|r| r.temperature_c.is_some()),
-    };
+    let measured = Measured::in_every(fit_files, score_files);
+    let static_amp = measured.current.then(|| StaticGain::fit(fit_files, &fit_skip));
     let (base_fit_flux, base_score_flux) = if flux_measured {
         (
             channel_scores(spec, &base.params, fit_files, &fit_skip, Channel::FluxDensity)?,

@@ -887,11 +887,13 @@ fn a_search_coils_flux_density_is_a_scored_channel_of_fit_compare_and_diagnose()
         assert!((v[0] - v[1] - v[2]).abs() < 1e-12, "{line}");
     }
     // diagnose judges the rod's effects on the flux density, the amplifier on the current, coil
-    // heating on the rig's logged temperature, the rest on the displacement.
+    // heating on the rig's logged temperature, the rest on the displacement; `--laws` compares
+    // the laws on the flux density too, the channel nearest them.
     let d = json(&gma(&[
         "diagnose",
         "--model",
         "ja+mech",
+        "--laws",
         "--json",
         "--val",
         &p("v.csv"),
@@ -907,6 +909,19 @@ fn a_search_coils_flux_density_is_a_scored_channel_of_fit_compare_and_diagnose()
         };
         assert_eq!(c["channel"], expected, "{c}");
     }
+    let laws = d["laws"].as_array().unwrap_or_else(|| panic!("no laws in {d:#}"));
+    assert!(laws.iter().all(|l| l["channel"] == "flux_density"), "{d:#}");
+    // The given law's score is the baseline's on that channel, as the flux candidates' before.
+    let eddy = d["candidates"].as_array().unwrap().iter().find(|c| c["effect"] == "eddy_current").unwrap();
+    let (given, before) = (laws[0]["nrmse"].as_f64().unwrap(), eddy["nrmse_before"].as_f64().unwrap());
+    assert!((given - before).abs() < 1e-12, "{given} against {before}: {d:#}");
+    let finding = d["findings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|f| f.as_str())
+        .find(|f| f.starts_with("hysteresis law:"));
+    assert!(finding.is_some_and(|f| f.contains("on the flux density")), "{d:#}");
 }
 
 /// `gma simulate --search-coil` writes the simulated rod's flux density B = μ0 (H + M) beside the

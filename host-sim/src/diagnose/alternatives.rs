@@ -4,10 +4,14 @@
 //! changes form or kind — so neither is a verdict; each gives a finding and a JSON table.
 //!
 //! Each alternative is fitted from the baseline's values (the dynamics it found carry over) and
-//! from the engineer's start values, the better kept, and scored like the candidates (validation
-//! files, else fit files, after each burn-in). It is named as fitting better by the candidates'
-//! rule: cut ≥ [`MIN_CUT`]×, lower on [`required_wins`] of the scored files, and — for the laws,
-//! whose parameter counts differ — a positive ΔBIC with the effective sample size.
+//! from the engineer's start values, the better kept, and scored like the candidates of the
+//! magnetization stage: validation files, else fit files, after each burn-in, on the flux density
+//! when every file logs a search coil's `flux_density_T` (nearest the law), else on the
+//! displacement. It is named as fitting better by the candidates' rule: cut ≥ [`MIN_CUT`]× —
+//! [`DECISIVE_CUT`]× when only the fit files score it, as for a candidate without a significant
+//! signature (an alternative has none, and a law fitted to the files it is scored on gains from
+//! any flexibility) — lower on [`required_wins`] of the scored files, and, for the laws, whose
+//! parameter counts differ, a positive ΔBIC with the effective sample size.
 
 use anyhow::{bail, Result};
 use model_core::magnetization::JaVariant;
@@ -16,8 +20,8 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::{
-    burn_in, displacement_scores, effective_samples, estimated_states, information_gain, mean, required_wins,
-    Diagnosis, Scored, MIN_CUT,
+    burn_in, channel_scores, effective_samples, error_cut, estimated_states, information_gain, mean,
+    required_wins, Channel, Diagnosis, Measured, Scored, DECISIVE_CUT, MIN_CUT,
 };
 use crate::fit::{self, FitOptions};
 use crate::progress;
@@ -30,9 +34,11 @@ pub struct VariantScore {
     pub variant: &'static str,
     /// The form the parameter file gave (its score is the baseline's).
     pub given: bool,
-    /// Mean displacement NRMSE on the scored files (validation, else fit), after each burn-in.
+    /// The channel scored: `flux_density` when every file logs it, else `displacement`.
+    pub channel: &'static str,
+    /// Mean NRMSE on `channel` of the scored files (validation, else fit), after each burn-in.
     pub nrmse: f64,
-    /// Scored files on which it is lower than the given form.
+    /// Scored files on which it is lower than the given form (0 for the given form).
     pub files_improved: usize,
     /// Scored files.
     pub files_scored: usize,
@@ -49,9 +55,11 @@ pub struct LawScore {
     pub model: String,
     /// The law the structure was given with (its score is the baseline's).
     pub given: bool,
-    /// Mean displacement NRMSE on the scored files (validation, else fit), after each burn-in.
+    /// The channel scored: `flux_density` when every file logs it, else `displacement`.
+    pub channel: &'static str,
+    /// Mean NRMSE on `channel` of the scored files (validation, else fit), after each burn-in.
     pub nrmse: f64,
-    /// Scored files on which it is lower than the given law.
+    /// Scored files on which it is lower than the given law (0 for the given law).
     pub files_improved: usize,
     /// Scored files.
     pub files_scored: usize,
@@ -115,21 +123,77 @@ struct Compared {
 struct Comparison {
     given_nrmse: f64,
     files_scored: usize,
-    /// "validation files" or "fit files".
-    on: &'static str,
+    channel: Channel,
+    /// The scored files are validation files (held out from every fit).
+    held_out: bool,
     alternatives: Vec<Compared>,
     /// Alternatives not refitted: `--time-limit` (or Ctrl-C) came first. Their start values
     /// are no fit, so they are left out, as candidates are.
     not_refitted: Vec<&'static str>,
+    /// Alternatives whose refit or scoring failed, with the reason: left out, the rest of the
+    /// diagnosis stands.
+    errored: Vec<String>,
 }
 
 impl Comparison {
-    /// The alternatives left out, in words ("" when none).
-    fn not_refitted_words(&self) -> String {
-        if self.not_refitted.is_empty() {
-            return String::new();
+    /// The channel scored, in words.
+    fn channel_words(&self) -> &'static str {
+        match self.channel {
+            Channel::FluxDensity => "flux density",
+            other => other.name(),
         }
-        format!("; not refitted (--time-limit reached first), left out: `{}`", self.not_refitted.join("`, `"))
+    }
+
+    /// The files scored, in words.
+    fn files_words(&self) -> &'static str {
+        if self.held_out {
+            "validation files"
+        } else {
+            "fit files"
+        }
+    }
+
+    /// What was scored, in words: "the displacement of the validation files".
+    fn on(&self) -> String {
+        format!("{} of the {}", self.channel_words(), self.files_words())
+    }
+
+    /// The cut an alternative needs: [`MIN_CUT`] on held-out files; on the fit files, which it
+    /// was fitted to, [`DECISIVE_CUT`] (it has no signature to indicate it otherwise).
+    fn needed_cut(&self) -> f64 {
+        if self.held_out {
+            MIN_CUT
+        } else {
+            DECISIVE_CUT
+        }
+    }
+
+    /// The alternatives left out, in words ("" when none).
+    fn left_out_words(&self) -> String {
+        let mut words = String::new();
+        if !self.not_refitted.is_empty() {
+            words += &format!(
+                "; not refitted (--time-limit reached first), left out: `{}`",
+                self.not_refitted.join("`, `")
+            );
+        }
+        if !self.errored.is_empty() {
+            words += &format!("; could not be refitted, left out: {}", self.errored.join(", "));
+        }
+        words
+    }
+
+    /// The rule, in words: "cut ≥ 1.5× on the displacement, lower on 2 of 2 validation files".
+    fn rule_words(&self, bic: bool) -> String {
+        format!(
+            "cut ≥ {}× on the {}, lower on {} of {} {}{}",
+            self.needed_cut(),
+            self.channel_words(),
+            required_wins(self.files_scored),
+            self.files_scored,
+            self.files_words(),
+            if bic { ", and ΔBIC > 0" } else { "" }
+        )
     }
 
     /// The lowest alternative that passes the rule (ΔBIC > 0 too when `bic`).
@@ -137,7 +201,7 @@ impl Comparison {
         self.alternatives
             .iter()
             .filter(|a| {
-                self.given_nrmse >= MIN_CUT * a.nrmse
+                error_cut(self.given_nrmse, a.nrmse) >= self.needed_cut()
                     && a.files_improved >= required_wins(a.files_scored)
                     && (!bic || a.delta_bic > 0.0)
             })
@@ -146,7 +210,8 @@ impl Comparison {
 }
 
 impl Diagnosis {
-    /// Refits each alternative (in parallel) and scores it beside the baseline.
+    /// Refits each alternative (in parallel) and scores it beside the baseline on the channel
+    /// the magnetization stage is judged on.
     fn refit_alternatives(
         &mut self,
         spec: ModelSpec,
@@ -161,12 +226,14 @@ impl Diagnosis {
         };
         let score_files = if val_files.is_empty() { fit_files } else { val_files };
         let skip: Vec<usize> = score_files.iter().map(burn_in).collect();
-        let before = displacement_scores(spec, &base.params, score_files, &skip)?;
+        let channel = Channel::judging(Effect::Hysteresis, Measured::in_every(fit_files, score_files));
+        let before = channel_scores(spec, &base.params, score_files, &skip, channel)?;
         let n_eff_files: Vec<f64> = before.iter().map(|s| effective_samples(&s.residual)).collect();
         let n_eff: f64 = n_eff_files.iter().sum();
         let base_free = (base.free.len() + estimated_states(spec, score_files.len())) as f64;
+        let past_deadline = || fit::time_left(opts.deadline).is_some_and(|t| t.is_zero());
         let phase = progress::Phase::start(
-            opts.progress,
+            opts.progress && !past_deadline(),
             &format!("diagnose: refitting `{spec}` {what}"),
             alternatives.len() as u64,
         );
@@ -175,14 +242,14 @@ impl Diagnosis {
             .into_par_iter()
             .map(|a| {
                 // Past the deadline an alternative is not refitted at all (and said so).
-                if fit::time_left(opts.deadline).is_some_and(|t| t.is_zero()) {
+                if past_deadline() {
                     return (a, None);
                 }
                 let refit =
                     fit::fit_from(a.spec, &a.starts, fit_files, FitOptions { progress: false, ..opts });
                 let scored = refit.and_then(|f| {
                     Ok((
-                        displacement_scores(a.spec, &f.params, score_files, &skip)?,
+                        channel_scores(a.spec, &f.params, score_files, &skip, channel)?,
                         f.time_limited,
                         f.free.len() + estimated_states(a.spec, score_files.len()),
                     ))
@@ -194,13 +261,20 @@ impl Diagnosis {
         phase.finish();
         let mut compared = Vec::new();
         let mut not_refitted = Vec::new();
+        let mut errored = Vec::new();
         for (a, scored) in refits {
             let Some(scored) = scored else {
                 self.time_limited = true;
                 not_refitted.push(a.name);
                 continue;
             };
-            let (after, time_limited, free) = scored?;
+            let (after, time_limited, free) = match scored {
+                Ok(s) => s,
+                Err(why) => {
+                    errored.push(format!("`{}` ({why:#})", a.name));
+                    continue;
+                }
+            };
             self.time_limited |= time_limited;
             let delta_bic = information_gain(&before, &after, &n_eff_files)
                 - (free as f64 - base_free) * n_eff.max(2.0).ln();
@@ -216,9 +290,11 @@ impl Diagnosis {
         Ok(Comparison {
             given_nrmse: mean(before.iter().map(|x| x.nrmse)),
             files_scored: before.len(),
-            on: if val_files.is_empty() { "fit files" } else { "validation files" },
+            channel,
+            held_out: !val_files.is_empty(),
             alternatives: compared,
             not_refitted,
+            errored,
         })
     }
 
@@ -257,9 +333,11 @@ impl Diagnosis {
             "in the other J–A forms",
         )?;
         let better = c.better(false).map(|b| b.name);
+        let channel = c.channel.name();
         let mut rows = vec![VariantScore {
             variant: given.name(),
             given: true,
+            channel,
             nrmse: c.given_nrmse,
             files_improved: 0,
             files_scored: c.files_scored,
@@ -268,24 +346,25 @@ impl Diagnosis {
         rows.extend(c.alternatives.iter().map(|a| VariantScore {
             variant: a.name,
             given: false,
+            channel,
             nrmse: a.nrmse,
             files_improved: a.files_improved,
             files_scored: a.files_scored,
             fits_better: Some(a.name) == better,
         }));
-        let on = c.on;
+        let on = c.on();
         let listed =
             rows.iter().map(|r| format!("`{}` {:.2} %", r.variant, r.nrmse * 100.0)).collect::<Vec<_>>();
-        let not_refitted = c.not_refitted_words();
+        let not_refitted = c.left_out_words();
         self.findings.push(match rows.iter().find(|r| r.fits_better) {
             Some(b) => format!(
-                "J–A form: `{}` fits better than the given `{}` ({:.2} % against {:.2} % on the {on}, {:.2}× lower, on {} of {}; \
+                "J–A form: `{}` fits better than the given `{}` ({:.2} % against {:.2} % on the {on}, {}, on {} of {}; \
                  all forms: {}{not_refitted}): set `[ja] variant = \"{}\"`",
                 b.variant,
                 rows[0].variant,
                 b.nrmse * 100.0,
                 rows[0].nrmse * 100.0,
-                rows[0].nrmse / b.nrmse,
+                lower_words(rows[0].nrmse, b.nrmse),
                 b.files_improved,
                 b.files_scored,
                 listed.join(", "),
@@ -297,10 +376,9 @@ impl Diagnosis {
                 rows[0].nrmse * 100.0
             ),
             None => format!(
-                "J–A form: no form fits clearly better than the given `{}` (cut ≥ {MIN_CUT}× on {} of the {on}): \
-                 {}{not_refitted}",
+                "J–A form: no form fits clearly better than the given `{}` ({}): {}{not_refitted}",
                 rows[0].variant,
-                required_wins(rows[0].files_scored),
+                c.rule_words(false),
                 listed.join(", ")
             ),
         });
@@ -333,11 +411,13 @@ impl Diagnosis {
             "with the other law",
         )?;
         let better = c.better(true).is_some();
-        let on = c.on;
+        let on = c.on();
+        let channel = c.channel.name();
         let given_row = LawScore {
             law: given,
             model: spec.to_string(),
             given: true,
+            channel,
             nrmse: c.given_nrmse,
             files_improved: 0,
             files_scored: c.files_scored,
@@ -348,7 +428,7 @@ impl Diagnosis {
             self.findings.push(format!(
                 "hysteresis law: `{other}` was not compared with the given `{given}` ({:.2} % on the {on}){}",
                 c.given_nrmse * 100.0,
-                c.not_refitted_words()
+                c.left_out_words()
             ));
             self.laws = Some(vec![given_row]);
             return Ok(());
@@ -356,10 +436,10 @@ impl Diagnosis {
         self.findings.push(if better {
             format!(
                 "hysteresis law: `{other}` fits better than the given `{given}` ({:.2} % against {:.2} % on the {on}, \
-                 {:.2}× lower, on {} of {}, ΔBIC {:+.1}): try `--model {}`",
+                 {}, on {} of {}, ΔBIC {:+.1}): try `--model {}`",
                 a.nrmse * 100.0,
                 c.given_nrmse * 100.0,
-                c.given_nrmse / a.nrmse,
+                lower_words(c.given_nrmse, a.nrmse),
                 a.files_improved,
                 a.files_scored,
                 a.delta_bic,
@@ -367,14 +447,15 @@ impl Diagnosis {
             )
         } else {
             format!(
-                "hysteresis law: `{other}` does not fit clearly better than the given `{given}` (cut ≥ {MIN_CUT}× on {} \
-                 of the {on} and ΔBIC > 0): `{given}` {:.2} %, `{other}` {:.2} % (lower on {} of {}, ΔBIC {:+.1})",
-                required_wins(c.files_scored),
+                "hysteresis law: `{other}` does not fit clearly better than the given `{given}` ({}): `{given}` {:.2} %, \
+                 `{other}` {:.2} % (lower on {} of {}, ΔBIC {:+.1}){}",
+                c.rule_words(true),
                 c.given_nrmse * 100.0,
                 a.nrmse * 100.0,
                 a.files_improved,
                 a.files_scored,
-                a.delta_bic
+                a.delta_bic,
+                c.left_out_words()
             )
         });
         self.laws = Some(vec![
@@ -383,6 +464,7 @@ impl Diagnosis {
                 law: other,
                 model: a.spec.to_string(),
                 given: false,
+                channel,
                 nrmse: a.nrmse,
                 files_improved: a.files_improved,
                 files_scored: a.files_scored,
@@ -391,5 +473,106 @@ impl Diagnosis {
             },
         ]);
         Ok(())
+    }
+}
+
+/// How much lower an alternative's error is than the given one's, in words ("2.41× lower"; "to
+/// zero" for an exact fit, whose ratio is infinite).
+fn lower_words(given: f64, alternative: f64) -> String {
+    match error_cut(given, alternative) {
+        cut if cut.is_infinite() => "to zero".into(),
+        cut => format!("{cut:.2}× lower"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn compared(name: &'static str, nrmse: f64, files_improved: usize, delta_bic: f64) -> Compared {
+        Compared {
+            name,
+            spec: ModelSpec::parse("preisach").unwrap(),
+            nrmse,
+            files_improved,
+            files_scored: 2,
+            delta_bic,
+        }
+    }
+
+    fn comparison(held_out: bool, alternatives: Vec<Compared>) -> Comparison {
+        Comparison {
+            given_nrmse: 0.04,
+            files_scored: 2,
+            channel: Channel::Displacement,
+            held_out,
+            alternatives,
+            not_refitted: Vec::new(),
+            errored: Vec::new(),
+        }
+    }
+
+    /// On validation files an alternative 2× lower on both, with ΔBIC > 0, fits better; scored
+    /// on the fit files it was fitted to, the same figures are not enough (it has no signature
+    /// to indicate it, as a candidate there would need): 3× is.
+    #[test]
+    fn on_the_fit_files_an_alternative_needs_a_decisive_cut() {
+        let two = || vec![compared("preisach", 0.02, 2, 10.0)];
+        assert_eq!(comparison(true, two()).better(true).map(|a| a.name), Some("preisach"));
+        assert!(comparison(false, two()).better(true).is_none());
+        let three = comparison(false, vec![compared("preisach", 0.04 / DECISIVE_CUT, 2, 10.0)]);
+        assert_eq!(three.better(true).map(|a| a.name), Some("preisach"));
+        // The rest of the rule holds on either: every file lower, and ΔBIC > 0 for the laws.
+        assert!(comparison(true, vec![compared("preisach", 0.02, 1, 10.0)]).better(true).is_none());
+        assert!(comparison(true, vec![compared("preisach", 0.02, 2, -1.0)]).better(true).is_none());
+        assert!(comparison(true, vec![compared("bulk", 0.02, 2, -1.0)]).better(false).is_some());
+        // An exact alternative is infinitely lower, and said so.
+        assert_eq!(lower_words(0.04, 0.0), "to zero");
+        assert_eq!(lower_words(0.04, 0.02), "2.00× lower");
+    }
+
+    /// An alternative whose refit cannot run is left out with its reason, and the diagnosis goes
+    /// on with the others (it ended the whole run, after every candidate's refit, with no
+    /// diagnosis). Here the other structure needs a `command_V` column the file lacks.
+    #[test]
+    fn an_alternative_that_cannot_be_refitted_is_left_out_with_its_reason() {
+        let dt = 1e-4;
+        let n = 1200;
+        let spec = ModelSpec::parse("ja").unwrap();
+        let mut p = ActuatorParams::TERFENOL_DEMO;
+        p.dt_s = dt as f32;
+        let mut rec = Recording::with_time("rig", n, dt);
+        let w = 2.0 * std::f64::consts::PI * 50.0 * dt;
+        rec.current_a = Some((0..n).map(|k| 1.5 * (w * k as f64).sin()).collect());
+        let (sim, _) = fit::simulate_drive(spec, &p, &rec, fit::InitialState::Demagnetized).unwrap();
+        rec.displacement_um = Some(sim.displacement_um);
+        let files = [rec];
+        let opts = FitOptions { effort: 0.1, ..FitOptions::default() };
+        let base = fit::fit(spec, &p, &files, opts).unwrap();
+        let mut d = Diagnosis {
+            model: spec.to_string(),
+            nrmse_fit: base.fit.mean_nrmse(),
+            nrmse_val: None,
+            candidates: Vec::new(),
+            verdict: None,
+            undistinguished: Vec::new(),
+            findings: Vec::new(),
+            baseline: Some(base.clone()),
+            time_limited: false,
+            ja_variants: None,
+            laws: None,
+        };
+        let mut other_form = base.params;
+        other_form.ja.variant = JaVariant::Original1986;
+        let alternatives = vec![
+            Alternative { name: "amp", spec: spec.with(Effect::AmplifierDynamics), starts: [base.params; 2] },
+            Alternative { name: "ja1986", spec, starts: [other_form; 2] },
+        ];
+        let c = d.refit_alternatives(spec, alternatives, &files, &[], opts, "for the test").unwrap();
+        assert_eq!(c.alternatives.iter().map(|a| a.name).collect::<Vec<_>>(), ["ja1986"]);
+        assert_eq!(c.errored.len(), 1, "{:?}", c.errored);
+        let words = c.left_out_words();
+        assert!(words.contains("could not be refitted") && words.contains("`amp`"), "{words}");
+        assert!(words.contains("needs a `command_V` column"), "{words}");
     }
 }
