@@ -1358,6 +1358,19 @@ fn fit_searched(
         .collect();
     let d = free.len();
     let dims = d + n_excursions;
+    // Through no more samples than unknowns any model passes: the "fit" would report values and
+    // a tiny error that the data do not determine. λ_s and each file's offset are unknowns too.
+    let samples: usize = files.iter().map(|r| r.len()).sum();
+    let unknowns = dims + usize::from(lambda_range.is_some()) + files.len();
+    if samples <= unknowns {
+        bail!(
+            "{samples} samples in all for {unknowns} unknowns of `{spec}` ({d} free parameters{}, {} per file): a fit \
+             through no more samples than unknowns is not determined by them; record more samples (thousands: a \
+             drive cycle at the rig's rate) or hold parameters with --fix",
+            if lambda_range.is_some() { ", λ_s" } else { "" },
+            if memory { "an initial magnetic state and an offset" } else { "an offset" },
+        );
+    }
     // The progress bar's length: the swarm, then per seed the plan's simplex and least-squares
     // runs (and one more least-squares run each in the polish).
     let swarm_iters = ((plan.swarm_iters * opts.effort).round() as u64).max(2);

@@ -735,6 +735,15 @@ pub fn fit_shown(
         bail!("the loop has no field or no magnetization excursion");
     }
     let bounds = model.bounds(h_max, m_max);
+    // Through no more points than parameters any law passes, whatever the material.
+    let points: usize = files.iter().map(|f| f.h.len()).sum();
+    if points <= bounds.len() {
+        bail!(
+            "{points} loop points in all for the {} parameters of the law: a fit through no more points than \
+             parameters is not determined by them; give the whole loop (both branches, tens of points or more)",
+            bounds.len()
+        );
+    }
     let targets: Vec<Vec<f64>> = files.iter().map(|f| f.value.clone()).collect();
     let cost = |_: &(), v: &[f64], _: Fidelity| -> f64 {
         let p = model.model_values(v);
@@ -775,7 +784,6 @@ pub fn fit_shown(
     let planned =
         PLAN.swarms as u64 * (PLAN.particles.0 + PLAN.particles.1 * d as usize) as u64 * (swarm_iters + 1)
             + PLAN.local_searches as u64 * PLAN.local.len() as u64 * simplex;
-    let points: usize = files.iter().map(|f| f.h.len()).sum();
     let progress = Progress::new(&format!("loop fit ({points} points)"), planned, show);
     let found = minimize(&bounds, &cost, None, &(), &starts, &PLAN, opts, &progress)?;
     progress.finish_and_clear();

@@ -414,22 +414,41 @@ fn a_non_finite_value_in_a_table_the_model_does_not_use_is_refused_with_its_line
     }
 }
 
-/// A recording too short to estimate the uncertainty (3 samples for 5 parameters and an
-/// offset) is fitted, but the doubt goes where `--json` readers look: its `warnings`, not only
-/// stderr.
+/// A recording too short to estimate the uncertainty (5 samples for `linear`'s 3 parameters and
+/// an offset: one more than the unknowns, too few for a covariance) is fitted, but the doubt goes
+/// where `--json` readers look: its `warnings`, not only stderr.
 #[test]
 fn a_fit_without_an_uncertainty_says_so_in_its_json_warnings() {
     let dir = tempfile::tempdir().unwrap();
-    let short = write(dir.path(), "short.csv", &csv(HEADER, &good_rows()[..3]));
-    let o = gma(&["fit", "--model", "ja", "--json", &short]);
+    let short = write(dir.path(), "short.csv", &csv(HEADER, &good_rows()[..5]));
+    let o = gma(&["fit", "--model", "linear", "--json", &short]);
     assert!(o.status.success(), "{}", stderr(&o));
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(j.get("uncertainty").is_none(), "{j}");
     let said = j["warnings"].as_array().unwrap().iter().any(|w| {
         let w = w.as_str().unwrap();
-        w.starts_with("no parameter uncertainty") && w.contains("3 residuals for 5 parameters")
+        w.starts_with("no parameter uncertainty") && w.contains("5 residuals for 3 parameters")
     });
     assert!(said, "{:#}", j["warnings"]);
+}
+
+/// Through no more samples than unknowns any model passes: 3 samples for `ja`'s 4 free
+/// parameters, λ_s, the file's initial magnetic state and its offset were fitted to 0.18 % NRMSE
+/// and the values printed as identified, exit 0. Refused, with the count and the way out; so is a loop of 5 points for
+/// the 5 parameters of a J–A loop.
+#[test]
+fn a_fit_through_no_more_samples_than_unknowns_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let short = write(dir.path(), "short.csv", &csv(HEADER, &good_rows()[..3]));
+    let what = "3 samples in all for 7 unknowns of `ja` (4 free parameters, λ_s, an initial magnetic state and an offset per file)";
+    refused(&gma(&["fit", "--model", "ja", &short]), &[what, "record more samples"], "3-sample fit");
+    let points = "H_A_per_m,M_A_per_m\n0,0\n1000,10000\n2000,30000\n1000,25000\n0,10000\n";
+    let tiny = write(dir.path(), "tiny-loop.csv", points.as_bytes());
+    refused(
+        &gma(&["fit", "--model", "ja", &tiny]),
+        &["5 loop points in all for the 5 parameters of the law", "give the whole loop"],
+        "5-point loop",
+    );
 }
 
 /// A `--fix` value or `--bound` range inside its registry range can still make the set invalid
