@@ -12,7 +12,7 @@
 
 use crate::amplifier::{AmpState, Amplifier, FirstOrderAmpParams, SecondOrderAmp, SecondOrderAmpParams};
 use crate::effects::{Effect, MagnetizationLaw};
-use crate::error::{check, positive, ParamError};
+use crate::error::{check, ParamError};
 use crate::field::{CoilField, FirstOrderLag, LagState};
 use crate::magnetization::{
     Anhysteretic, AnhystereticParams, JaParams, JaState, JilesAtherton, LinearMagnetization, Preisach,
@@ -55,9 +55,22 @@ impl ModalMechanics {
     /// displacement the other bounds allow, so finite.
     pub const MIN_DAMPING_RATIO: f32 = 1e-3;
 
+    /// Largest natural frequency accepted [Hz]: far above any rod's first mode and any sample
+    /// rate, and low enough that ω_n² stays finite in f32 (at 1e30 Hz the unit mass 1/ω_n² was 0
+    /// and the set was refused as `mech.mass_kg`, a name the parameter file does not have).
+    pub const MAX_NATURAL_FREQUENCY_HZ: f32 = 1e9;
+    /// Smallest natural frequency accepted [Hz], for the same reason at the other end (1/ω_n²
+    /// overflows below about 1e-20 Hz); at a sample period [`Self::discretised`] asks more.
+    pub const MIN_NATURAL_FREQUENCY_HZ: f32 = 1e-6;
+
     /// The unit-stiffness mass-spring-damper with this f_n and ζ (static gain 1).
     pub fn unit_gain(&self) -> Result<MassSpringDamper, ParamError> {
-        let fn_hz = positive("mech.natural_frequency_hz", self.natural_frequency_hz)?;
+        let fn_hz = check(
+            "mech.natural_frequency_hz",
+            self.natural_frequency_hz,
+            |f| (Self::MIN_NATURAL_FREQUENCY_HZ..=Self::MAX_NATURAL_FREQUENCY_HZ).contains(&f),
+            "in [1e-6, 1e9] Hz (a mode above every sample rate does not show: leave `mech` out)",
+        )?;
         let zeta =
             check("mech.damping_ratio", self.damping_ratio, |z| z >= Self::MIN_DAMPING_RATIO, ">= 1e-3")?;
         let w = 2.0 * core::f32::consts::PI * fn_hz;

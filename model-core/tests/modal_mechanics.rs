@@ -54,3 +54,27 @@ fn a_stiff_fast_mode_driven_hard_stays_finite() {
         }
     }
 }
+
+/// A natural frequency so high (or low) that 1/ω_n² leaves f32 was refused as `mech.mass_kg`, a
+/// derived value the parameter file does not hold: the frequency itself is refused by name, with
+/// its range, and the ends of that range still step.
+#[test]
+fn a_natural_frequency_beyond_f32_is_refused_by_its_own_name() {
+    for f_n in [1e30, 2e9, 1e-21, 0.0, -5.0] {
+        let m = ModalMechanics { natural_frequency_hz: f_n, damping_ratio: 0.3 };
+        let e = m.unit_gain().err();
+        assert_eq!(e.map(|e| e.name()), Some("mech.natural_frequency_hz"), "{f_n} Hz");
+    }
+    let mut p = ActuatorParams::TERFENOL_DEMO;
+    p.mech.natural_frequency_hz = ModalMechanics::MAX_NATURAL_FREQUENCY_HZ;
+    let m = Actuator::new(ModelSpec::parse("ja+mech").unwrap(), &p).unwrap();
+    let mut s = m.rest_state();
+    for n in 0..200 {
+        let o = m.step(&mut s, (n as f32 * 0.1).sin()).unwrap();
+        assert!(o.displacement_m.is_finite(), "sample {n}: {o:?}");
+    }
+    let low =
+        ModalMechanics { natural_frequency_hz: ModalMechanics::MIN_NATURAL_FREQUENCY_HZ, damping_ratio: 0.3 };
+    let msd = low.unit_gain().unwrap();
+    assert!(msd.mass_kg.is_finite() && msd.damping_n_s_per_m.is_finite(), "{msd:?}");
+}
