@@ -1341,9 +1341,10 @@ pub fn diagnose(
     if structured {
         findings.push(match verdict {
             None => format!(
-                "{:.2} % unexplained (validation NRMSE), not one of the known effects: the residual is structured ({:.0} % of \
+                "{:.2} % unexplained ({} NRMSE), not one of the known effects: the residual is structured ({:.0} % of \
                  autocorrelation lags 1–20 outside the 95 % band, white noise leaves at most {:.0} %) yet no candidate passes",
                 final_val * 100.0,
+                if val_files.is_empty() { "fit-file" } else { "validation" },
                 white_final * 100.0,
                 band * 100.0
             ),

@@ -1364,9 +1364,11 @@ fn fit_searched(
     let unknowns = dims + usize::from(lambda_range.is_some()) + files.len();
     if samples <= unknowns {
         bail!(
-            "{samples} samples in all for {unknowns} unknowns of `{spec}` ({d} free parameters{}, {} per file): a fit \
-             through no more samples than unknowns is not determined by them; record more samples (thousands: a \
-             drive cycle at the rig's rate) or hold parameters with --fix",
+            "{samples} samples in all ({}) for {unknowns} unknowns of `{spec}` ({d} free parameters{}, {} per file): \
+             a fit through no more samples than unknowns is not determined by them; record more samples (thousands: \
+             a drive cycle at the rig's rate), raise --max-samples or drop --trim-start if they cut the files, or \
+             hold parameters with --fix",
+            files.iter().map(|r| format!("{}: {}", r.name, r.len())).collect::<Vec<_>>().join(", "),
             if lambda_range.is_some() { ", λ_s" } else { "" },
             if memory { "an initial magnetic state and an offset" } else { "an offset" },
         );

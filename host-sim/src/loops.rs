@@ -739,8 +739,10 @@ pub fn fit_shown(
     let points: usize = files.iter().map(|f| f.h.len()).sum();
     if points <= bounds.len() {
         bail!(
-            "{points} loop points in all for the {} parameters of the law: a fit through no more points than \
-             parameters is not determined by them; give the whole loop (both branches, tens of points or more)",
+            "{points} loop points in all ({}) for the {} parameters of the law: a fit through no more points than \
+             parameters is not determined by them; give the whole loop (both branches, tens of points or more), \
+             or raise --max-samples if it cut the file",
+            files.iter().map(|f| format!("{}: {}", f.name, f.h.len())).collect::<Vec<_>>().join(", "),
             bounds.len()
         );
     }

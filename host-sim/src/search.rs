@@ -353,7 +353,11 @@ pub fn minimize<C: Clone + Send + Sync>(
     let d_swarm = d - held.len();
     let particles = plan.particles.0 + plan.particles.1 * d_swarm;
     let iters = ((plan.swarm_iters * opts.effort).round() as u64).max(2);
-    let swarm_bests: Vec<Vec<f64>> = (0..plan.swarms as u64)
+    // Every dimension the swarm would search held (`--fix` of every law parameter, the initial
+    // states left): no swarm (argmin's needs a dimension); the local searches start from the held
+    // values and the starts.
+    let swarm_runs = if d_swarm == 0 { 0 } else { plan.swarms as u64 };
+    let mut swarm_bests: Vec<Vec<f64>> = (0..swarm_runs)
         .into_par_iter()
         .map(|k| -> Result<Vec<f64>> {
             let pso = ParticleSwarm::new((vec![0.0; d_swarm], vec![1.0; d_swarm]), particles)
@@ -372,6 +376,9 @@ pub fn minimize<C: Clone + Send + Sync>(
             Ok([best, held.clone()].concat())
         })
         .collect::<Result<_>>()?;
+    if d_swarm == 0 {
+        swarm_bests.push(held.clone());
+    }
 
     // Candidates: the starts and the swarms' bests, ranked on all data.
     let to_unit = |v: &[f64]| -> Vec<f64> { bounds.iter().zip(v).map(|(b, &x)| b.to_unit(x)).collect() };

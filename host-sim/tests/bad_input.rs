@@ -440,15 +440,41 @@ fn a_fit_without_an_uncertainty_says_so_in_its_json_warnings() {
 fn a_fit_through_no_more_samples_than_unknowns_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let short = write(dir.path(), "short.csv", &csv(HEADER, &good_rows()[..3]));
-    let what = "3 samples in all for 7 unknowns of `ja` (4 free parameters, λ_s, an initial magnetic state and an offset per file)";
-    refused(&gma(&["fit", "--model", "ja", &short]), &[what, "record more samples"], "3-sample fit");
+    let what =
+        "for 7 unknowns of `ja` (4 free parameters, λ_s, an initial magnetic state and an offset per file)";
+    let o = gma(&["fit", "--model", "ja", &short]);
+    refused(&o, &["3 samples in all (", "short.csv: 3)", what, "record more samples"], "3-sample fit");
+    // Cut by --max-samples, the way out names it.
+    let good = write(dir.path(), "good.csv", &csv(HEADER, &good_rows()));
+    let o = gma(&["fit", "--model", "ja", "--max-samples", "5", &good]);
+    refused(&o, &["5 samples in all (", "good.csv: 5)", "raise --max-samples"], "--max-samples 5");
     let points = "H_A_per_m,M_A_per_m\n0,0\n1000,10000\n2000,30000\n1000,25000\n0,10000\n";
     let tiny = write(dir.path(), "tiny-loop.csv", points.as_bytes());
     refused(
         &gma(&["fit", "--model", "ja", &tiny]),
-        &["5 loop points in all for the 5 parameters of the law", "give the whole loop"],
+        &[
+            "5 loop points in all (",
+            "tiny-loop.csv: 5) for the 5 parameters of the law",
+            "give the whole loop",
+        ],
         "5-point loop",
     );
+}
+
+/// With every parameter of a hysteretic law held by `--fix`, only each file's initial magnetic
+/// state (and λ_s) is left to search, dimensions the swarm holds: the swarm got none and the fit
+/// panicked in argmin (exit 101). Now the local searches run from the held values.
+#[test]
+fn fixing_every_law_parameter_leaves_the_initial_state_to_the_local_search() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(dir.path(), "good.csv", &csv(HEADER, &good_rows()));
+    let law = ["--fix", "ja.a_a_per_m", "--fix", "ja.alpha", "--fix", "ja.k_a_per_m", "--fix", "ja.c"];
+    for lambda in [&[][..], &["--fix", "magnetostriction.lambda_s"][..]] {
+        let o = gma(&[&["fit", "--model", "ja", "--json"][..], &law, lambda, &[&good]].concat());
+        assert!(o.status.success(), "{:?}: {}", lambda, stderr(&o));
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert!(j["nrmse_fit"].as_f64().is_some_and(f64::is_finite), "{j}");
+    }
 }
 
 /// A `--fix` value or `--bound` range inside its registry range can still make the set invalid
