@@ -636,6 +636,40 @@ struct Measured {
 }
 
 impl Measured {
+    /// Findings for channels some files log and others do not: each judges its effects only
+    /// when every file has it, and falls back to the displacement silently otherwise.
+    fn partly(fit_files: &[Recording], score_files: &[Recording]) -> Vec<String> {
+        let files: Vec<&Recording> = fit_files.iter().chain(score_files).collect();
+        // (columns, whether a file logs them, what they judge)
+        type Logged = fn(&Recording) -> bool;
+        let channels: [(&str, Logged, &str); 3] = [
+            (
+                "flux_density_T",
+                |r| r.flux_density_t.is_some(),
+                "the rod's field, magnetization and creep effects (and the laws and J–A forms compared)",
+            ),
+            (
+                "current_A and command_V",
+                |r| r.current_a.is_some() && r.command_v.is_some(),
+                "amplifier dynamics",
+            ),
+            ("temperature_C", |r| r.temperature_c.is_some(), "coil heating"),
+        ];
+        channels
+            .iter()
+            .filter_map(|(name, has, what)| {
+                let lacking: Vec<&str> = files.iter().filter(|r| !has(r)).map(|r| r.name.as_str()).collect();
+                (!lacking.is_empty() && lacking.len() < files.len()).then(|| {
+                    format!(
+                        "{name}: logged in some files but not in {}: {what} judged on the displacement (that channel \
+                         is used only when every fit and scored file has it)",
+                        lacking.join(", ")
+                    )
+                })
+            })
+            .collect()
+    }
+
     /// What every fit and scored file logs.
     fn in_every(fit_files: &[Recording], score_files: &[Recording]) -> Self {
         let all = |has: fn(&Recording) -> bool| fit_files.iter().chain(score_files).all(has);
@@ -885,7 +919,7 @@ pub fn diagnose(
     };
     let sigs = signals_on(false);
     let flux_sigs = if flux_measured { signals_on(true) } else { Vec::new() };
-    let mut findings = Vec::new();
+    let mut findings = Measured::partly(fit_files, score_files);
     let white = whiteness(&sigs.iter().map(|s| s.residual.as_slice()).collect::<Vec<_>>());
     let (not_white, white_limit) = structured_residual(white, sigs.len());
     findings.push(if not_white {
@@ -1493,6 +1527,23 @@ mod tests {
         .unwrap();
         let c = d.candidates.iter().find(|c| c.effect == Effect::ThermalDrift).unwrap();
         assert_eq!(c.channel, "displacement", "{d}");
+    }
+
+    /// A channel some files log and others not is said, naming the files without it (the
+    /// diagnosis then judged on the displacement without a word); none when all or none log it.
+    #[test]
+    fn a_channel_some_files_lack_is_said_with_those_files() {
+        let file = |name: &str, flux: bool| {
+            let mut r = Recording::with_time(name, 10, 1e-4);
+            r.current_a = Some(vec![0.0; 10]);
+            r.flux_density_t = flux.then(|| vec![0.0; 10]);
+            r
+        };
+        let said = Measured::partly(&[file("a", true), file("b", true)], &[file("v", false)]);
+        assert_eq!(said.len(), 1, "{said:?}");
+        assert!(said[0].starts_with("flux_density_T: logged in some files but not in v:"), "{said:?}");
+        assert!(Measured::partly(&[file("a", true)], &[file("v", true)]).is_empty());
+        assert!(Measured::partly(&[file("a", false)], &[file("v", false)]).is_empty());
     }
 
     #[test]
