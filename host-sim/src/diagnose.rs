@@ -635,30 +635,30 @@ struct Measured {
     temperature: bool,
 }
 
+/// Whether a file logs a channel's columns.
+type Logs = fn(&Recording) -> bool;
+
+/// The channels besides the displacement: their columns, whether a file logs them, and what they
+/// judge.
+const CHANNELS: [(&str, Logs, &str); 3] = [
+    ("current_A and command_V", |r| r.current_a.is_some() && r.command_v.is_some(), "amplifier dynamics"),
+    (
+        "flux_density_T",
+        |r| r.flux_density_t.is_some(),
+        "the rod's field, magnetization and creep effects (and the laws and J–A forms compared)",
+    ),
+    ("temperature_C", |r| r.temperature_c.is_some(), "coil heating"),
+];
+
 impl Measured {
     /// Findings for channels some files log and others do not: each judges its effects only
     /// when every file has it, and falls back to the displacement silently otherwise.
     fn partly(fit_files: &[Recording], score_files: &[Recording]) -> Vec<String> {
         let files: Vec<&Recording> = fit_files.iter().chain(score_files).collect();
-        // (columns, whether a file logs them, what they judge)
-        type Logged = fn(&Recording) -> bool;
-        let channels: [(&str, Logged, &str); 3] = [
-            (
-                "flux_density_T",
-                |r| r.flux_density_t.is_some(),
-                "the rod's field, magnetization and creep effects (and the laws and J–A forms compared)",
-            ),
-            (
-                "current_A and command_V",
-                |r| r.current_a.is_some() && r.command_v.is_some(),
-                "amplifier dynamics",
-            ),
-            ("temperature_C", |r| r.temperature_c.is_some(), "coil heating"),
-        ];
-        channels
+        CHANNELS
             .iter()
-            .filter_map(|(name, has, what)| {
-                let lacking: Vec<&str> = files.iter().filter(|r| !has(r)).map(|r| r.name.as_str()).collect();
+            .filter_map(|(name, logs, what)| {
+                let lacking: Vec<&str> = files.iter().filter(|r| !logs(r)).map(|r| r.name.as_str()).collect();
                 (!lacking.is_empty() && lacking.len() < files.len()).then(|| {
                     format!(
                         "{name}: logged in some files but not in {}: {what} judged on the displacement (that channel \
@@ -672,12 +672,9 @@ impl Measured {
 
     /// What every fit and scored file logs.
     fn in_every(fit_files: &[Recording], score_files: &[Recording]) -> Self {
-        let all = |has: fn(&Recording) -> bool| fit_files.iter().chain(score_files).all(has);
-        Measured {
-            current: all(|r| r.current_a.is_some() && r.command_v.is_some()),
-            flux: all(|r| r.flux_density_t.is_some()),
-            temperature: all(|r| r.temperature_c.is_some()),
-        }
+        let [current, flux, temperature] =
+            CHANNELS.map(|(_, logs, _)| fit_files.iter().chain(score_files).all(logs));
+        Measured { current, flux, temperature }
     }
 }
 
@@ -906,7 +903,8 @@ pub fn diagnose(
     let evidence_phase =
         progress::Phase::start(opts.progress, "diagnose: residual evidence and trends across files", 0);
     // With a search coil on every file, the stages before the strain are judged on its flux.
-    let flux_measured = Measured::in_every(fit_files, score_files).flux;
+    let measured = Measured::in_every(fit_files, score_files);
+    let flux_measured = measured.flux;
     let base_sims: Vec<Simulation> =
         fit_files.iter().map(|rec| simulate(spec, &base.params, rec)).collect::<Result<_>>()?;
     let signals_on = |flux: bool| -> Vec<Signals> {
@@ -1030,7 +1028,6 @@ pub fn diagnose(
     refitting.finish();
     // With `current_A` and `command_V` in every file, amplifier dynamics is judged on the current
     // channel: command → current by a static gain (the baseline) against the refit's amplifier.
-    let measured = Measured::in_every(fit_files, score_files);
     let static_amp = measured.current.then(|| StaticGain::fit(fit_files, &fit_skip));
     let (base_fit_flux, base_score_flux) = if flux_measured {
         (

@@ -356,29 +356,29 @@ pub fn minimize<C: Clone + Send + Sync>(
     // Every dimension the swarm would search held (`--fix` of every law parameter, the initial
     // states left): no swarm (argmin's needs a dimension); the local searches start from the held
     // values and the starts.
-    let swarm_runs = if d_swarm == 0 { 0 } else { plan.swarms as u64 };
-    let mut swarm_bests: Vec<Vec<f64>> = (0..swarm_runs)
-        .into_par_iter()
-        .map(|k| -> Result<Vec<f64>> {
-            let pso = ParticleSwarm::new((vec![0.0; d_swarm], vec![1.0; d_swarm]), particles)
-                .with_rng_generator(rand::rngs::StdRng::seed_from_u64(opts.seed.wrapping_add(k)));
-            let problem = SwarmUnit { unit: unit!(swarm_context, Fidelity::Swarm), held: held.clone() };
-            let res = bounded(Executor::new(problem, pso), opts.deadline)
-                .configure(|s| s.max_iters(iters))
-                .run()
-                .map_err(|e| anyhow::anyhow!("particle swarm: {e}"))?;
-            note_time(res.state().get_termination_reason());
-            let best = res
-                .state()
-                .get_best_param()
-                .map(|p| p.position.clone())
-                .unwrap_or_else(|| vec![0.5; d_swarm]);
-            Ok([best, held.clone()].concat())
-        })
-        .collect::<Result<_>>()?;
-    if d_swarm == 0 {
-        swarm_bests.push(held.clone());
-    }
+    let swarm_bests: Vec<Vec<f64>> = if d_swarm == 0 {
+        vec![held.clone()]
+    } else {
+        (0..plan.swarms as u64)
+            .into_par_iter()
+            .map(|k| -> Result<Vec<f64>> {
+                let pso = ParticleSwarm::new((vec![0.0; d_swarm], vec![1.0; d_swarm]), particles)
+                    .with_rng_generator(rand::rngs::StdRng::seed_from_u64(opts.seed.wrapping_add(k)));
+                let problem = SwarmUnit { unit: unit!(swarm_context, Fidelity::Swarm), held: held.clone() };
+                let res = bounded(Executor::new(problem, pso), opts.deadline)
+                    .configure(|s| s.max_iters(iters))
+                    .run()
+                    .map_err(|e| anyhow::anyhow!("particle swarm: {e}"))?;
+                note_time(res.state().get_termination_reason());
+                let best = res
+                    .state()
+                    .get_best_param()
+                    .map(|p| p.position.clone())
+                    .unwrap_or_else(|| vec![0.5; d_swarm]);
+                Ok([best, held.clone()].concat())
+            })
+            .collect::<Result<_>>()?
+    };
 
     // Candidates: the starts and the swarms' bests, ranked on all data.
     let to_unit = |v: &[f64]| -> Vec<f64> { bounds.iter().zip(v).map(|(b, &x)| b.to_unit(x)).collect() };
