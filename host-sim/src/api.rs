@@ -323,11 +323,14 @@ pub struct FitSettings {
     pub fix: Vec<String>,
     /// `NAME=LO:HI` narrowed ranges (displacement fits).
     pub bound: Vec<String>,
+    /// Progress lines of the search, as the CLI writes them (to stderr, or to the caller's
+    /// sink: [`crate::progress::to_sink`]).
+    pub progress: bool,
 }
 
 impl Default for FitSettings {
     fn default() -> Self {
-        Self { seed: 1, effort: 1.0, time_limit_s: None, fix: Vec::new(), bound: Vec::new() }
+        Self { seed: 1, effort: 1.0, time_limit_s: None, fix: Vec::new(), bound: Vec::new(), progress: false }
     }
 }
 
@@ -360,7 +363,7 @@ fn prepare(
         spec,
         init,
         data,
-        opts: FitOptions { seed: s.seed, progress: false, effort: s.effort, deadline },
+        opts: FitOptions { seed: s.seed, progress: s.progress, effort: s.effort, deadline },
         params_source,
         input_warnings,
     })

@@ -1,5 +1,6 @@
 //! Progress of long work on stderr: a bar on a terminal; off a terminal (a log file, CI, a
 //! pipe) one line every few seconds, so a long fit is never silent and never floods a log.
+//! [`to_sink`] hands the same lines to a caller instead (the Python API's `progress=`).
 
 use std::io::IsTerminal as _;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -11,6 +12,37 @@ use indicatif::{ProgressBar, ProgressStyle};
 /// Seconds between log lines off a terminal.
 const LINE_EVERY: Duration = Duration::from_secs(5);
 
+/// Where the lines go while [`to_sink`] runs (none: stderr).
+static SINK: Mutex<Option<Say>> = Mutex::new(None);
+/// Held while a sink is installed, so that one caller's lines never reach another's.
+static SINK_OWNER: Mutex<()> = Mutex::new(());
+
+/// Runs `f` with every progress line of the work it starts with progress enabled handed to
+/// `say`, as lines (no terminal bar), instead of written to stderr. Calls that want a sink run
+/// one at a time.
+pub fn to_sink<T>(say: Say, f: impl FnOnce() -> T) -> T {
+    struct Uninstall;
+    impl Drop for Uninstall {
+        fn drop(&mut self) {
+            *SINK.lock().unwrap_or_else(|e| e.into_inner()) = None;
+        }
+    }
+    let _owner = SINK_OWNER.lock().unwrap_or_else(|e| e.into_inner());
+    *SINK.lock().unwrap_or_else(|e| e.into_inner()) = Some(say);
+    let _uninstall = Uninstall;
+    f()
+}
+
+/// The installed sink, if any.
+fn sink() -> Option<Say> {
+    SINK.lock().unwrap_or_else(|e| e.into_inner()).clone()
+}
+
+/// Lines to stderr.
+fn stderr_lines() -> Say {
+    Arc::new(|line: &str| eprintln!("{line}"))
+}
+
 /// A counter of planned work (`len` units, e.g. model evaluations) with a label.
 pub struct Progress {
     kind: Kind,
@@ -19,15 +51,16 @@ pub struct Progress {
 enum Kind {
     Hidden,
     Bar(ProgressBar),
-    Lines { label: String, len: u64, pos: AtomicU64, start: Instant, last: Mutex<Instant> },
+    Lines { label: String, len: u64, pos: AtomicU64, start: Instant, last: Mutex<Instant>, say: Say },
 }
 
 impl Progress {
     /// Progress of `label`; nothing is shown unless `enabled`.
     pub fn new(label: &str, len: u64, enabled: bool) -> Self {
+        let sink = sink();
         let kind = if !enabled {
             Kind::Hidden
-        } else if std::io::stderr().is_terminal() {
+        } else if sink.is_none() && std::io::stderr().is_terminal() {
             let b = ProgressBar::new(len);
             b.set_style(
                 ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} evaluations, {elapsed}")
@@ -36,7 +69,8 @@ impl Progress {
             b.set_message(label.to_string());
             Kind::Bar(b)
         } else {
-            eprintln!("gma: {label}: up to {len} evaluations planned");
+            let say = sink.unwrap_or_else(stderr_lines);
+            say(&format!("gma: {label}: up to {len} evaluations planned"));
             let now = Instant::now();
             Kind::Lines {
                 label: label.into(),
@@ -44,6 +78,7 @@ impl Progress {
                 pos: AtomicU64::new(0),
                 start: now,
                 last: Mutex::new(now),
+                say,
             }
         };
         Self { kind }
@@ -54,12 +89,15 @@ impl Progress {
         match &self.kind {
             Kind::Hidden => {}
             Kind::Bar(b) => b.inc(n),
-            Kind::Lines { label, len, pos, start, last } => {
+            Kind::Lines { label, len, pos, start, last, say } => {
                 let p = pos.fetch_add(n, Ordering::Relaxed) + n;
                 let Ok(mut last) = last.try_lock() else { return };
                 if last.elapsed() >= LINE_EVERY {
                     *last = Instant::now();
-                    eprintln!("gma: {label}: {p}/{len} evaluations, {:.0} s", start.elapsed().as_secs_f64());
+                    say(&format!(
+                        "gma: {label}: {p}/{len} evaluations, {:.0} s",
+                        start.elapsed().as_secs_f64()
+                    ));
                 }
             }
         }
@@ -70,11 +108,11 @@ impl Progress {
         match &self.kind {
             Kind::Hidden => {}
             Kind::Bar(b) => b.finish_and_clear(),
-            Kind::Lines { label, pos, start, .. } => eprintln!(
+            Kind::Lines { label, pos, start, say, .. } => say(&format!(
                 "gma: {label}: done, {} evaluations in {:.1} s",
                 pos.load(Ordering::Relaxed),
                 start.elapsed().as_secs_f64()
-            ),
+            )),
         }
     }
 }
@@ -82,7 +120,7 @@ impl Progress {
 /// A phase of long work starting or ending, as one line on stderr (when `enabled`).
 pub fn phase(enabled: bool, text: &str) {
     if enabled {
-        eprintln!("gma: {text}");
+        sink().unwrap_or_else(stderr_lines)(&format!("gma: {text}"));
     }
 }
 
@@ -105,15 +143,15 @@ enum Show {
     Lines(Say, Option<(mpsc::Sender<()>, std::thread::JoinHandle<()>)>),
 }
 
-/// Where a line log goes (stderr; a buffer in tests).
-type Say = Arc<dyn Fn(&str) + Send + Sync>;
+/// Where a line log goes (stderr, a [`to_sink`] caller's; a buffer in tests).
+pub type Say = Arc<dyn Fn(&str) + Send + Sync>;
 
 impl Phase {
     /// Starts `label`, a phase of `steps` steps (0: not counted).
     pub fn start(enabled: bool, label: &str, steps: u64) -> Self {
-        let terminal = std::io::stderr().is_terminal();
-        if enabled && !terminal {
-            return Self::lines(label, steps, LINE_EVERY, Arc::new(|line: &str| eprintln!("{line}")));
+        let sink = sink();
+        if enabled && (sink.is_some() || !std::io::stderr().is_terminal()) {
+            return Self::lines(label, steps, LINE_EVERY, sink.unwrap_or_else(stderr_lines));
         }
         let show = if enabled {
             let b = if steps > 0 { ProgressBar::new(steps) } else { ProgressBar::new_spinner() };
@@ -238,5 +276,38 @@ mod tests {
         assert!(last.starts_with("gma: refits: done 2/3 in "), "{log:?}");
         // Nothing after the done line: the heartbeat stopped with the phase.
         assert_eq!(log.iter().filter(|l| l.contains("done 2/3")).count(), 1);
+    }
+
+    /// While a sink is installed every kind of progress goes to it as lines, and only work
+    /// started with progress enabled; after it, nothing more reaches it.
+    #[test]
+    fn a_sink_takes_the_lines_of_enabled_work_only_and_only_while_installed() {
+        let log = Arc::new(Mutex::new(Vec::<String>::new()));
+        let sink = log.clone();
+        let say: Say = Arc::new(move |l: &str| sink.lock().unwrap().push(l.to_string()));
+        let counted = to_sink(say, || {
+            phase(true, "diagnose: fitting");
+            phase(false, "not asked for");
+            let bar = Progress::new("fitting ja", 10, true);
+            bar.inc(10);
+            bar.finish_and_clear();
+            Progress::new("quiet", 10, false).finish_and_clear();
+            Phase::start(true, "refits", 2).finish();
+            7
+        });
+        assert_eq!(counted, 7);
+        phase(true, "after the sink (to stderr)");
+        let log = log.lock().unwrap().clone();
+        let expected = [
+            "gma: diagnose: fitting",
+            "gma: fitting ja: up to 10 evaluations planned",
+            "gma: fitting ja: done, 10 evaluations in",
+            "gma: refits: started",
+            "gma: refits: done 0/2 in",
+        ];
+        assert_eq!(log.len(), expected.len(), "{log:?}");
+        for (line, start) in log.iter().zip(expected) {
+            assert!(line.starts_with(start), "{line:?} should start with {start:?}: {log:?}");
+        }
     }
 }

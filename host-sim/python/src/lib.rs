@@ -82,18 +82,87 @@ const SIGNAL_POLL: std::time::Duration = std::time::Duration::from_millis(50);
 /// exception (`KeyboardInterrupt`) is raised. A call in another thread that the stop cut short
 /// raises `GmaError` rather than return a truncated search.
 fn run<T: Send>(py: Python<'_>, f: impl FnOnce() -> anyhow::Result<T> + Send) -> PyResult<T> {
+    run_reporting(py, None, f)
+}
+
+/// What a call's `progress=` asks for: nothing (None, False), lines on Python's `sys.stderr`
+/// (True: a notebook shows them under the cell), or each line handed to a callable.
+fn progress_target(py: Python<'_>, progress: Option<&Bound<'_, PyAny>>) -> PyResult<Option<Py<PyAny>>> {
+    let Some(p) = progress.filter(|p| !p.is_none()) else { return Ok(None) };
+    if let Ok(on) = p.extract::<bool>() {
+        return on
+            .then(|| py.import("sys").and_then(|sys| sys.getattr("stderr")).map(|e| e.unbind()))
+            .transpose();
+    }
+    if p.is_callable() {
+        return Ok(Some(p.clone().unbind()));
+    }
+    Err(to_py_err(
+        py,
+        anyhow::anyhow!(
+            "progress must be None, True, False or a callable taking one str (a line), got {}",
+            p.get_type().name().map(|n| n.to_string()).unwrap_or_else(|_| "an object".into())
+        ),
+    ))
+}
+
+/// Hands `line` to the target: `write` on a stream (sys.stderr), else a call.
+fn report_line(py: Python<'_>, target: &Py<PyAny>, line: &str) -> PyResult<()> {
+    let t = target.bind(py);
+    if t.hasattr("write")? && !t.is_callable() {
+        t.call_method1("write", (format!("{line}\n"),))?;
+        if t.hasattr("flush")? {
+            t.call_method0("flush")?;
+        }
+        Ok(())
+    } else {
+        t.call1((line,)).map(|_| ())
+    }
+}
+
+/// [`run`], with the search's progress lines handed to `report` (see [`progress_target`]) on
+/// the caller's thread, with the GIL, as they come. A `report` that raises stops the call like
+/// Ctrl-C, and its exception is raised.
+fn run_reporting<T: Send>(
+    py: Python<'_>,
+    report: Option<Py<PyAny>>,
+    f: impl FnOnce() -> anyhow::Result<T> + Send,
+) -> PyResult<T> {
     let stops_before = host_sim::search::stops_requested();
-    let outcome = py.detach(|| {
+    let (lines_tx, lines) = std::sync::mpsc::channel::<String>();
+    let reporting = report.is_some();
+    // Moved in: the receiver is not shared, only this thread reads it.
+    let outcome = py.detach(move || {
         std::thread::scope(|scope| {
             let caller = std::thread::current();
             let worker = scope.spawn(move || {
-                let result = f();
+                let result = if reporting {
+                    let say: host_sim::progress::Say = std::sync::Arc::new(move |line: &str| {
+                        let _ = lines_tx.send(line.to_string());
+                    });
+                    host_sim::progress::to_sink(say, f)
+                } else {
+                    f()
+                };
                 caller.unpark(); // done: no need to wait out the poll
                 result
             });
             let mut interrupt = None;
+            let deliver = |interrupt: &mut Option<PyErr>| {
+                let Some(target) = &report else { return };
+                for line in lines.try_iter() {
+                    if interrupt.is_some() {
+                        continue; // drained, not shown: the call is being stopped
+                    }
+                    if let Err(e) = Python::attach(|py| report_line(py, target, &line)) {
+                        host_sim::search::request_stop(true);
+                        *interrupt = Some(e);
+                    }
+                }
+            };
             while !worker.is_finished() {
                 std::thread::park_timeout(SIGNAL_POLL);
+                deliver(&mut interrupt);
                 if interrupt.is_none() {
                     if let Err(e) = Python::attach(|py| py.check_signals()) {
                         host_sim::search::request_stop(true);
@@ -102,6 +171,7 @@ fn run<T: Send>(py: Python<'_>, f: impl FnOnce() -> anyhow::Result<T> + Send) ->
                 }
             }
             let result = worker.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+            deliver(&mut interrupt); // the last lines (the searches' "done")
             host_sim::search::request_stop(false);
             match interrupt {
                 Some(e) => Err(e),
@@ -307,6 +377,7 @@ fn fit_settings(
         time_limit_s,
         fix: fix.unwrap_or_default(),
         bound: bound.unwrap_or_default(),
+        progress: false,
     })
 }
 
@@ -345,10 +416,12 @@ fn read_loop<'py>(py: Python<'py>, path: PathBuf, max_samples: Option<i128>) -> 
 /// Identifies `model` (a spec such as `ja+mech`) from `files` jointly — paths of recordings or
 /// loop files, or dicts of arrays as `read_recording` returns — scored on `val`. Returns the
 /// `gma fit --json` object as a dict, plus `params_toml` (the parameter file `--params-out`
-/// writes; pass the result as `params=` to compare, diagnose, simulate).
+/// writes; pass the result as `params=` to compare, diagnose, simulate). `progress=True` writes
+/// the search's progress to `sys.stderr` as the CLI does (a line every few seconds; a notebook
+/// shows it under the cell), a callable gets each line instead.
 #[pyfunction]
 #[pyo3(signature = (model, files, *, val=None, params=None, seed=None, effort=None, time_limit_s=None,
-    fix=None, bound=None, columns=None, resample=None, trim_start_s=None, max_samples=None))]
+    fix=None, bound=None, columns=None, resample=None, trim_start_s=None, max_samples=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit<'py>(
     py: Python<'py>,
@@ -365,16 +438,21 @@ fn fit<'py>(
     resample: Option<String>,
     trim_start_s: Option<f64>,
     max_samples: Option<i128>,
+    progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let report = progress_target(py, progress)?;
     let fit_src = sources(py, files, 0)?;
     let val_src = match val {
         Some(v) if !v.is_none() => sources(py, v, fit_src.len())?,
         _ => Vec::new(),
     };
     let ps = params_source(py, params)?;
-    let settings = fit_settings(py, seed, effort, time_limit_s, fix, bound)?;
+    let settings = FitSettings {
+        progress: report.is_some(),
+        ..fit_settings(py, seed, effort, time_limit_s, fix, bound)?
+    };
     let read = read_settings(py, max_samples, columns, resample, trim_start_s)?;
-    let out = run(py, || api::fit(&model, &fit_src, &val_src, &ps, &settings, &read))?;
+    let out = run_reporting(py, report, || api::fit(&model, &fit_src, &val_src, &ps, &settings, &read))?;
     let d = json_to_py(py, &out.summary)?;
     d.set_item("params_toml", out.params_toml)?;
     Ok(d)
@@ -436,10 +514,11 @@ fn simulation_items(py: Python<'_>, d: &Bound<'_, PyDict>, sim: &host_sim::fit::
 }
 
 /// Fits `model`, analyses what it leaves unexplained and names the missing effect: the `gma
-/// diagnose --json` object as a dict (`verdict`, `candidates`, `findings`, …).
+/// diagnose --json` object as a dict (`verdict`, `candidates`, `findings`, …). `progress` as
+/// for `fit` (a diagnosis refits the model once per candidate effect: a minute or more).
 #[pyfunction]
 #[pyo3(signature = (model, files, *, val=None, params=None, seed=None, effort=None, time_limit_s=None,
-    columns=None, resample=None, trim_start_s=None, max_samples=None))]
+    columns=None, resample=None, trim_start_s=None, max_samples=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn diagnose<'py>(
     py: Python<'py>,
@@ -454,16 +533,21 @@ fn diagnose<'py>(
     resample: Option<String>,
     trim_start_s: Option<f64>,
     max_samples: Option<i128>,
+    progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let report = progress_target(py, progress)?;
     let fit_src = sources(py, files, 0)?;
     let val_src = match val {
         Some(v) if !v.is_none() => sources(py, v, fit_src.len())?,
         _ => Vec::new(),
     };
     let ps = params_source(py, params)?;
-    let settings = fit_settings(py, seed, effort, time_limit_s, None, None)?;
+    let settings = FitSettings {
+        progress: report.is_some(),
+        ..fit_settings(py, seed, effort, time_limit_s, None, None)?
+    };
     let read = read_settings(py, max_samples, columns, resample, trim_start_s)?;
-    let d = run(py, || api::diagnose(&model, &fit_src, &val_src, &ps, &settings, &read))?;
+    let d = run_reporting(py, report, || api::diagnose(&model, &fit_src, &val_src, &ps, &settings, &read))?;
     json_to_py(py, &d)
 }
 

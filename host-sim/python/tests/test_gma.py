@@ -306,6 +306,44 @@ def test_ctrl_c_stops_a_running_fit():
     assert gma.fit("ja+mech", [FIT_CSV], **QUICK)["nrmse_fit"] < 0.2
 
 
+def test_progress_lines_reach_a_callable_or_stderr(capsys):
+    # A notebook does not show the Rust side's stderr: the lines come back through Python.
+    lines = []
+    fit = gma.fit("ja+mech", [FIT_CSV], progress=lines.append, **QUICK)
+    assert fit["nrmse_fit"] < 0.2
+    assert lines and all(isinstance(line, str) and line.startswith("gma: ") for line in lines), lines
+    assert any("fitting ja+mech: up to" in line for line in lines), lines
+    assert any("fitting ja+mech: done," in line for line in lines), lines
+    # The same search with and without progress: the same result.
+    assert gma.fit("ja+mech", [FIT_CSV], **QUICK)["nrmse_fit"] == fit["nrmse_fit"]
+    capsys.readouterr()
+    d = gma.diagnose("ja", [FIT_CSV], val=[VAL_CSV], progress=True, **QUICK)
+    err = capsys.readouterr().err
+    assert d["candidates"] and "gma: diagnose: fitting the given model `ja`" in err, err
+    assert "candidate effects: done" in err, err
+    # Without progress= nothing is written.
+    gma.fit("ja", [FIT_CSV], **QUICK)
+    assert capsys.readouterr().err == ""
+
+
+def test_a_progress_callback_that_raises_stops_the_call():
+    class Seen(Exception):
+        pass
+
+    def refuse(line):
+        raise Seen(line)
+
+    with pytest.raises(Seen, match="^gma: "):
+        gma.diagnose("ja", [FIT_CSV], val=[VAL_CSV], progress=refuse, **QUICK)
+    # The stop was withdrawn: the next call runs in full.
+    assert gma.fit("ja+mech", [FIT_CSV], **QUICK)["nrmse_fit"] < 0.2
+
+
+def test_progress_that_is_neither_a_flag_nor_callable_is_refused():
+    with pytest.raises(gma.GmaError, match="progress must be None, True, False or a callable"):
+        gma.fit("ja", [FIT_CSV], progress="yes")
+
+
 def test_wrong_model_spec_is_the_clis_error():
     with pytest.raises(gma.GmaError) as e:
         gma.fit("ja+nosuch", [FIT_CSV])
