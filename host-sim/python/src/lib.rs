@@ -85,62 +85,87 @@ fn run<T: Send>(py: Python<'_>, f: impl FnOnce() -> anyhow::Result<T> + Send) ->
     run_reporting(py, None, f)
 }
 
-/// What a call's `progress=` asks for: nothing (None, False), lines on Python's `sys.stderr`
-/// (True: a notebook shows them under the cell), or each line handed to a callable.
-fn progress_target(py: Python<'_>, progress: Option<&Bound<'_, PyAny>>) -> PyResult<Option<Py<PyAny>>> {
-    let Some(p) = progress.filter(|p| !p.is_none()) else { return Ok(None) };
-    if let Ok(on) = p.extract::<bool>() {
-        return on
-            .then(|| py.import("sys").and_then(|sys| sys.getattr("stderr")).map(|e| e.unbind()))
-            .transpose();
-    }
-    if p.is_callable() {
-        return Ok(Some(p.clone().unbind()));
-    }
-    Err(to_py_err(
-        py,
-        anyhow::anyhow!(
-            "progress must be None, True, False or a callable taking one str (a line), got {}",
-            p.get_type().name().map(|n| n.to_string()).unwrap_or_else(|_| "an object".into())
-        ),
-    ))
+/// Where a call's progress lines go (`progress=`), decided once per call.
+enum ProgressTarget {
+    /// A stream's `write` (True: Python's `sys.stderr`, which a notebook shows under the cell).
+    Stream(Py<PyAny>),
+    /// A callable, with each line.
+    Call(Py<PyAny>),
 }
 
-/// Hands `line` to the target: `write` on a stream (sys.stderr), else a call.
-fn report_line(py: Python<'_>, target: &Py<PyAny>, line: &str) -> PyResult<()> {
-    let t = target.bind(py);
-    if t.hasattr("write")? && !t.is_callable() {
-        t.call_method1("write", (format!("{line}\n"),))?;
-        if t.hasattr("flush")? {
-            t.call_method0("flush")?;
+impl ProgressTarget {
+    /// What `progress=` asks for: nothing (None, False; True when `sys.stderr` is None, as under
+    /// pythonw), `sys.stderr` (True), a callable, or an object with `write` (a file, sys.stdout).
+    fn of(py: Python<'_>, progress: Option<&Bound<'_, PyAny>>) -> PyResult<Option<Self>> {
+        let Some(p) = progress.filter(|p| !p.is_none()) else { return Ok(None) };
+        if let Ok(on) = p.extract::<bool>() {
+            if !on {
+                return Ok(None);
+            }
+            let stderr = py.import("sys")?.getattr("stderr")?;
+            return Ok((!stderr.is_none()).then(|| ProgressTarget::Stream(stderr.unbind())));
         }
-        Ok(())
-    } else {
-        t.call1((line,)).map(|_| ())
+        if p.is_callable() {
+            return Ok(Some(ProgressTarget::Call(p.clone().unbind())));
+        }
+        if p.hasattr("write")? {
+            return Ok(Some(ProgressTarget::Stream(p.clone().unbind())));
+        }
+        Err(to_py_err(
+            py,
+            anyhow::anyhow!(
+                "progress must be None, True, False, a callable taking one str (a line) or a stream with \
+                 write(), got {}",
+                p.get_type().name().map(|n| n.to_string()).unwrap_or_else(|_| "an object".into())
+            ),
+        ))
+    }
+
+    /// Hands `line` over. A stream that fails to write (closed) is not the call's failure: the
+    /// line is dropped; a callable that raises stops the call.
+    fn say(&self, py: Python<'_>, line: &str) -> PyResult<()> {
+        match self {
+            ProgressTarget::Stream(stream) => {
+                let stream = stream.bind(py);
+                let written = stream.call_method1("write", (format!("{line}\n"),));
+                if written.is_ok() && stream.hasattr("flush").unwrap_or(false) {
+                    let _ = stream.call_method0("flush");
+                }
+                Ok(())
+            }
+            ProgressTarget::Call(f) => f.call1(py, (line,)).map(|_| ()),
+        }
     }
 }
 
-/// [`run`], with the search's progress lines handed to `report` (see [`progress_target`]) on
-/// the caller's thread, with the GIL, as they come. A `report` that raises stops the call like
-/// Ctrl-C, and its exception is raised.
+/// [`run`], with the search's progress lines handed to `report` on the caller's thread, with the
+/// GIL, as they come (the last ones once the work has ended). A callable that raises stops the
+/// call like Ctrl-C, and its exception is raised. Calls with progress run one at a time
+/// ([`host_sim::progress::to_sink`]); one interrupted while it waits for its turn never starts.
 fn run_reporting<T: Send>(
     py: Python<'_>,
-    report: Option<Py<PyAny>>,
+    report: Option<ProgressTarget>,
     f: impl FnOnce() -> anyhow::Result<T> + Send,
 ) -> PyResult<T> {
     let stops_before = host_sim::search::stops_requested();
     let (lines_tx, lines) = std::sync::mpsc::channel::<String>();
-    let reporting = report.is_some();
+    let interrupted = std::sync::atomic::AtomicBool::new(false);
     // Moved in: the receiver is not shared, only this thread reads it.
     let outcome = py.detach(move || {
         std::thread::scope(|scope| {
             let caller = std::thread::current();
+            let (reporting, interrupted) = (report.is_some(), &interrupted);
             let worker = scope.spawn(move || {
                 let result = if reporting {
                     let say: host_sim::progress::Say = std::sync::Arc::new(move |line: &str| {
                         let _ = lines_tx.send(line.to_string());
                     });
-                    host_sim::progress::to_sink(say, f)
+                    host_sim::progress::to_sink(say, || {
+                        if interrupted.load(std::sync::atomic::Ordering::Relaxed) {
+                            anyhow::bail!("stopped before it started (interrupted while another call held the progress output)");
+                        }
+                        f()
+                    })
                 } else {
                     f()
                 };
@@ -148,30 +173,41 @@ fn run_reporting<T: Send>(
                 result
             });
             let mut interrupt = None;
-            let deliver = |interrupt: &mut Option<PyErr>| {
+            // The lines so far, with the GIL once per batch. `stop`: a callable that raises
+            // stops the searches (not once the work has ended).
+            let deliver = |interrupt: &mut Option<PyErr>, stop: bool| {
                 let Some(target) = &report else { return };
-                for line in lines.try_iter() {
-                    if interrupt.is_some() {
-                        continue; // drained, not shown: the call is being stopped
-                    }
-                    if let Err(e) = Python::attach(|py| report_line(py, target, &line)) {
-                        host_sim::search::request_stop(true);
-                        *interrupt = Some(e);
-                    }
+                let batch: Vec<String> = lines.try_iter().collect();
+                if batch.is_empty() || interrupt.is_some() {
+                    return; // drained, not shown: the call is being stopped
                 }
+                Python::attach(|py| {
+                    for line in &batch {
+                        if let Err(e) = target.say(py, line) {
+                            if stop {
+                                host_sim::search::request_stop(true);
+                            }
+                            *interrupt = Some(e);
+                            break;
+                        }
+                    }
+                });
             };
             while !worker.is_finished() {
                 std::thread::park_timeout(SIGNAL_POLL);
-                deliver(&mut interrupt);
+                deliver(&mut interrupt, true);
                 if interrupt.is_none() {
                     if let Err(e) = Python::attach(|py| py.check_signals()) {
                         host_sim::search::request_stop(true);
                         interrupt = Some(e);
                     }
                 }
+                if interrupt.is_some() {
+                    interrupted.store(true, std::sync::atomic::Ordering::Relaxed);
+                }
             }
             let result = worker.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic));
-            deliver(&mut interrupt); // the last lines (the searches' "done")
+            deliver(&mut interrupt, false);
             host_sim::search::request_stop(false);
             match interrupt {
                 Some(e) => Err(e),
@@ -184,7 +220,10 @@ fn run_reporting<T: Send>(
         // Another thread's Ctrl-C stopped this call's searches too: its result is not a fit.
         return Err(to_py_err(
             py,
-            anyhow::anyhow!("stopped: an interrupt in another thread stopped every running search"),
+            anyhow::anyhow!(
+                "stopped: an interrupt in another thread (Ctrl-C, or a progress callback that raised) stopped \
+                 every running search"
+            ),
         ));
     }
     result.map_err(|e| to_py_err(py, e))
@@ -368,6 +407,7 @@ fn fit_settings(
     time_limit_s: Option<f64>,
     fix: Option<Vec<String>>,
     bound: Option<Vec<String>>,
+    progress: bool,
 ) -> PyResult<FitSettings> {
     let d = FitSettings::default();
     let seed = whole(py, "seed", seed, "a whole number in [0, 2^64)")?;
@@ -377,7 +417,7 @@ fn fit_settings(
         time_limit_s,
         fix: fix.unwrap_or_default(),
         bound: bound.unwrap_or_default(),
-        progress: false,
+        progress,
     })
 }
 
@@ -418,7 +458,7 @@ fn read_loop<'py>(py: Python<'py>, path: PathBuf, max_samples: Option<i128>) -> 
 /// `gma fit --json` object as a dict, plus `params_toml` (the parameter file `--params-out`
 /// writes; pass the result as `params=` to compare, diagnose, simulate). `progress=True` writes
 /// the search's progress to `sys.stderr` as the CLI does (a line every few seconds; a notebook
-/// shows it under the cell), a callable gets each line instead.
+/// shows it under the cell); a callable gets each line instead, a stream (`write`) is written to.
 #[pyfunction]
 #[pyo3(signature = (model, files, *, val=None, params=None, seed=None, effort=None, time_limit_s=None,
     fix=None, bound=None, columns=None, resample=None, trim_start_s=None, max_samples=None, progress=None))]
@@ -440,17 +480,14 @@ fn fit<'py>(
     max_samples: Option<i128>,
     progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let report = progress_target(py, progress)?;
+    let report = ProgressTarget::of(py, progress)?;
     let fit_src = sources(py, files, 0)?;
     let val_src = match val {
         Some(v) if !v.is_none() => sources(py, v, fit_src.len())?,
         _ => Vec::new(),
     };
     let ps = params_source(py, params)?;
-    let settings = FitSettings {
-        progress: report.is_some(),
-        ..fit_settings(py, seed, effort, time_limit_s, fix, bound)?
-    };
+    let settings = fit_settings(py, seed, effort, time_limit_s, fix, bound, report.is_some())?;
     let read = read_settings(py, max_samples, columns, resample, trim_start_s)?;
     let out = run_reporting(py, report, || api::fit(&model, &fit_src, &val_src, &ps, &settings, &read))?;
     let d = json_to_py(py, &out.summary)?;
@@ -535,17 +572,14 @@ fn diagnose<'py>(
     max_samples: Option<i128>,
     progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let report = progress_target(py, progress)?;
+    let report = ProgressTarget::of(py, progress)?;
     let fit_src = sources(py, files, 0)?;
     let val_src = match val {
         Some(v) if !v.is_none() => sources(py, v, fit_src.len())?,
         _ => Vec::new(),
     };
     let ps = params_source(py, params)?;
-    let settings = FitSettings {
-        progress: report.is_some(),
-        ..fit_settings(py, seed, effort, time_limit_s, None, None)?
-    };
+    let settings = fit_settings(py, seed, effort, time_limit_s, None, None, report.is_some())?;
     let read = read_settings(py, max_samples, columns, resample, trim_start_s)?;
     let d = run_reporting(py, report, || api::diagnose(&model, &fit_src, &val_src, &ps, &settings, &read))?;
     json_to_py(py, &d)

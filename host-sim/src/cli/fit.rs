@@ -190,10 +190,10 @@ pub(crate) fn fit_loops(
     let model = loops::LoopModel::from_spec(spec, &p.init)?;
     let t = Instant::now();
     crate::progress::phase(
-        true,
+        p.opts.progress,
         &format!("fitting the magnetization model `{spec}` to {} loop file(s)", fit_files.len()),
     );
-    let mut res = loops::fit_shown(model, fit_files, &p.init, p.search_options(), true)?;
+    let mut res = loops::fit_shown(model, fit_files, &p.init, p.search_options(), p.opts.progress)?;
     res.warnings.splice(0..0, p.input_warnings.iter().cloned());
     let mut files: Vec<FileScoreRow> = fit_files
         .iter()
