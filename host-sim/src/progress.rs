@@ -43,6 +43,12 @@ fn stderr_lines() -> Say {
     Arc::new(|line: &str| eprintln!("{line}"))
 }
 
+/// Where work shown as lines writes them: the installed sink, else stderr off a terminal; none on
+/// a terminal (there it gets a bar).
+fn line_log() -> Option<Say> {
+    sink().or_else(|| (!std::io::stderr().is_terminal()).then(stderr_lines))
+}
+
 /// A counter of planned work (`len` units, e.g. model evaluations) with a label.
 pub struct Progress {
     kind: Kind,
@@ -57,19 +63,9 @@ enum Kind {
 impl Progress {
     /// Progress of `label`; nothing is shown unless `enabled`.
     pub fn new(label: &str, len: u64, enabled: bool) -> Self {
-        let sink = sink();
         let kind = if !enabled {
             Kind::Hidden
-        } else if sink.is_none() && std::io::stderr().is_terminal() {
-            let b = ProgressBar::new(len);
-            b.set_style(
-                ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} evaluations, {elapsed}")
-                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
-            );
-            b.set_message(label.to_string());
-            Kind::Bar(b)
-        } else {
-            let say = sink.unwrap_or_else(stderr_lines);
+        } else if let Some(say) = line_log() {
             say(&format!("gma: {label}: up to {len} evaluations planned"));
             let now = Instant::now();
             Kind::Lines {
@@ -80,6 +76,14 @@ impl Progress {
                 last: Mutex::new(now),
                 say,
             }
+        } else {
+            let b = ProgressBar::new(len);
+            b.set_style(
+                ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} evaluations, {elapsed}")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            b.set_message(label.to_string());
+            Kind::Bar(b)
         };
         Self { kind }
     }
@@ -149,9 +153,8 @@ pub type Say = Arc<dyn Fn(&str) + Send + Sync>;
 impl Phase {
     /// Starts `label`, a phase of `steps` steps (0: not counted).
     pub fn start(enabled: bool, label: &str, steps: u64) -> Self {
-        let sink = sink();
-        if enabled && (sink.is_some() || !std::io::stderr().is_terminal()) {
-            return Self::lines(label, steps, LINE_EVERY, sink.unwrap_or_else(stderr_lines));
+        if let Some(say) = enabled.then(line_log).flatten() {
+            return Self::lines(label, steps, LINE_EVERY, say);
         }
         let show = if enabled {
             let b = if steps > 0 { ProgressBar::new(steps) } else { ProgressBar::new_spinner() };
