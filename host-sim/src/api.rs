@@ -1,7 +1,8 @@
 //! The workbench as a library for bindings (the Python package in `host-sim/python`): fit,
 //! compare, diagnose and simulate on files or on arrays in memory, with the CLI's checks, errors
 //! and result types ([`crate::results`], [`crate::diagnose::Diagnosis`]). Nothing here prints a
-//! result; warnings the CLI prints on stderr are printed on stderr here too.
+//! result; the notes and warnings the CLI prints on stderr are said here too, through
+//! [`crate::warning`] (a binding collects them with [`crate::warning::heard`]).
 
 use std::fmt;
 use std::path::PathBuf;
@@ -186,19 +187,14 @@ pub enum ParamsSource {
 
 impl ParamsSource {
     /// The parameters, checked for `spec`, and where they came from (the CLI's
-    /// `parameters_source` / `parameters_defaulted`; the same stderr notes).
+    /// `parameters_source` / `parameters_defaulted`; the same notes).
     pub fn load(&self, spec: ModelSpec) -> Result<(ActuatorParams, ParamSource)> {
         match self {
             ParamsSource::Demo => crate::params::load_input(None, spec, "parameters"),
             ParamsSource::File(path) => {
                 crate::params::load_input(Some(Input::open(path)?), spec, "parameters")
             }
-            ParamsSource::Text { name, text } => {
-                let f = crate::params::parse_file(name, text, spec)?;
-                let source =
-                    ParamSource { parameters_source: name.clone(), parameters_defaulted: f.defaulted };
-                Ok((f.params, source))
-            }
+            ParamsSource::Text { name, text } => crate::params::load_text(name, text, spec, None),
         }
     }
 }
@@ -587,8 +583,9 @@ pub fn simulate_rig(
     let mut args = SimulateCli::try_parse_from(argv).map_err(|e| usage_error(&e))?.args;
     // The file is temporary: no "wrote … to FILE" line.
     args.quiet = true;
-    // Checked here first, so that problems are reported under the names given, not the temporary files'.
-    params.load(crate::params::parse_spec(&args.model)?)?;
+    // Checked here first, so that problems are reported under the names given, not the temporary
+    // files'; its notes are the run's below, said once.
+    crate::warning::heard(|| params.load(crate::params::parse_spec(&args.model)?)).0?;
     args.params = match params {
         ParamsSource::Demo => None,
         ParamsSource::File(p) => Some(p.clone()),

@@ -125,8 +125,8 @@ pub struct ParamSource {
 /// `parameters_source` when no parameter file was given.
 pub const DEMO_SET: &str = "built-in demo set";
 
-/// As [`load`], from an opened input, saying on stderr when the built-in demo set (or part of
-/// it) stands in; `role` names what the parameters are for (e.g. "start values").
+/// As [`load`], from an opened input, saying (a [`crate::warning::note`]) when the built-in demo
+/// set (or part of it) stands in; `role` names what the parameters are for (e.g. "start values").
 pub fn load_input(
     input: Option<Input>,
     spec: ModelSpec,
@@ -146,40 +146,51 @@ pub fn load_input_also_for(
 ) -> Result<(ActuatorParams, ParamSource)> {
     match input {
         None => {
-            eprintln!("gma: note: no --params: {role} are the built-in Terfenol-D demo set");
+            crate::warning::note(format_args!(
+                "no parameter file given: {role} are the built-in Terfenol-D demo set"
+            ));
             let source = ParamSource { parameters_source: DEMO_SET.into(), parameters_defaulted: Vec::new() };
             Ok((ActuatorParams::TERFENOL_DEMO, source))
         }
         Some(input) => {
             let name = input.name.clone();
             let text = input.into_text(MAX_PARAM_FILE_BYTES)?;
-            let mut f = parse_file(&name, &text, spec)?;
-            if let Some(note) = defaulted_note(&name, &f.defaulted) {
-                eprintln!("gma: note: {note}");
-            }
-            if let Some((other, what)) = also {
-                let extra: Vec<&'static str> = parse_file(&name, &text, other)?
-                    .defaulted
-                    .into_iter()
-                    .filter(|t| !f.defaulted.contains(t))
-                    .collect();
-                if !extra.is_empty() {
-                    eprintln!(
-                        "gma: note: {name} has no {} for `{other}` ({what}): the demo set's values stand in",
-                        extra.iter().map(|t| format!("`{t}`")).collect::<Vec<_>>().join(", ")
-                    );
-                }
-                f.defaulted.extend(extra);
-            }
-            // Valid to model-core (it steps), but not a J–A model: said wherever the file is used.
-            if let Some(why) = crate::fit::multivalued_ja(spec, &f.params) {
-                crate::warning::warn(format_args!(
-                    "{name}: {why}; a fit refuses it, other commands use it as given"
-                ));
-            }
-            Ok((f.params, ParamSource { parameters_source: name, parameters_defaulted: f.defaulted }))
+            load_text(&name, &text, spec, also)
         }
     }
+}
+
+/// A parameter file's text (named `name` in messages) checked for `spec` (and `also`, as in
+/// [`load_input_also_for`]), saying which tables the demo set fills in and a multivalued J–A set.
+pub fn load_text(
+    name: &str,
+    text: &str,
+    spec: ModelSpec,
+    also: Option<(ModelSpec, &str)>,
+) -> Result<(ActuatorParams, ParamSource)> {
+    let mut f = parse_file(name, text, spec)?;
+    if let Some(note) = defaulted_note(name, &f.defaulted) {
+        crate::warning::note(note);
+    }
+    if let Some((other, what)) = also {
+        let extra: Vec<&'static str> = parse_file(name, text, other)?
+            .defaulted
+            .into_iter()
+            .filter(|t| !f.defaulted.contains(t))
+            .collect();
+        if !extra.is_empty() {
+            crate::warning::note(format_args!(
+                "{name} has no {} for `{other}` ({what}): the demo set's values stand in",
+                extra.iter().map(|t| format!("`{t}`")).collect::<Vec<_>>().join(", ")
+            ));
+        }
+        f.defaulted.extend(extra);
+    }
+    // Valid to model-core (it steps), but not a J–A model: said wherever the file is used.
+    if let Some(why) = crate::fit::multivalued_ja(spec, &f.params) {
+        crate::warning::warn(format_args!("{name}: {why}; a fit refuses it, other commands use it as given"));
+    }
+    Ok((f.params, ParamSource { parameters_source: name.into(), parameters_defaulted: f.defaulted }))
 }
 
 /// Largest parameter file read [bytes] (they are a few KB).

@@ -2,11 +2,75 @@
 //! put them in JSON as text, and decide from [`Warning::invalidates`] whether a result may be
 //! written — never by searching message text.
 
+use std::cell::RefCell;
 use std::fmt;
 
-/// Says one doubt on stderr, in the one form every command uses (`gma: warning: …`).
+/// Says one doubt on stderr, in the one form every command uses (`gma: warning: …`), or hands it
+/// to [`heard`]'s caller.
 pub fn warn(what: impl fmt::Display) {
-    eprintln!("gma: warning: {what}");
+    say(Said::Warning(what.to_string()));
+}
+
+/// Says what stands in for something not given (the demo set for a missing parameter file,
+/// samples filled in by resampling) on stderr (`gma: note: …`), or hands it to [`heard`]'s caller.
+pub fn note(what: impl fmt::Display) {
+    say(Said::Note(what.to_string()));
+}
+
+/// A note or a warning said while a command ran.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub enum Said {
+    /// [`note`]'s.
+    Note(String),
+    /// [`warn`]'s.
+    Warning(String),
+}
+
+impl fmt::Display for Said {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Said::Note(text) => write!(f, "note: {text}"),
+            Said::Warning(text) => write!(f, "warning: {text}"),
+        }
+    }
+}
+
+thread_local! {
+    /// What [`heard`] collects on this thread (None: stderr).
+    static HEARD: RefCell<Option<Vec<Said>>> = const { RefCell::new(None) };
+}
+
+fn say(said: Said) {
+    let unheard = HEARD.with(|h| match h.borrow_mut().as_mut() {
+        Some(heard) => {
+            heard.push(said);
+            None
+        }
+        None => Some(said),
+    });
+    if let Some(said) = unheard {
+        eprintln!("gma: {said}");
+    }
+}
+
+/// Runs `f` with the notes and warnings it says on this thread collected, not written to stderr
+/// (a binding shows them its own way: the Python package as `UserWarning`s, which a notebook
+/// shows; it does not show the process's stderr). Those said on other threads (none today: the
+/// parallel searches say nothing) still go to stderr.
+pub fn heard<T>(f: impl FnOnce() -> T) -> (T, Vec<Said>) {
+    struct Restore(Option<Vec<Said>>);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            let outer = self.0.take();
+            HEARD.with(|h| *h.borrow_mut() = outer);
+        }
+    }
+    let outer = HEARD.with(|h| h.borrow_mut().replace(Vec::new()));
+    let restore = Restore(outer);
+    let value = f();
+    let said = HEARD.with(|h| h.borrow_mut().take()).unwrap_or_default();
+    drop(restore);
+    (value, said)
 }
 
 /// One doubt about a result.
@@ -346,5 +410,29 @@ mod tests {
         let text = zero.to_string();
         assert!(!text.contains("nearest end"), "{text}");
         assert!(text.contains("began at 2.4495e-2, the middle of that range"), "{text}");
+    }
+
+    /// What is said inside `heard` is collected in order, an inner `heard` keeps its own, and
+    /// the outer collection carries on after it (a call that panics still restores it).
+    #[test]
+    fn heard_collects_what_is_said_on_its_thread_and_nests() {
+        let ((inner, outer_after), said) = heard(|| {
+            note("first");
+            let ((), inner) = heard(|| warn(format_args!("inner {}", 2)));
+            warn("after");
+            let panicked = std::panic::catch_unwind(|| heard(|| panic!("in a heard call"))).is_err();
+            note("still heard");
+            (inner, panicked)
+        });
+        assert_eq!(inner, vec![Said::Warning("inner 2".into())]);
+        assert!(outer_after);
+        assert_eq!(
+            said,
+            vec![Said::Note("first".into()), Said::Warning("after".into()), Said::Note("still heard".into())]
+        );
+        assert_eq!(said[0].to_string(), "note: first");
+        // Another thread's words are not this call's.
+        let ((), said) = heard(|| std::thread::spawn(|| note("elsewhere")).join().unwrap());
+        assert!(said.is_empty(), "{said:?}");
     }
 }

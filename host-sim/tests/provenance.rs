@@ -48,7 +48,11 @@ fn the_demo_set_and_defaulted_stages_are_said_in_text_and_json() {
     let rec = recording(dir.path(), "r.csv", "100");
     let plots = dir.path().join("plots");
     let o = gma(&["compare", "--model", "ja", "--json", "--out-dir", plots.to_str().unwrap(), &rec]);
-    assert!(err(&o).contains("no --params") && err(&o).contains("demo set"), "{}", err(&o));
+    assert!(
+        err(&o).contains("gma: note: no parameter file given") && err(&o).contains("demo set"),
+        "{}",
+        err(&o)
+    );
     let j = one_json(&o);
     assert_eq!(j["parameters_source"], "built-in demo set", "{j}");
     assert_eq!(j["parameters_defaulted"], serde_json::json!([]), "{j}");

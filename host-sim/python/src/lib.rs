@@ -72,6 +72,18 @@ fn warn(py: Python<'_>, w: Option<host_sim::warning::Warning>) -> PyResult<()> {
     }
 }
 
+/// The notes and warnings a call said (the CLI's `gma: note: …` and `gma: warning: …` lines) as
+/// Python `UserWarning`s, each once: a notebook shows them under the cell, where it would not
+/// show the process's stderr. With warnings turned into errors (`-W error`) the first raises.
+fn say_as_warnings(py: Python<'_>, said: &[host_sim::warning::Said]) -> PyResult<()> {
+    let mut seen = std::collections::HashSet::new();
+    for s in said.iter().filter(|s| seen.insert(*s)) {
+        let text = std::ffi::CString::new(escape_control(&s.to_string())).unwrap_or_default();
+        PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &text, 1)?;
+    }
+    Ok(())
+}
+
 /// How often a running call looks for Ctrl-C.
 const SIGNAL_POLL: std::time::Duration = std::time::Duration::from_millis(50);
 
@@ -156,7 +168,8 @@ fn run_reporting<T: Send>(
             let caller = std::thread::current();
             let (reporting, interrupted) = (report.is_some(), &interrupted);
             let worker = scope.spawn(move || {
-                let result = if reporting {
+                // The notes and warnings the CLI writes to stderr, back to the caller's thread.
+                let heard = host_sim::warning::heard(|| if reporting {
                     let say: host_sim::progress::Say = std::sync::Arc::new(move |line: &str| {
                         let _ = lines_tx.send(line.to_string());
                     });
@@ -168,9 +181,9 @@ fn run_reporting<T: Send>(
                     })
                 } else {
                     f()
-                };
+                });
                 caller.unpark(); // done: no need to wait out the poll
-                result
+                heard
             });
             let mut interrupt = None;
             // The lines so far, with the GIL once per batch. `stop`: a callable that raises
@@ -215,7 +228,8 @@ fn run_reporting<T: Send>(
             }
         })
     });
-    let result = outcome?;
+    let (result, said) = outcome?;
+    say_as_warnings(py, &said)?;
     if host_sim::search::stops_requested() != stops_before {
         // Another thread's Ctrl-C stopped this call's searches too: its result is not a fit.
         return Err(to_py_err(

@@ -277,6 +277,36 @@ def test_a_file_cut_short_by_max_samples_is_a_python_warning():
     assert any("using the first 500" in w for w in c["warnings"]), c["warnings"]
 
 
+def test_the_clis_notes_are_python_warnings_not_stderr(tmp_path, capfd, fitted):
+    # A notebook shows neither the process's stderr nor what the CLI notes there: the notes come
+    # back as UserWarnings, each once per call.
+    capfd.readouterr()
+    with pytest.warns(UserWarning, match=r"^note: no parameter file given: parameters are the built-in") as w:
+        gma.compare("ja", VAL_CSV)
+    assert sum("no parameter file given" in str(x.message) for x in w) == 1, [str(x.message) for x in w]
+    # simulate checks its parameters, then runs as the CLI's command: the note still comes once.
+    with pytest.warns(UserWarning, match=r"demo set") as w:
+        gma.simulate("ja", duration_s=0.01)
+    assert sum("demo set" in str(x.message) for x in w) == 1, [str(x.message) for x in w]
+    # A parameter set without a table the model uses, given as a file or as a fit result's text.
+    tables = fitted["params_toml"].split("\n[")
+    partial = tmp_path / "no-mech.toml"
+    partial.write_text("\n[".join(t for t in tables if not t.startswith("mech]")))
+    with pytest.warns(UserWarning, match=r"no-mech.toml has no `mech` for this model: the demo set's values stand in"):
+        gma.compare("ja+mech", VAL_CSV, params=partial)
+    no_mech = {**fitted, "params_toml": partial.read_text()}
+    with pytest.warns(UserWarning, match=r"has no `mech` for this model"):
+        gma.model_response("ja+mech", gma.read_recording(VAL_CSV), params=no_mech)
+    assert "gma: note" not in capfd.readouterr().err
+    # Turned into errors, a warning raises, as any Python warning does.
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(UserWarning, match="no parameter file given"):
+            gma.compare("ja", VAL_CSV)
+
+
 def test_a_loop_given_as_arrays_is_told_to_pass_its_path():
     lp = gma.read_loop(CORPUS / "loop_units.csv")
     with pytest.raises(gma.GmaError) as e:

@@ -378,15 +378,15 @@ pub fn read_recording(
     });
     // Gaps bridged by `--resample linear` are data the rig did not record: said.
     if opts.resample.is_some() && r.len() > read.kept {
-        eprintln!(
-            "gma: note: {}: --resample linear put {} samples onto {} at the median step {:.3e} s: {} were filled in \
+        crate::warning::note(format_args!(
+            "{}: --resample linear put {} samples onto {} at the median step {:.3e} s: {} were filled in \
              across gaps by interpolation",
             r.name,
             read.kept,
             r.len(),
             r.dt_s(),
             r.len() - read.kept
-        );
+        ));
     }
     Ok((r, cut))
 }

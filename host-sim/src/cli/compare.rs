@@ -184,7 +184,7 @@ fn compare_recordings(
                 Some(fa.summary)
             }
             Err(e) => {
-                eprintln!("gma: note: {}: no residual or frequency analysis: {e}", rec.name);
+                crate::warning::note(format_args!("{}: no residual or frequency analysis: {e}", rec.name));
                 None
             }
         };

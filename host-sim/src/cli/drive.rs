@@ -266,7 +266,10 @@ fn replies(r: &RepliesArgs) -> Result<()> {
     }
     // A capture of the board's line holds its telemetry too: skipping those frames is normal.
     if d.refused > 0 {
-        eprintln!("gma: note: {name}: {} frames that are not replies (telemetry) skipped", d.refused);
+        crate::warning::note(format_args!(
+            "{name}: {} frames that are not replies (telemetry) skipped",
+            d.refused
+        ));
     }
     if d.corrupt > 0 {
         crate::warning::warn(format_args!(
