@@ -399,6 +399,10 @@ pub fn fit(
             crate::cli::fit::fit_recordings(&p, fit_files, val_files, &c)?
         }
     };
+    // Said as the CLI says them (a binding shows them: the Python package as `UserWarning`s).
+    for w in &warnings {
+        crate::warning::warn(w);
+    }
     let invalid: Vec<String> = warnings.iter().filter(|w| w.invalidates()).map(|w| w.to_string()).collect();
     if !invalid.is_empty() {
         bail!("the loop fit did not produce a valid model: {}", invalid.join("; "));
@@ -519,6 +523,9 @@ pub fn compare(
                 });
             }
         }
+    }
+    for w in &warnings {
+        crate::warning::warn(w);
     }
     let summary = CompareSummary {
         model: spec.to_string(),

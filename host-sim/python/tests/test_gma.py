@@ -298,6 +298,12 @@ def test_the_clis_notes_are_python_warnings_not_stderr(tmp_path, capfd, fitted):
     with pytest.warns(UserWarning, match=r"has no `mech` for this model"):
         gma.model_response("ja+mech", gma.read_recording(VAL_CSV), params=no_mech)
     assert "gma: note" not in capfd.readouterr().err
+    # The doubts the CLI warns of are warned too, and kept in the result's `warnings`.
+    with pytest.warns(UserWarning, match=r"^warning: .*using the first 1500"):
+        f = gma.fit("ja", [FIT_CSV], max_samples=1500, **QUICK)
+    assert any("using the first 1500" in w for w in f["warnings"]), f["warnings"]
+    with pytest.warns(UserWarning, match=r"^warning: .*using the first 500"):
+        gma.compare("ja", VAL_CSV, max_samples=500)
     # Turned into errors, a warning raises, as any Python warning does.
     import warnings
 
