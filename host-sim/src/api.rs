@@ -384,7 +384,7 @@ pub fn fit(
     read: &ReadSettings,
 ) -> Result<FitOutcome> {
     let mut p = prepare(model, fit_src, val_src, params, s, read)?;
-    let (summary, fitted, warnings) = match &p.data {
+    let (mut summary, fitted, mut warnings) = match &p.data {
         Data::Loops(fit_files, val_files) => {
             if !(s.fix.is_empty() && s.bound.is_empty()) {
                 bail!(
@@ -400,6 +400,7 @@ pub fn fit(
         }
     };
     // Said as the CLI says them (a binding shows them: the Python package as `UserWarning`s).
+    crate::cli::fit::add_time_limit_warning(&mut summary, &mut warnings, s.time_limit_s);
     for w in &warnings {
         crate::warning::warn(w);
     }
@@ -438,7 +439,11 @@ pub fn diagnose(
         bail!("diagnose works on displacement recordings; for magnetization loops use `gma fit` and `gma compare`");
     };
     p.warn_about_inputs();
-    crate::diagnose::diagnose(p.spec, &p.init, fit_files, val_files, p.opts)
+    let d = crate::diagnose::diagnose(p.spec, &p.init, fit_files, val_files, p.opts)?;
+    if d.time_limited {
+        crate::warning::warn(Warning::TimeLimit { seconds: s.time_limit_s.unwrap_or(f64::NAN) });
+    }
+    Ok(d)
 }
 
 /// The model's prediction for one compared source.
@@ -593,16 +598,29 @@ pub fn simulate_rig(
     // Checked here first, so that problems are reported under the names given, not the temporary
     // files'; its notes are the run's below, said once.
     crate::warning::heard(|| params.load(crate::params::parse_spec(&args.model)?)).0?;
-    args.params = match params {
-        ParamsSource::Demo => None,
-        ParamsSource::File(p) => Some(p.clone()),
-        ParamsSource::Text { text, .. } => {
+    let temporary_params = match params {
+        ParamsSource::Demo | ParamsSource::File(_) => None,
+        ParamsSource::Text { name, text } => {
             let p = dir.path().join("params.toml");
             std::fs::write(&p, text).context("writing the parameter set to a temporary file")?;
-            Some(p)
+            Some((p, name))
         }
     };
-    crate::cli::simulate::run(&args)?;
+    args.params = match (params, &temporary_params) {
+        (ParamsSource::File(p), _) => Some(p.clone()),
+        (_, Some((p, _))) => Some(p.clone()),
+        _ => None,
+    };
+    let (ran, said) = crate::warning::heard(|| crate::cli::simulate::run(&args));
+    // The run read the temporary copy of a parameter text: its notes name the text as given.
+    let temporary = temporary_params.as_ref().map(|(p, name)| (crate::files::display(p), name.as_str()));
+    for s in said {
+        crate::warning::say(match &temporary {
+            Some((path, name)) => s.map_text(|t| t.replace(path, name)),
+            None => s,
+        });
+    }
+    ran?;
     let mut rec = Recording::read(&out)?;
     rec.name = name.into();
     Ok(rec)

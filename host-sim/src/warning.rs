@@ -40,7 +40,18 @@ thread_local! {
     static HEARD: RefCell<Option<Vec<Said>>> = const { RefCell::new(None) };
 }
 
-fn say(said: Said) {
+impl Said {
+    /// The same kind of message with its text changed (a temporary file's path named as given).
+    pub fn map_text(self, f: impl FnOnce(&str) -> String) -> Said {
+        match self {
+            Said::Note(t) => Said::Note(f(&t)),
+            Said::Warning(t) => Said::Warning(f(&t)),
+        }
+    }
+}
+
+/// Says `said` again, as it was first said: to [`heard`]'s caller if one listens, else stderr.
+pub fn say(said: Said) {
     let unheard = HEARD.with(|h| match h.borrow_mut().as_mut() {
         Some(heard) => {
             heard.push(said);

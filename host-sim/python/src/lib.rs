@@ -62,14 +62,10 @@ fn opt<'py, T: IntoPyObject<'py>>(py: Python<'py>, v: Option<T>) -> Py<PyAny> {
 
 /// A doubt about what was read (`max_samples` cut the file short) as a Python `UserWarning`,
 /// which `warnings.catch_warnings` and notebooks see (stderr they may not).
+/// Worded as every other call's warnings (`warning: …`).
 fn warn(py: Python<'_>, w: Option<host_sim::warning::Warning>) -> PyResult<()> {
-    match w {
-        Some(w) => {
-            let text = std::ffi::CString::new(escape_control(&w.to_string())).unwrap_or_default();
-            PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &text, 1)
-        }
-        None => Ok(()),
-    }
+    let said: Vec<_> = w.iter().map(|w| host_sim::warning::Said::Warning(w.to_string())).collect();
+    say_as_warnings(py, &said)
 }
 
 /// The notes and warnings a call said (the CLI's `gma: note: …` and `gma: warning: …` lines) as

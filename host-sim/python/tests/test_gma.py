@@ -304,6 +304,20 @@ def test_the_clis_notes_are_python_warnings_not_stderr(tmp_path, capfd, fitted):
     assert any("using the first 1500" in w for w in f["warnings"]), f["warnings"]
     with pytest.warns(UserWarning, match=r"^warning: .*using the first 500"):
         gma.compare("ja", VAL_CSV, max_samples=500)
+    # A fit result given to simulate is run from a temporary copy: its notes name it as given.
+    with pytest.warns(UserWarning, match=r"^note: <fit result params_toml> has no `mech`") as w:
+        gma.simulate("ja+mech", params=no_mech, duration_s=0.01)
+    assert not any("params.toml" in str(x.message) for x in w), [str(x.message) for x in w]
+    # A call the time limit cut short says so, as the CLI does.
+    with pytest.warns(UserWarning, match=r"^warning: .*reached: the result is the best found so far"):
+        f = gma.fit("ja", [FIT_CSV], time_limit_s=0.01, **QUICK)
+    assert f["time_limit_reached"] and any("reached" in w for w in f["warnings"]), f["warnings"]
+    with pytest.warns(UserWarning, match=r"^warning: .*reached: the result is the best found so far"):
+        d = gma.diagnose("ja", [FIT_CSV], time_limit_s=0.01, **QUICK)
+    assert d["time_limit_reached"]
+    # What reading says is worded as every other call's warnings.
+    with pytest.warns(UserWarning, match=r"^warning: .*using the first 500"):
+        gma.read_recording(VAL_CSV, max_samples=500)
     # Turned into errors, a warning raises, as any Python warning does.
     import warnings
 

@@ -37,6 +37,19 @@ pub struct FitArgs {
 }
 
 /// Runs `gma fit`.
+/// The time limit is a doubt like the others: said, and in the JSON's `warnings` too.
+pub(crate) fn add_time_limit_warning(
+    summary: &mut FitSummary,
+    warnings: &mut Vec<Warning>,
+    time_limit_s: Option<f64>,
+) {
+    if summary.time_limit_reached {
+        let w = Warning::TimeLimit { seconds: time_limit_s.unwrap_or(f64::NAN) };
+        summary.warnings.get_or_insert_with(Vec::new).push(w.to_string());
+        warnings.push(w);
+    }
+}
+
 pub fn run(a: &FitArgs) -> Result<()> {
     let outputs: Vec<&std::path::Path> = a.params_out.as_deref().into_iter().collect();
     let mut p = a.mf.prepare(&outputs)?;
@@ -55,12 +68,7 @@ pub fn run(a: &FitArgs) -> Result<()> {
             fit_recordings(&p, fit_files, val_files, &c)?
         }
     };
-    // The time limit is a doubt like the others: on stderr and in the JSON's `warnings` too.
-    if summary.time_limit_reached {
-        let w = Warning::TimeLimit { seconds: a.mf.time_limit.unwrap_or(f64::NAN) };
-        summary.warnings.get_or_insert_with(Vec::new).push(w.to_string());
-        warnings.push(w);
-    }
+    add_time_limit_warning(&mut summary, &mut warnings, a.mf.time_limit);
     let j = a.mf.json;
     say!(j, "{summary}");
     for w in &warnings {
