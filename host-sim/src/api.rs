@@ -436,7 +436,7 @@ pub fn diagnose(
 ) -> Result<Diagnosis> {
     let p = prepare(model, fit_src, val_src, params, s, read)?;
     let Data::Recordings(fit_files, val_files) = &p.data else {
-        bail!("diagnose works on displacement recordings; for magnetization loops use `gma fit` and `gma compare`");
+        bail!("diagnose works on displacement recordings; for magnetization loops use `fit` and `compare`");
     };
     p.warn_about_inputs();
     let d = crate::diagnose::diagnose(p.spec, &p.init, fit_files, val_files, p.opts)?;

@@ -103,7 +103,18 @@ impl ColumnMap {
             bail!("--column `{shown}`: no HEADER after `=` (expected CANONICAL=HEADER[:UNIT])");
         }
         let unit = match unit {
-            None => UNITS[k][0],
+            // A header that names another unit is not read as the canonical one unsaid.
+            None => match named_unit(header, k) {
+                Some(u) => bail!(
+                    "--column `{shown}`: the header `{}` names {u}, but no unit is given, so it would be read as {}; give it (`{canonical}={}:{u}` converts it) or, if the values are {} despite the name, `:{}`",
+                    crate::files::echo(header),
+                    CANONICAL_UNIT[k],
+                    crate::files::echo(header),
+                    CANONICAL_UNIT[k],
+                    UNITS[k][0].name
+                ),
+                None => UNITS[k][0],
+            },
             Some(u) => match UNITS[k].iter().find(|x| x.name == u) {
                 Some(x) => *x,
                 None => bail!(
@@ -127,6 +138,16 @@ impl ColumnMap {
             format!("`{header}` (read as `{name}`, {} → {})", self.unit.name, CANONICAL_UNIT[self.canonical])
         }
     }
+}
+
+/// A converting unit of column `k` that `header` names at its end (`x_mm`, `x [mm]`, `x (mm)`,
+/// `x/mm`, `x mm`), if any.
+fn named_unit(header: &str, k: usize) -> Option<&'static str> {
+    UNITS[k].iter().filter(|u| !u.is_identity()).map(|u| u.name).find(|u| {
+        ["_", " ", "/"].iter().any(|sep| header.ends_with(&format!("{sep}{u}")))
+            || header.ends_with(&format!("[{u}]"))
+            || header.ends_with(&format!("({u})"))
+    })
 }
 
 /// The accepted unit names of canonical column `k`, for messages and docs.

@@ -229,6 +229,9 @@ pub struct Diagnosis {
     pub verdict: Option<Effect>,
     /// Effects the evidence could not separate from the verdict.
     pub undistinguished: Vec<Effect>,
+    /// Candidates `--time-limit` left untested: with any, no verdict means undecided, not
+    /// "nothing is missing".
+    pub not_refitted: Vec<Effect>,
     /// Residual whiteness, trends across files: findings in words.
     pub findings: Vec<String>,
     /// The fit of the given structure.
@@ -307,8 +310,28 @@ impl std::fmt::Display for Diagnosis {
                 self.model,
                 v.alias().unwrap_or(v.name())
             ),
-            None => write!(f, "verdict: nothing significant is missing"),
+            None => write!(f, "verdict: {}", self.no_verdict()),
         }
+    }
+}
+
+impl Diagnosis {
+    /// What no verdict means, in words: nothing missing, or undecided when the time limit left
+    /// candidates untested.
+    pub fn no_verdict(&self) -> String {
+        if self.not_refitted.is_empty() {
+            return "nothing significant is missing".into();
+        }
+        let untested = self.not_refitted.iter().map(|e| e.name()).collect::<Vec<_>>().join("`, `");
+        let tested = self.candidates.len();
+        format!(
+            "undecided — the time limit left `{untested}` untested{}; raise --time-limit",
+            match tested {
+                0 => String::new(),
+                1 => ", and the one refitted in time is not missing".into(),
+                n => format!(", and none of the {n} refitted in time is missing"),
+            }
+        )
     }
 }
 
@@ -1044,7 +1067,7 @@ pub fn diagnose(
     let mut unpinned = Vec::new();
     for (e, r) in results {
         let Some(r) = r else {
-            skipped.push(e.name());
+            skipped.push(e);
             continue;
         };
         if let Ok((f, _)) = &r {
@@ -1393,7 +1416,7 @@ pub fn diagnose(
         time_limited = true;
         findings.push(format!(
             "--time-limit reached: `{}` not refitted; the verdict weighs only the candidates refitted in time",
-            skipped.join("`, `")
+            skipped.iter().map(|e| e.name()).collect::<Vec<_>>().join("`, `")
         ));
     }
     Ok(Diagnosis {
@@ -1404,6 +1427,7 @@ pub fn diagnose(
         candidates,
         verdict,
         undistinguished,
+        not_refitted: skipped,
         findings,
         baseline: Some(base),
         ja_variants: None,

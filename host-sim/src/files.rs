@@ -61,11 +61,11 @@ impl Input {
             ("<stdin>".into(), Box::new(std::io::stdin()), None)
         } else {
             let name = display(path);
-            let meta = std::fs::metadata(path).with_context(|| format!("{name}: cannot read"))?;
+            let meta = std::fs::metadata(path).map_err(|e| cannot_read(&name, &e))?;
             if meta.is_dir() {
-                bail!("{name}: is a folder, not a file");
+                return Err(Located::file(&name, "is a folder, not a file").into());
             }
-            let f = std::fs::File::open(path).with_context(|| format!("{name}: cannot read"))?;
+            let f = std::fs::File::open(path).map_err(|e| cannot_read(&name, &e))?;
             (name, Box::new(f), identity(&meta))
         };
         // Hashed as it streams (provenance), the first line (with its newline) bounded like
@@ -114,7 +114,8 @@ impl Input {
                 break;
             }
             if (text.len() + line.len()) as u64 > max_bytes {
-                bail!("{name}: larger than {} MB; this is not a file of this kind", max_bytes >> 20);
+                let what = format!("larger than {} MB; this is not a file of this kind", max_bytes >> 20);
+                return Err(Located::file(&name, what).into());
             }
             let bytes = if number == 1 { line.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&line) } else { &line };
             let Ok(s) = std::str::from_utf8(bytes) else {
@@ -157,8 +158,13 @@ pub fn read_error(name: &str, e: std::io::Error) -> anyhow::Error {
             ),
         )
         .into(),
-        None => anyhow::anyhow!("{name}: cannot read: {e}"),
+        None => cannot_read(name, &e),
     }
+}
+
+/// A file that cannot be opened or read, located at the file (`--json`'s `file`).
+pub fn cannot_read(name: &str, e: &std::io::Error) -> anyhow::Error {
+    Located::file(name, format!("cannot read: {e}")).into()
 }
 
 /// A line over [`MAX_LINE_BYTES`], carried inside an `io::Error`.

@@ -188,7 +188,9 @@ pub fn load_text(
     }
     // Valid to model-core (it steps), but not a J–A model: said wherever the file is used.
     if let Some(why) = crate::fit::multivalued_ja(spec, &f.params) {
-        crate::warning::warn(format_args!("{name}: {why}; a fit refuses it, other commands use it as given"));
+        crate::warning::warn(format_args!(
+            "{name}: {why}; a fit and the drive refuse it, other commands use it as given"
+        ));
     }
     Ok((f.params, ParamSource { parameters_source: name.into(), parameters_defaulted: f.defaulted }))
 }
@@ -264,6 +266,9 @@ pub fn parse_file(file: &str, text: &str, spec: ModelSpec) -> Result<ParamFile> 
     Actuator::new(spec, &params).map_err(|e| {
         let what = format!("{e} (checked for model `{spec}`)");
         match line_of(text, e.name()) {
+            Some((line, value)) if beyond_f32(value) => {
+                Located::at(file, line, None, beyond_f32_words(e.name(), value))
+            }
             Some((line, value)) => Located::at(file, line, None, format!("{what}; found `{}`", echo(value))),
             // A table the file left out (the demo set's) or a combination of parameters.
             None => Located::file(file, what),
@@ -275,6 +280,9 @@ pub fn parse_file(file: &str, text: &str, spec: ModelSpec) -> Result<ParamFile> 
     {
         let what = format!("parameter `{name}` is not a finite number");
         return Err(match line_of(text, &name) {
+            Some((line, value)) if beyond_f32(value) => {
+                Located::at(file, line, None, beyond_f32_words(&name, value))
+            }
             Some((line, value)) => Located::at(file, line, None, format!("{what}; found `{}`", echo(value))),
             None => Located::file(file, what),
         }
@@ -283,6 +291,19 @@ pub fn parse_file(file: &str, text: &str, spec: ModelSpec) -> Result<ParamFile> 
     let used = tables_used(spec);
     let defaulted = missing.into_iter().filter(|t| used.contains(t)).collect();
     Ok(ParamFile { params, format_version, defaulted })
+}
+
+/// A finite number in the file that f32, the precision the models run in, cannot hold (it
+/// reads as ±inf, which the checks would call "not a finite number").
+fn beyond_f32(value: &str) -> bool {
+    value.trim().replace('_', "").parse::<f64>().is_ok_and(|v| v.is_finite() && v.abs() > f64::from(f32::MAX))
+}
+
+fn beyond_f32_words(name: &str, value: &str) -> String {
+    format!(
+        "parameter `{name}` = {} is beyond the range of f32 (±3.4e38), the precision the models run in",
+        echo(value)
+    )
 }
 
 /// The dotted name (`table.key`) of the first non-finite number in `table`, if any.
@@ -388,8 +409,29 @@ fn toml_error(file: &str, text: &str, e: &toml::de::Error) -> anyhow::Error {
     }
     match key_at(before) {
         Some(key) => here(format!("parameter `{}`: {msg} (found `{at}`)", echo(&key))),
-        None => here(format!("{msg} (at `{at}`)")),
+        None => here(format!("{msg} (at `{at}`){}", top_level_key_hint(before, msg))),
     }
+}
+
+/// For a top-level key written below a `[table]` header (TOML puts it in that table): where it
+/// belongs. Empty otherwise.
+fn top_level_key_hint(before: &str, msg: &str) -> String {
+    let Some(field) = msg.strip_prefix("unknown field `").and_then(|m| m.split_once('`')).map(|(f, _)| f)
+    else {
+        return String::new();
+    };
+    let Some(table) = before.lines().rev().map(str::trim).find(|l| l.starts_with('[')) else {
+        return String::new();
+    };
+    let top_level = toml::Table::try_from(ActuatorParams::TERFENOL_DEMO)
+        .is_ok_and(|t| t.get(field).is_some_and(|v| !v.is_table()));
+    if !top_level {
+        return String::new();
+    }
+    format!(
+        " — `{field}` is a top-level key: move it above the first `[table]` line (below `{}` it belongs to that table)",
+        echo(table)
+    )
 }
 
 /// The dotted key (`table.key`) whose value starts where `before` ends, if that is a value.
@@ -419,9 +461,19 @@ pub fn to_toml(p: &ActuatorParams, header: &str) -> Result<String> {
 pub fn parse_spec(text: &str) -> Result<ModelSpec> {
     ModelSpec::parse(text).map_err(|e| match e {
         model_core::SpecError::UnknownEffect { start, end, suggestion } => {
-            let hint = suggestion.map(|s| format!("; did you mean `{s}`?")).unwrap_or_default();
+            // `ja,mech` or `ja mech`: the nearest single word would drop an effect.
+            let joined = text
+                .split(|c: char| matches!(c, ',' | ';' | '|' | '&' | '/') || c.is_whitespace())
+                .filter(|w| !w.is_empty())
+                .collect::<Vec<_>>()
+                .join("+");
+            let hint = if joined != text && ModelSpec::parse(&joined).is_ok() {
+                format!("; effects are joined by `+`: did you mean `{joined}`?")
+            } else {
+                suggestion.map(|s| format!("; did you mean `{s}`?")).unwrap_or_default()
+            };
             anyhow::anyhow!(
-                "model spec `{text}`: unknown effect `{}`{hint} (words: {})",
+                "model spec `{text}`: unknown effect `{}` at byte {start}{hint} (words: {})",
                 &text[start..end],
                 spec_words().collect::<Vec<_>>().join(", ")
             )

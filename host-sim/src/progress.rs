@@ -66,7 +66,7 @@ impl Progress {
         let kind = if !enabled {
             Kind::Hidden
         } else if let Some(say) = line_log() {
-            say(&format!("gma: {label}: up to {len} evaluations planned"));
+            say(&format!("gma: {label}: about {len} evaluations planned"));
             let now = Instant::now();
             Kind::Lines {
                 label: label.into(),
@@ -304,7 +304,7 @@ mod tests {
         // In this order (a slow machine may add a heartbeat line between them).
         let expected = [
             "gma: diagnose: fitting",
-            "gma: fitting ja: up to 10 evaluations planned",
+            "gma: fitting ja: about 10 evaluations planned",
             "gma: fitting ja: done, 10 evaluations in",
             "gma: refits: started",
             "gma: refits: done 0/2 in",

@@ -194,9 +194,9 @@ pub fn open_stream(input: &Path) -> Result<Box<dyn Read + Send>> {
     } else {
         let name = crate::files::display(input);
         if input.is_dir() {
-            bail!("{name}: is a folder, not a telemetry capture");
+            return Err(crate::error::Located::file(&name, "is a folder, not a telemetry capture").into());
         }
-        let f = std::fs::File::open(input).with_context(|| format!("{name}: cannot read"))?;
+        let f = std::fs::File::open(input).map_err(|e| crate::files::cannot_read(&name, &e))?;
         Ok(Box::new(f))
     }
 }

@@ -214,6 +214,9 @@ impl Recording {
         let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(false).from_reader(input);
         let headers = rdr.headers().map_err(|e| csv_error(file, e))?.clone();
         if headers.iter().all(|h| h.trim().is_empty()) {
+            if headers.len() > 1 || rdr.records().next().is_some() {
+                located!(file, Some(1), None; "the header line names no columns (only separators or blanks); expected a header such as `time_s,current_A,displacement_um`");
+            }
             located!(file, Some(1), None; "empty file (no header line); expected a header such as `time_s,current_A,displacement_um`");
         }
         let index = locate_columns(file, &headers, opts)?;

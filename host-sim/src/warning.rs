@@ -347,7 +347,9 @@ impl fmt::Display for Warning {
                 "--time-limit {seconds} s reached: the result is the best found so far, not a converged fit"
             ),
             Warning::ModeAboveNyquist { natural_frequency_hz, nyquist_hz, step_s, lowest_searched } => {
-                let at = format!("the recordings' Nyquist frequency ({nyquist_hz:.1} Hz, a sample every {step_s} s)");
+                // Six significant digits: a step read off a time column is 0.10000000000000142 s.
+                let step = format!("{:.5e}", step_s).parse::<f64>().unwrap_or(*step_s);
+                let at = format!("the recordings' Nyquist frequency ({nyquist_hz:.1} Hz, a sample every {step} s)");
                 if *lowest_searched {
                     write!(
                         f,

@@ -42,6 +42,12 @@ fn bad_csvs() -> Vec<(&'static str, Vec<u8>, Vec<&'static str>)> {
     junk.extend((0..2000u32).map(|k| (k.wrapping_mul(2_654_435_761) >> 24) as u8));
     vec![
         ("empty.csv", Vec::new(), vec!["empty.csv:1:", "empty file"]),
+        // Not empty: its rows are there, its header names nothing.
+        (
+            "commas_header.csv",
+            b",,\n0,0.1,1.0\n".to_vec(),
+            vec!["commas_header.csv:1:", "the header line names no columns"],
+        ),
         ("header_only.csv", csv(HEADER, &[]), vec!["header_only.csv:", "0 data rows"]),
         ("one_sample.csv", csv(HEADER, &good_rows()[..1]), vec!["one_sample.csv:", "1 data row;"]),
         ("junk.csv", junk, vec!["junk.csv:1:", "not UTF-8"]),
@@ -224,6 +230,9 @@ fn model_spec_typos_are_named_with_the_nearest_effect_by_every_command() {
         ("hysterisis", "hysterisis", "`hysteresis`"),
         ("ja+eddy_curent", "eddy_curent", "`eddy_current`"),
         ("saturation+termal", "termal", "`thermal`"),
+        // Another separator: the nearest single word (`mech`) would drop `ja`.
+        ("ja,mech", "ja,mech", "`ja+mech`"),
+        ("eddy ja", "eddy ja", "`eddy+ja`"),
     ] {
         let msg = [format!("unknown effect `{word}`"), format!("did you mean {hint}?")];
         let exp: Vec<&str> = msg.iter().map(String::as_str).collect();
@@ -279,6 +288,7 @@ fn bad_parameter_files_name_the_file_line_and_parameter_in_every_command() {
     };
     let (negative_at, ppm_at, nan_at) =
         (at("negative.toml", "k_a_per_m"), at("ppm.toml", "lambda_s"), at("nan.toml", "alpha"));
+    let huge_at = at("huge.toml", "k_a_per_m");
     let cases: Vec<(String, Vec<&str>)> = vec![
         (
             params_with(dir.path(), "missing.toml", |t| replace_line(t, "k_a_per_m", "")),
@@ -297,12 +307,28 @@ fn bad_parameter_files_name_the_file_line_and_parameter_in_every_command() {
             vec![&nan_at, "`ja.alpha` is not a finite number", "found `nan`"],
         ),
         (
+            // Finite, but not in f32: said so, not "not a finite number".
+            params_with(dir.path(), "huge.toml", |t| replace_line(t, "k_a_per_m", "k_a_per_m = 1e40")),
+            vec![&huge_at, "`ja.k_a_per_m` = 1e40 is beyond the range of f32"],
+        ),
+        (
             params_with(dir.path(), "text.toml", |t| replace_line(t, "c", "c = \"0.2\"")),
             vec!["text.toml:", "parameter `ja.c`", "invalid type"],
         ),
         (
             params_with(dir.path(), "unknown.toml", |t| replace_line(t, "c", "c = 0.2\nk_a_perm = 3.0")),
             vec!["unknown.toml:", "unknown field `k_a_perm`"],
+        ),
+        (
+            // A top-level key at the end of the file lands in the last table: said where it goes.
+            params_with(dir.path(), "late_key.toml", |t| {
+                format!("{}\neddy_tau_s = 1e-4\n", replace_line(t, "eddy_tau_s", ""))
+            }),
+            vec![
+                "late_key.toml:",
+                "unknown field `eddy_tau_s`",
+                "is a top-level key: move it above the first `[table]` line",
+            ],
         ),
         (params_with(dir.path(), "syntax.toml", |t| format!("{t}\n[ja\n")), vec!["syntax.toml:"]),
         (
@@ -377,7 +403,7 @@ fn errors_after_the_format_version_line_point_at_the_right_place_and_parameter()
 
 /// NaN and ±inf are refused everywhere (docs/formats.md), also in a table the model does not
 /// use: read as given, such a value went on into `fit --params-out`, to break the next command
-/// that uses the stage. A number beyond f32's range (1e39) is as infinite as `inf`.
+/// that uses the stage. A number beyond f32's range (1e39) is as infinite as `inf`, and said so.
 #[test]
 fn a_non_finite_value_in_a_table_the_model_does_not_use_is_refused_with_its_line() {
     let dir = tempfile::tempdir().unwrap();
@@ -393,7 +419,10 @@ fn a_non_finite_value_in_a_table_the_model_does_not_use_is_refused_with_its_line
     ] {
         let p = params_with(dir.path(), name, |t| replace_line(t, key, &format!("{key} = {value}")));
         let place = format!("{name}:{}: ", line_of(key));
-        let what = format!("parameter `{param}` is not a finite number");
+        let what = match value {
+            "1e39" => format!("parameter `{param}` = 1e39 is beyond the range of f32"),
+            _ => format!("parameter `{param}` is not a finite number"),
+        };
         for args in [
             vec!["fit", "--model", "ja", "--params", &p, "--params-out", &out, &good],
             vec![
@@ -723,7 +752,7 @@ fn simulate_says_its_sample_period_limits_in_the_stated_numbers() {
             vec!["simulate", "--freq-hz", "6000", "--out", &out],
             "above the Nyquist frequency 5000 Hz of the sample period dt_s = 1e-4 s",
         ),
-        (vec!["simulate", "--duration-s", "1e-4", "--out", &out], "gives 1 samples at dt_s = 1e-4 s"),
+        (vec!["simulate", "--duration-s", "1e-4", "--out", &out], "gives 1 sample at dt_s = 1e-4 s"),
         (
             vec!["simulate", "--duration-s", "3000", "--out", &out],
             "at dt_s = 1e-4 s; at most 2e7 (2000 s) per run",

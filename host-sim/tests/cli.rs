@@ -596,6 +596,28 @@ fn alternatives_past_the_time_limit_are_left_out_not_scored_at_their_start() {
     }
 }
 
+/// Candidates the time limit left untested make no verdict "undecided", not "nothing is
+/// missing" (the rig has eddy currents the model lacks: that answer was false).
+#[test]
+fn a_diagnosis_cut_short_before_its_refits_is_undecided_not_complete() {
+    let dir = tempfile::tempdir().unwrap();
+    let (fit, _, val) = rig(dir.path());
+    let args = ["diagnose", "--model", "ja", "--time-limit", "0.001", "--val", &val, &fit];
+    let d = json(&gma(&[&args[..], &["--json"]].concat()));
+    assert_eq!(
+        (&d["verdict"], &d["candidates"]),
+        (&serde_json::Value::Null, &serde_json::json!([])),
+        "{d:#}"
+    );
+    let untested = d["not_refitted"].as_array().unwrap_or_else(|| panic!("no not_refitted in {d:#}"));
+    assert!(untested.contains(&"eddy_current".into()), "{d:#}");
+    let o = gma(&args);
+    let out = String::from_utf8_lossy(&o.stdout);
+    let last = out.lines().last().unwrap_or_default();
+    assert!(last.starts_with("verdict: undecided — the time limit left `"), "{out}");
+    assert!(!out.contains("nothing significant is missing"), "{out}");
+}
+
 #[test]
 fn malformed_csv_is_refused_with_file_line_and_column() {
     let dir = tempfile::tempdir().unwrap();

@@ -133,6 +133,11 @@ fn bad_commands_are_refused_on_the_host_before_sending() {
         "a constant with a frequency",
     );
     refused(
+        &gma(&["drive", "reference", "--shape", "sine", "--amplitude-um", "10", "--out", o]),
+        &["--shape sine: give its frequency, --freq-hz in (0, 1666.7] Hz"],
+        "a sine left at the default frequency",
+    );
+    refused(
         &gma(&["drive", "load", "--params", "nonexistent.toml", "--model", "ja", "--out", o]),
         &["nonexistent.toml"],
         "missing file",

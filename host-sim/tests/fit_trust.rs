@@ -107,7 +107,7 @@ fn the_displacement_fit_refuses_a_multivalued_set_and_reports_its_start() {
 
 /// A start value outside its search range is moved to the range's end and the fit says so (as a
 /// warning, in the JSON too), and a parameter file with α·M_s/(3a) ≥ 1 is named as such by the
-/// commands that run it as given (`compare`), not scored in silence.
+/// commands that run it as given (`compare`), not scored in silence, and refused by the drive.
 #[test]
 fn a_start_outside_its_range_and_a_multivalued_file_are_said_not_passed_over() {
     let dir = tempfile::tempdir().unwrap();
@@ -147,9 +147,15 @@ fn a_start_outside_its_range_and_a_multivalued_file_are_said_not_passed_over() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(
-        err.contains("gma: warning:") && err.contains("≥ 1") && err.contains("a fit refuses it"),
+        err.contains("gma: warning:") && err.contains("≥ 1") && err.contains("a fit and the drive refuse it"),
         "{err}"
     );
+    // The board's feedforward inverts the set: it refuses it, so the host never sends it.
+    let frame = dir.path().join("load.bin");
+    let o = gma(&["drive", "load", "--params", params, "--model", "ja", "--out", frame.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && !frame.exists(), "{err}");
+    assert!(err.contains("the board would refuse this parameter set") && err.contains("`ja.alpha`"), "{err}");
 }
 
 /// The sensor delay is identified as a real number of samples: a rig whose sensor lags by 2.6

@@ -238,6 +238,13 @@ fn json_errors_are_one_object_that_points_into_the_file() {
     let o =
         gma(&["compare", "--model", "ja", "--json", "--out-dir", path(&dir.path().join("c")), path(&bad)]);
     assert_eq!(json(&o)["error"]["line"], 7);
+    // A file that cannot be opened, or is a folder, is the error's `file` too (it was null).
+    let missing = dir.path().join("nope.csv");
+    for (input, says) in [(path(&missing), "cannot read"), (path(dir.path()), "is a folder")] {
+        let e = &json(&gma(&["fit", "--model", "ja", "--json", input]))["error"];
+        assert_eq!((&e["file"], e["line"].as_u64()), (&input.into(), None), "{e}");
+        assert!(e["message"].as_str().unwrap().starts_with(&format!("{input}: {says}")), "{e}");
+    }
     // A usage error with --json: the error object too, with clap's exit status 2.
     let o = gma(&["fit", "--model", "ja", "--json", "--no-such-option", path(&bad)]);
     assert_eq!(o.status.code(), Some(2));
@@ -577,7 +584,7 @@ fn long_work_is_bounded_by_time_limit_and_reports_progress_off_a_terminal() {
     assert!(listed, "the JSON's warnings lack the time limit: {j}");
     assert!(std::fs::read_to_string(&p).unwrap().contains("stopped by --time-limit"));
     // Off a terminal, progress is a line log (stderr is a pipe here).
-    assert!(err(&o).contains("gma: fitting ja+mech: up to"), "{}", err(&o));
+    assert!(err(&o).contains("gma: fitting ja+mech: about"), "{}", err(&o));
     // Generous: the limit stops the search; what remains is reading, one final evaluation, writing.
     assert!(took < Duration::from_secs(30), "took {took:?} with --time-limit 2");
 }

@@ -25,7 +25,9 @@ pub mod tick;
 pub mod timing;
 pub mod units;
 
-use model_core::{Actuator, ActuatorParams, Compensator, CompensatorState, ModelSpec, ParamError};
+use model_core::{
+    Actuator, ActuatorParams, Compensator, CompensatorState, MagnetizationLaw, ModelSpec, ParamError,
+};
 
 use crate::calibration::IdleCalibration;
 use crate::command::{Command, Refusal, Reply};
@@ -574,7 +576,9 @@ impl Controller {
 /// effects the registry leaves to feedback (`Inverse::LeftToFeedback`: the amplifier, as the
 /// current loop is the amplifier; the mechanics and the sensor delay, which the PID handles).
 /// `firmware/build.rs` and `gma drive load` build it too, so that a set the board would refuse
-/// fails the build or is never sent.
+/// fails the build or is never sent. A Jiles–Atherton set with α·M_s/(3a) ≥ 1 is refused, as
+/// every fit refuses it: its anhysteretic curve is multivalued, so the M(H) the compensator
+/// inverts would be an artefact of its step size, not of the rod.
 pub fn compensator_model(
     spec: ModelSpec,
     params: &ActuatorParams,
@@ -582,7 +586,14 @@ pub fn compensator_model(
 ) -> Result<Actuator, ParamError> {
     let mut p = *params;
     p.dt_s = tick_s;
-    Actuator::new(spec.for_compensator(), &p)
+    let model = Actuator::new(spec.for_compensator(), &p)?;
+    if spec.law() == MagnetizationLaw::JilesAtherton && params.ja.mean_field_ratio() >= 1.0 {
+        return Err(ParamError::OutOfRange(
+            "ja.alpha",
+            "below 3a/M_s (α·M_s/(3a) < 1: a single-valued anhysteretic curve, which the compensator inverts)",
+        ));
+    }
+    Ok(model)
 }
 
 /// The compensator for `spec` with `params` at `cfg`'s tick, moved into `slot` (left as it was

@@ -741,3 +741,32 @@ fn a_commanded_reference_is_validated_and_tracked() {
     let y = rig.displacement_from_rest_um();
     assert!((y - 10.0).abs() < 0.1, "constant 10 µm reference: at {y:.3} µm");
 }
+
+/// A J–A set whose anhysteretic curve is multivalued (α·M_s/(3a) ≥ 1, refused by every fit) is
+/// refused by the board too, as a load and at build: the compensator would invert an
+/// integration artefact. Just below the bound it loads.
+#[test]
+fn a_multivalued_ja_set_is_refused_by_the_board() {
+    use gma_control::StagedParameters;
+    let cfg = ControlConfig::REFERENCE;
+    let with_ratio = |ratio: f32| {
+        let mut p = ActuatorParams::TERFENOL_DEMO;
+        p.ja.alpha = ratio * 3.0 * p.ja.a_a_per_m / p.ja.ms_a_per_m;
+        p
+    };
+    let mut ctl = controller(spec("ja+mech"));
+    for (ratio, loads) in [(0.95, true), (1.01, false), (1.5, false)] {
+        let p = with_ratio(ratio);
+        let built = gma_control::compensator_model(spec("ja+mech"), &p, cfg.current_loop.tick_s);
+        assert_eq!(built.is_ok(), loads, "α·M_s/(3a) = {ratio}");
+        if let Err(e) = built {
+            assert_eq!(e.name(), "ja.alpha");
+        }
+        let mut staged = StagedParameters::build(&cfg, spec("ja+mech"), &p);
+        let expected = if loads { Ok(()) } else { Err(Refusal::InvalidParameters) };
+        assert_eq!(ctl.load_staged(0, &mut staged).outcome, expected, "α·M_s/(3a) = {ratio}");
+    }
+    // The Preisach law has no mean field: its set loads whatever the J–A table holds.
+    let p = with_ratio(1.5);
+    assert!(gma_control::compensator_model(spec("preisach+mech"), &p, cfg.current_loop.tick_s).is_ok());
+}

@@ -32,8 +32,8 @@ pub struct ModelFiles {
     /// Recordings (CSV) or magnetization-loop files to fit; `-` reads standard input.
     #[arg(required = true, value_name = "FILE")]
     pub files: Vec<PathBuf>,
-    /// A validation recording (or loop file, with loop files to fit): scored, never fitted
-    /// (repeat `--val` for several files).
+    /// A validation file, of the kind of the files fitted (a recording; a loop file where loops
+    /// are fitted): scored, never fitted (repeat `--val` for several files).
     #[arg(long, value_name = "FILE")]
     pub val: Vec<PathBuf>,
     /// Start values and fixed parameters (TOML as `--params-out` writes, e.g. from a loop fit);

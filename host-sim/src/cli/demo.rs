@@ -75,7 +75,7 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         }
         match d.verdict {
             Some(v) => say!(j, "    → missing: `{v}`; adding it"),
-            None => say!(j, "    → nothing significant is missing"),
+            None => say!(j, "    → {}", d.no_verdict()),
         }
     })?;
     let param_paths: Vec<PathBuf> = rungs

@@ -37,7 +37,7 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
     })?;
     p.warn_about_inputs();
     let Data::Recordings(fit_files, val_files) = &p.data else {
-        bail!("diagnose works on displacement recordings; for magnetization loops use `gma fit` and `gma compare`");
+        bail!("diagnose works on displacement recordings; for magnetization loops use `gma fit`, `gma compare` or `gma report`");
     };
     if a.ja_variants {
         check_ja_variants(p.spec)?;

@@ -167,6 +167,14 @@ fn reference(r: &ReferenceArgs) -> Result<Command> {
         ReferenceCommand { shape, amplitude_um: r.amplitude_um, bias_um: r.bias_um, freq_hz: r.freq_hz };
     // The board's own check with the reference board's limits, so that a typo fails here.
     let cfg = gma_control::ControlConfig::REFERENCE;
+    // The one slip the range list below hides: a waveform left at the default frequency, 0.
+    if !matches!(r.shape, WaveShape::Constant) && r.freq_hz == 0.0 {
+        bail!(
+            "reference --shape {}: give its frequency, --freq-hz in (0, {:.1}] Hz (the default, 0, is for `constant` only)",
+            shape_name(r.shape),
+            1.0 / (6.0 * cfg.current_loop.tick_s)
+        );
+    }
     if cmd.waveform(cfg.max_reference_um, 1.0 / (6.0 * cfg.current_loop.tick_s)).is_err() {
         bail!(
             "reference --shape {} --amplitude-um {} --bias-um {} --freq-hz {}: out of range (finite, amplitude ≥ 0, \
@@ -197,7 +205,10 @@ fn load(l: &LoadArgs) -> Result<Command> {
     // The board's validation, before anything is sent.
     gma_control::compensator_model(spec, &params, gma_control::ControlConfig::REFERENCE.current_loop.tick_s)
         .map_err(|e| {
-            anyhow::anyhow!("{}: the board would refuse this parameter set: {e}", display(&l.params))
+            crate::error::Located::file(
+                &display(&l.params),
+                format!("the board would refuse this parameter set: {e}"),
+            )
         })?;
     Ok(Command::LoadParameters { spec, params })
 }

@@ -338,8 +338,9 @@ fn run_waveform(
     let samples = (a.duration_s / dt).round();
     if samples < 3.0 {
         bail!(
-            "--duration-s {} gives {samples} samples at dt_s = {dt_shown:e} s; a recording needs at least 3",
-            a.duration_s
+            "--duration-s {} gives {samples} sample{} at dt_s = {dt_shown:e} s; a recording needs at least 3",
+            a.duration_s,
+            if samples == 1.0 { "" } else { "s" }
         );
     }
     if samples > MAX_SAMPLES {

@@ -556,6 +556,7 @@ mod tests {
             candidates: Vec::new(),
             verdict: None,
             undistinguished: Vec::new(),
+            not_refitted: Vec::new(),
             findings: Vec::new(),
             baseline: Some(base.clone()),
             time_limited: false,
