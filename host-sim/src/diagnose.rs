@@ -232,6 +232,9 @@ pub struct Diagnosis {
     /// Candidates `--time-limit` left untested: with any, no verdict means undecided, not
     /// "nothing is missing".
     pub not_refitted: Vec<Effect>,
+    /// Candidates whose refit `--time-limit` stopped before it converged (listed among the
+    /// candidates with their best figures so far): with any, no verdict means undecided too.
+    pub cut_short: Vec<Effect>,
     /// Residual whiteness, trends across files: findings in words.
     pub findings: Vec<String>,
     /// The fit of the given structure.
@@ -317,19 +320,27 @@ impl std::fmt::Display for Diagnosis {
 
 impl Diagnosis {
     /// What no verdict means, in words: nothing missing, or undecided when the time limit left
-    /// candidates untested.
+    /// candidates untested or stopped their refits.
     pub fn no_verdict(&self) -> String {
-        if self.not_refitted.is_empty() {
+        if self.not_refitted.is_empty() && self.cut_short.is_empty() {
             return "nothing significant is missing".into();
         }
-        let untested = self.not_refitted.iter().map(|e| e.name()).collect::<Vec<_>>().join("`, `");
-        let tested = self.candidates.len();
+        let names = |l: &[Effect]| l.iter().map(|e| e.name()).collect::<Vec<_>>().join("`, `");
+        let mut what = Vec::new();
+        if !self.not_refitted.is_empty() {
+            what.push(format!("left `{}` untested", names(&self.not_refitted)));
+        }
+        if !self.cut_short.is_empty() {
+            what.push(format!("stopped the refit of `{}` before it converged", names(&self.cut_short)));
+        }
+        let done = self.candidates.len().saturating_sub(self.cut_short.len());
         format!(
-            "undecided — the time limit left `{untested}` untested{}; raise --time-limit",
-            match tested {
+            "undecided — the time limit {}{}; raise --time-limit",
+            what.join(" and "),
+            match done {
                 0 => String::new(),
-                1 => ", and the one refitted in time is not missing".into(),
-                n => format!(", and none of the {n} refitted in time is missing"),
+                1 => ", and the one refitted in full is not missing".into(),
+                n => format!(", and none of the {n} refitted in full is missing"),
             }
         )
     }
@@ -1062,6 +1073,7 @@ pub fn diagnose(
     };
     let mut candidates = Vec::new();
     let mut skipped = Vec::new();
+    let mut cut_short = Vec::new();
     let mut failed_refits = Vec::new();
     let mut errored_refits = Vec::new();
     let mut unpinned = Vec::new();
@@ -1072,6 +1084,9 @@ pub fn diagnose(
         };
         if let Ok((f, _)) = &r {
             time_limited |= f.time_limited;
+            if f.time_limited {
+                cut_short.push(e);
+            }
         }
         let s2 = spec.with(e);
         let channel = Channel::judging(e, measured);
@@ -1428,6 +1443,7 @@ pub fn diagnose(
         verdict,
         undistinguished,
         not_refitted: skipped,
+        cut_short,
         findings,
         baseline: Some(base),
         ja_variants: None,
@@ -1502,6 +1518,39 @@ fn trend_findings(trends: &[Trend], per_file: &[(f64, f64, f64, f64)], names: &[
 mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
+
+    /// No verdict after a time limit that left a candidate untested or stopped its refit is
+    /// "undecided", never "nothing is missing" (a refit stopped at once ends near the baseline
+    /// and cannot pass: that answer would be the time limit's, not the data's).
+    #[test]
+    fn no_verdict_is_undecided_when_the_time_limit_cut_a_candidate() {
+        let d = |not_refitted: Vec<Effect>, cut_short: Vec<Effect>| Diagnosis {
+            model: "ja".into(),
+            nrmse_fit: 0.05,
+            nrmse_val: None,
+            candidates: Vec::new(),
+            verdict: None,
+            undistinguished: Vec::new(),
+            not_refitted,
+            cut_short,
+            findings: Vec::new(),
+            baseline: None,
+            time_limited: true,
+            ja_variants: None,
+            laws: None,
+        };
+        assert_eq!(d(vec![], vec![]).no_verdict(), "nothing significant is missing");
+        let cut = d(vec![], vec![Effect::EddyCurrent]).to_string();
+        assert!(
+            cut.ends_with("verdict: undecided — the time limit stopped the refit of `eddy_current` before it converged; raise --time-limit"),
+            "{cut}"
+        );
+        let both = d(vec![Effect::MechanicalDynamics], vec![Effect::EddyCurrent]).no_verdict();
+        assert!(
+            both.contains("left `mechanical_dynamics` untested and stopped the refit of `eddy_current`"),
+            "{both}"
+        );
+    }
 
     /// Plumbing, on the model's own data (it proves the wiring, not the physics: the
     /// independent rig's suite does that): with `temperature_C` logged, coil heating is judged

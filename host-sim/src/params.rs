@@ -463,7 +463,7 @@ pub fn parse_spec(text: &str) -> Result<ModelSpec> {
         model_core::SpecError::UnknownEffect { start, end, suggestion } => {
             // `ja,mech` or `ja mech`: the nearest single word would drop an effect.
             let joined = text
-                .split(|c: char| matches!(c, ',' | ';' | '|' | '&' | '/') || c.is_whitespace())
+                .split(|c: char| matches!(c, '+' | ',' | ';' | '|' | '&' | '/') || c.is_whitespace())
                 .filter(|w| !w.is_empty())
                 .collect::<Vec<_>>()
                 .join("+");

@@ -237,7 +237,7 @@ pub fn html(
         }
         let verdict = match r.diagnosis.verdict {
             Some(v) => format!("<span class=v>missing: {v}</span>"),
-            None => r.diagnosis.no_verdict(),
+            None => esc(&r.diagnosis.no_verdict()),
         };
         let _ = write!(h, "<td class=l>{verdict}</td></tr>");
     }

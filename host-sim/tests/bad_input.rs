@@ -233,6 +233,7 @@ fn model_spec_typos_are_named_with_the_nearest_effect_by_every_command() {
         // Another separator: the nearest single word (`mech`) would drop `ja`.
         ("ja,mech", "ja,mech", "`ja+mech`"),
         ("eddy ja", "eddy ja", "`eddy+ja`"),
+        ("ja + mech, eddy", "mech, eddy", "`ja+mech+eddy`"),
     ] {
         let msg = [format!("unknown effect `{word}`"), format!("did you mean {hint}?")];
         let exp: Vec<&str> = msg.iter().map(String::as_str).collect();

@@ -616,6 +616,26 @@ fn a_diagnosis_cut_short_before_its_refits_is_undecided_not_complete() {
     let last = out.lines().last().unwrap_or_default();
     assert!(last.starts_with("verdict: undecided — the time limit left `"), "{out}");
     assert!(!out.contains("nothing significant is missing"), "{out}");
+    // The report's rung says so too.
+    let html = dir.path().join("r.html");
+    let r = json(&gma(&[
+        "report",
+        "--model",
+        "ja",
+        "--time-limit",
+        "0.001",
+        "--val",
+        &val,
+        &fit,
+        "-o",
+        html.to_str().unwrap(),
+        "--json",
+    ]));
+    let rung = &r["ladder"][0];
+    assert_eq!(rung["verdict"], serde_json::Value::Null, "{r:#}");
+    assert!(rung["not_refitted"].as_array().is_some_and(|l| l.contains(&"eddy_current".into())), "{r:#}");
+    let page = std::fs::read_to_string(&html).unwrap();
+    assert!(page.contains("undecided") && !page.contains("nothing significant"), "the page's rung");
 }
 
 #[test]

@@ -99,7 +99,7 @@ pub fn run(a: &ReportArgs) -> Result<()> {
                     .iter()
                     .zip(&uncertainties)
                     .map(|(r, u)| {
-                        let rung = json!({"model": r.spec.to_string(), "nrmse_fit": r.fit_nrmse, "nrmse_val": r.val_nrmse, "verdict": r.diagnosis.verdict});
+                        let rung = json!({"model": r.spec.to_string(), "nrmse_fit": r.fit_nrmse, "nrmse_val": r.val_nrmse, "verdict": r.diagnosis.verdict, "not_refitted": r.diagnosis.not_refitted, "cut_short": r.diagnosis.cut_short});
                         match u {
                             Ok(u) => super::merged_json(&rung, &UncertaintyFields::from(u)),
                             Err(e) => super::merged_json(&rung, &json!({"uncertainty_error": e})),

@@ -557,6 +557,7 @@ mod tests {
             verdict: None,
             undistinguished: Vec::new(),
             not_refitted: Vec::new(),
+            cut_short: Vec::new(),
             findings: Vec::new(),
             baseline: Some(base.clone()),
             time_limited: false,
