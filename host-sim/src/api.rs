@@ -598,22 +598,23 @@ pub fn simulate_rig(
     // Checked here first, so that problems are reported under the names given, not the temporary
     // files'; its notes are the run's below, said once.
     crate::warning::heard(|| params.load(crate::params::parse_spec(&args.model)?)).0?;
-    let temporary_params = match params {
-        ParamsSource::Demo | ParamsSource::File(_) => None,
+    // A parameter text is run from a temporary copy, whose path the run's notes name.
+    let temporary = match params {
+        ParamsSource::Demo => None,
+        ParamsSource::File(p) => {
+            args.params = Some(p.clone());
+            None
+        }
         ParamsSource::Text { name, text } => {
             let p = dir.path().join("params.toml");
             std::fs::write(&p, text).context("writing the parameter set to a temporary file")?;
-            Some((p, name))
+            let path = crate::files::display(&p);
+            args.params = Some(p);
+            Some((path, name.as_str()))
         }
     };
-    args.params = match (params, &temporary_params) {
-        (ParamsSource::File(p), _) => Some(p.clone()),
-        (_, Some((p, _))) => Some(p.clone()),
-        _ => None,
-    };
     let (ran, said) = crate::warning::heard(|| crate::cli::simulate::run(&args));
-    // The run read the temporary copy of a parameter text: its notes name the text as given.
-    let temporary = temporary_params.as_ref().map(|(p, name)| (crate::files::display(p), name.as_str()));
+    // The notes name the text as given, not its temporary copy.
     for s in said {
         crate::warning::say(match &temporary {
             Some((path, name)) => s.map_text(|t| t.replace(path, name)),

@@ -46,6 +46,7 @@ mod alternatives;
 use crate::progress;
 use crate::recording::Recording;
 pub(crate) use crate::spectral::effective_samples;
+use crate::warning::Warning;
 pub use alternatives::{check_ja_variants, other_law_structure, LawScore, VariantScore};
 
 /// A candidate must cut the scored NRMSE at least this much to be the verdict (the issue's
@@ -335,7 +336,7 @@ impl Diagnosis {
         }
         let done = self.candidates.len().saturating_sub(self.cut_short.len());
         format!(
-            "undecided — the time limit {}{}; raise --time-limit",
+            "undecided — the time limit {}{}; raise the time limit",
             what.join(" and "),
             match done {
                 0 => String::new(),
@@ -964,6 +965,18 @@ pub fn diagnose(
     } else {
         format!("residual is close to white: {:.0} % of lags 1–20 outside the 95 % band", white * 100.0)
     });
+    // A parameter the fit left at its range's end, as `gma fit` warns: a structure that lacks
+    // an effect often bends a parameter that far to stand in for it.
+    for f in &base.free {
+        let value = (f.get)(&base.params);
+        if f.bound.at_edge(value) {
+            let w = Warning::AtEdge { param: f.name(), value, lo: f.bound.lo, hi: f.bound.hi };
+            findings.push(format!(
+                "in the fit of `{spec}`, {w}: a structure that lacks an effect often bends a parameter to the \
+                 end of its range to stand in for it; a parameter the data do not need ends there too"
+            ));
+        }
+    }
     let mut per_file: Vec<(f64, f64, f64, f64)> = Vec::new(); // freq, amplitude, duration, nrmse
     let all_files: Vec<&Recording> = fit_files.iter().chain(val_files).collect();
     let all_scores =
@@ -1542,7 +1555,7 @@ mod tests {
         assert_eq!(d(vec![], vec![]).no_verdict(), "nothing significant is missing");
         let cut = d(vec![], vec![Effect::EddyCurrent]).to_string();
         assert!(
-            cut.ends_with("verdict: undecided — the time limit stopped the refit of `eddy_current` before it converged; raise --time-limit"),
+            cut.ends_with("verdict: undecided — the time limit stopped the refit of `eddy_current` before it converged; raise the time limit"),
             "{cut}"
         );
         let both = d(vec![Effect::MechanicalDynamics], vec![Effect::EddyCurrent]).no_verdict();

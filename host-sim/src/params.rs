@@ -263,34 +263,36 @@ pub fn parse_file(file: &str, text: &str, spec: ModelSpec) -> Result<ParamFile> 
             })?
         }
     };
-    Actuator::new(spec, &params).map_err(|e| {
-        let what = format!("{e} (checked for model `{spec}`)");
-        match line_of(text, e.name()) {
-            Some((line, value)) if beyond_f32(value) => {
-                Located::at(file, line, None, beyond_f32_words(e.name(), value))
-            }
-            Some((line, value)) => Located::at(file, line, None, format!("{what}; found `{}`", echo(value))),
-            // A table the file left out (the demo set's) or a combination of parameters.
-            None => Located::file(file, what),
-        }
-    })?;
+    Actuator::new(spec, &params)
+        .map_err(|e| located_parameter(file, text, e.name(), format!("{e} (checked for model `{spec}`)")))?;
     // model-core checks the stages the model uses; a NaN or ±inf elsewhere (or a number beyond
     // f32's range) would be kept as read and written on by `fit --params-out`.
     if let Some(name) = non_finite(&toml::Table::try_from(params).context("serialising the parameters")?, "")
     {
-        let what = format!("parameter `{name}` is not a finite number");
-        return Err(match line_of(text, &name) {
-            Some((line, value)) if beyond_f32(value) => {
-                Located::at(file, line, None, beyond_f32_words(&name, value))
-            }
-            Some((line, value)) => Located::at(file, line, None, format!("{what}; found `{}`", echo(value))),
-            None => Located::file(file, what),
-        }
+        return Err(located_parameter(
+            file,
+            text,
+            &name,
+            format!("parameter `{name}` is not a finite number"),
+        )
         .into());
     }
     let used = tables_used(spec);
     let defaulted = missing.into_iter().filter(|t| used.contains(t)).collect();
     Ok(ParamFile { params, format_version, defaulted })
+}
+
+/// `what` is wrong with parameter `name` (dotted, `ja.alpha`) of the parameter file `text`, at
+/// the line that sets it with the value found there; the whole file when no line sets it (a
+/// table the file left out, the demo set's).
+pub fn located_parameter(file: &str, text: &str, name: &str, what: String) -> Located {
+    match line_of(text, name) {
+        Some((line, value)) if beyond_f32(value) => {
+            Located::at(file, line, None, beyond_f32_words(name, value))
+        }
+        Some((line, value)) => Located::at(file, line, None, format!("{what}; found `{}`", echo(value))),
+        None => Located::file(file, what),
+    }
 }
 
 /// A finite number in the file that f32, the precision the models run in, cannot hold (it

@@ -217,6 +217,9 @@ impl Recording {
             if headers.len() > 1 || rdr.records().next().is_some() {
                 located!(file, Some(1), None; "the header line names no columns (only separators or blanks); expected a header such as `time_s,current_A,displacement_um`");
             }
+            if !headers.is_empty() {
+                located!(file, Some(1), None; "the header line is blank and nothing follows it; expected a header such as `time_s,current_A,displacement_um`");
+            }
             located!(file, Some(1), None; "empty file (no header line); expected a header such as `time_s,current_A,displacement_um`");
         }
         let index = locate_columns(file, &headers, opts)?;

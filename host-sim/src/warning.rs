@@ -193,7 +193,7 @@ pub enum Warning {
         /// Why.
         why: String,
     },
-    /// `--time-limit` stopped the search: the best point so far.
+    /// The time limit (`--time-limit`, Python's `time_limit_s`) stopped the search: the best point so far.
     TimeLimit {
         /// The limit [s].
         seconds: f64,
@@ -344,7 +344,7 @@ impl fmt::Display for Warning {
             Warning::NoUncertainty { why } => write!(f, "no parameter uncertainty: {why}"),
             Warning::TimeLimit { seconds } => write!(
                 f,
-                "--time-limit {seconds} s reached: the result is the best found so far, not a converged fit"
+                "the time limit of {seconds} s was reached: the result is the best found so far, not a converged fit"
             ),
             Warning::ModeAboveNyquist { natural_frequency_hz, nyquist_hz, step_s, lowest_searched } => {
                 // Six significant digits: a step read off a time column is 0.10000000000000142 s.

@@ -512,6 +512,52 @@ fn diagnose_names_the_missing_effect_in_the_json_contract() {
     assert!(d.get("laws").is_none(), "only with --laws");
 }
 
+/// A parameter the baseline fit leaves at the end of its search range is said by `diagnose` as
+/// `fit` warns it (a structure without the rod's resonance, here, pins J–A's `c` at 0 on a rig
+/// that has one; SIMULATED by our own plant: a check of the plumbing), the same parameters.
+#[test]
+fn diagnose_says_the_parameters_its_fit_left_at_a_range_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut files = Vec::new();
+    for (name, f, a) in [("slow.csv", "40", "1.5"), ("fast.csv", "800", "1.0")] {
+        let path = dir.path().join(name).to_str().unwrap().to_string();
+        let o = gma(&[
+            "simulate",
+            "--model",
+            "ja+mech",
+            "--freq-hz",
+            f,
+            "--amplitude",
+            a,
+            "--bias",
+            "0",
+            "--duration-s",
+            "0.06",
+            "--noise-um",
+            "0.02",
+            "--out",
+            &path,
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        files.push(path);
+    }
+    let at_edge = |texts: Vec<String>| -> Vec<String> {
+        texts
+            .iter()
+            .filter(|t| t.contains("ended at the edge of its search range"))
+            .map(|t| t.split('`').nth(1).unwrap_or_default().to_string())
+            .collect()
+    };
+    let (slow, fast) = (files[0].as_str(), files[1].as_str());
+    let warned = at_edge(warnings_of(&["fit", "--model", "ja", "--json", slow, fast]));
+    let d = json(&gma(&["diagnose", "--model", "ja", "--json", slow, fast]));
+    let findings: Vec<String> =
+        d["findings"].as_array().unwrap().iter().map(|f| f.as_str().unwrap().to_string()).collect();
+    let said = at_edge(findings.iter().map(|f| f.replacen("in the fit of `ja`, ", "", 1)).collect());
+    assert!(warned.contains(&"ja.c".to_string()), "{warned:?}");
+    assert_eq!(said, warned, "{findings:#?}");
+}
+
 /// `--ja-variants` scores the given structure in every J–A form (the given one first, as the
 /// baseline) and says in a finding whether one fits clearly better; without a J–A law it is
 /// refused with the reason. On this rig (the default `bulk` form, simulated by our own plant)

@@ -156,6 +156,22 @@ fn a_start_outside_its_range_and_a_multivalued_file_are_said_not_passed_over() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && !frame.exists(), "{err}");
     assert!(err.contains("the board would refuse this parameter set") && err.contains("`ja.alpha`"), "{err}");
+    // At the line that sets it, as the other parameter-file errors are.
+    let text = std::fs::read_to_string(params).unwrap();
+    let mut table = "";
+    let line = 1 + text
+        .lines()
+        .position(|l| {
+            if l.starts_with('[') {
+                table = l;
+            }
+            table == "[ja]" && l.trim_start().starts_with("alpha")
+        })
+        .unwrap();
+    assert!(
+        err.contains(&format!("{params}:{line}: the board would refuse")) && err.contains("found `0.5"),
+        "{err}"
+    );
 }
 
 /// The sensor delay is identified as a real number of samples: a rig whose sensor lags by 2.6

@@ -574,13 +574,13 @@ fn long_work_is_bounded_by_time_limit_and_reports_progress_off_a_terminal() {
     let j = json(&o);
     assert_eq!(j["time_limit_reached"], true, "{j}");
     assert!(j["nrmse_fit"].as_f64().unwrap().is_finite());
-    assert!(err(&o).contains("--time-limit 2 s reached"), "{}", err(&o));
-    assert_eq!(err(&o).matches("--time-limit 2 s reached").count(), 1, "said once: {}", err(&o));
+    assert!(err(&o).contains("the time limit of 2 s was reached"), "{}", err(&o));
+    assert_eq!(err(&o).matches("the time limit of 2 s was reached").count(), 1, "said once: {}", err(&o));
     let listed = j["warnings"]
         .as_array()
         .unwrap()
         .iter()
-        .any(|w| w.as_str().unwrap().contains("--time-limit 2 s reached"));
+        .any(|w| w.as_str().unwrap().contains("the time limit of 2 s was reached"));
     assert!(listed, "the JSON's warnings lack the time limit: {j}");
     assert!(std::fs::read_to_string(&p).unwrap().contains("stopped by --time-limit"));
     // Off a terminal, progress is a line log (stderr is a pipe here).

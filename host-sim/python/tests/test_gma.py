@@ -312,6 +312,8 @@ def test_the_clis_notes_are_python_warnings_not_stderr(tmp_path, capfd, fitted):
     with pytest.warns(UserWarning, match=r"^warning: .*reached: the result is the best found so far"):
         f = gma.fit("ja", [FIT_CSV], time_limit_s=0.01, **QUICK)
     assert f["time_limit_reached"] and any("reached" in w for w in f["warnings"]), f["warnings"]
+    # Worded for any caller: Python has no `--time-limit` flag.
+    assert not any("--time-limit" in w for w in f["warnings"]), f["warnings"]
     with pytest.warns(UserWarning, match=r"^warning: .*reached: the result is the best found so far"):
         d = gma.diagnose("ja", [FIT_CSV], time_limit_s=0.01, **QUICK)
     assert d["time_limit_reached"]

@@ -205,8 +205,13 @@ fn load(l: &LoadArgs) -> Result<Command> {
     // The board's validation, before anything is sent.
     gma_control::compensator_model(spec, &params, gma_control::ControlConfig::REFERENCE.current_loop.tick_s)
         .map_err(|e| {
-            crate::error::Located::file(
-                &display(&l.params),
+            let file = display(&l.params);
+            // Read once more only to point at the line; the load above read it whole.
+            let text = std::fs::read_to_string(&l.params).unwrap_or_default();
+            crate::params::located_parameter(
+                &file,
+                &text,
+                e.name(),
                 format!("the board would refuse this parameter set: {e}"),
             )
         })?;
