@@ -107,27 +107,32 @@ fn rig(dir: &std::path::Path) -> (String, String, String) {
     let fit2 = dir.join("fit2.csv");
     let val = dir.join("val.csv");
     for (path, f, a) in [(&fit, "40", "1.5"), (&fit2, "300", "1.0"), (&val, "150", "1.0")] {
-        let o = gma(&[
-            "simulate",
-            "--model",
-            "ja+eddy",
-            "--freq-hz",
-            f,
-            "--amplitude",
-            a,
-            "--bias",
-            "0",
-            "--duration-s",
-            "0.06",
-            "--noise-um",
-            "0.02",
-            "--out",
-            path.to_str().unwrap(),
-        ]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        simulate_sine("ja+eddy", path, f, a);
     }
     let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
     (s(&fit), s(&fit2), s(&val))
+}
+
+/// 60 ms of `model` (our own plant) driven by an unbiased sine, with 0.02 µm of sensor noise.
+fn simulate_sine(model: &str, path: &std::path::Path, freq_hz: &str, amplitude: &str) {
+    let o = gma(&[
+        "simulate",
+        "--model",
+        model,
+        "--freq-hz",
+        freq_hz,
+        "--amplitude",
+        amplitude,
+        "--bias",
+        "0",
+        "--duration-s",
+        "0.06",
+        "--noise-um",
+        "0.02",
+        "--out",
+        path.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
 fn json(o: &std::process::Output) -> serde_json::Value {
@@ -520,26 +525,9 @@ fn diagnose_says_the_parameters_its_fit_left_at_a_range_end() {
     let dir = tempfile::tempdir().unwrap();
     let mut files = Vec::new();
     for (name, f, a) in [("slow.csv", "40", "1.5"), ("fast.csv", "800", "1.0")] {
-        let path = dir.path().join(name).to_str().unwrap().to_string();
-        let o = gma(&[
-            "simulate",
-            "--model",
-            "ja+mech",
-            "--freq-hz",
-            f,
-            "--amplitude",
-            a,
-            "--bias",
-            "0",
-            "--duration-s",
-            "0.06",
-            "--noise-um",
-            "0.02",
-            "--out",
-            &path,
-        ]);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        files.push(path);
+        let path = dir.path().join(name);
+        simulate_sine("ja+mech", &path, f, a);
+        files.push(path.to_str().unwrap().to_string());
     }
     let at_edge = |texts: Vec<String>| -> Vec<String> {
         texts
