@@ -34,7 +34,7 @@
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use model_core::effects::{Candidacy, MagnetizationLaw, Signature, Stage};
 use model_core::{Effect, ModelSpec};
 use rayon::prelude::*;
@@ -43,6 +43,7 @@ use serde::Serialize;
 use crate::fit::{self, evaluate, simulate, FitOptions, FitResult, Simulation};
 
 mod alternatives;
+use crate::error::InRecording;
 use crate::progress;
 use crate::recording::Recording;
 pub(crate) use crate::spectral::effective_samples;
@@ -899,22 +900,26 @@ pub fn diagnose(
         let drive = rec.current_a.as_deref().or(rec.command_v.as_deref()).unwrap_or_default();
         let n = reversals(drive);
         if n < 2 {
-            bail!(
-                "{}: the drive covers less than one cycle ({n} reversal{} in {:.1} ms): a diagnosis compares \
-                 both branches of the loop and scores each file after its first cycle, so record at least one \
-                 full period of the excitation",
-                rec.name,
-                if n == 1 { "" } else { "s" },
-                rec.duration_s() * 1e3
-            );
+            return Err(InRecording::error(
+                &rec.name,
+                format!(
+                    "the drive covers less than one cycle ({n} reversal{} in {:.1} ms): a diagnosis compares \
+                     both branches of the loop and scores each file after its first cycle, so record at least \
+                     one full period of the excitation",
+                    if n == 1 { "" } else { "s" },
+                    rec.duration_s() * 1e3
+                ),
+            ));
         }
         if rec.len() < MIN_SAMPLES {
-            bail!(
-                "{}: {} samples; a diagnosis compares models with up to about ten parameters and needs at \
-                 least {MIN_SAMPLES} samples per file",
-                rec.name,
-                rec.len()
-            );
+            return Err(InRecording::error(
+                &rec.name,
+                format!(
+                    "{} samples; a diagnosis compares models with up to about ten parameters and needs at \
+                     least {MIN_SAMPLES} samples per file",
+                    rec.len()
+                ),
+            ));
         }
     }
     progress::phase(opts.progress, &format!("diagnose: fitting the given model `{spec}`"));

@@ -44,6 +44,33 @@ impl fmt::Display for Located {
 
 impl std::error::Error for Located {}
 
+/// A problem with one recording as a whole (a drive that never changes, too few samples), under
+/// the recording's name. On the command line every recording is a file, so `--json` gives the
+/// name as the error's `file`; the Python API does not, as its recordings may be arrays under
+/// a caller's label.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct InRecording {
+    /// The recording's name (a file's path as given, `<stdin>`, or a caller's label).
+    pub recording: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl InRecording {
+    /// `message` about the recording named `recording`, as an error.
+    pub fn error(recording: &str, message: impl Into<String>) -> anyhow::Error {
+        Self { recording: recording.to_string(), message: message.into() }.into()
+    }
+}
+
+impl fmt::Display for InRecording {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: {}", self.recording, self.message)
+    }
+}
+
+impl std::error::Error for InRecording {}
+
 /// Returns early with a [`Located`] error: `located!(file, line, col; "format", args…)`
 /// (`line`, `col` are `Option`s), or `located!(file; "format", args…)` for a whole file.
 #[macro_export]

@@ -19,6 +19,7 @@ use model_core::effects::{Param, Signature, ROD_THERMAL_LAG, STRAIN_SCALE};
 use model_core::{Actuator, ActuatorParams, Effect, MagnetizationLaw, ModelSpec};
 use rayon::prelude::*;
 
+use crate::error::InRecording;
 use crate::params::{free_params, logs_coil_temperature, FreeParam, Given};
 use crate::progress::{self, Progress};
 use crate::recording::Recording;
@@ -51,18 +52,20 @@ pub fn drive_for(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
     let span =
         |v: &[f64]| v.iter().fold(f64::MIN, |a, &b| a.max(b)) - v.iter().fold(f64::MAX, |a, &b| a.min(b));
     if span(y) <= 0.0 {
-        bail!(
-            "{}: the displacement never changes: there is nothing to fit (sensor unplugged or stuck?)",
-            rec.name
-        );
+        return Err(InRecording::error(
+            &rec.name,
+            "the displacement never changes: there is nothing to fit (sensor unplugged or stuck?)",
+        ));
     }
     if span(y) < MIN_DISPLACEMENT_SPAN_UM {
-        bail!(
-            "{}: the displacement spans only {:.3e} µm, below any sensor's resolution ({MIN_DISPLACEMENT_SPAN_UM:e} µm): \
-             is `displacement_um` in micrometres?",
-            rec.name,
-            span(y)
-        );
+        return Err(InRecording::error(
+            &rec.name,
+            format!(
+                "the displacement spans only {:.3e} µm, below any sensor's resolution ({MIN_DISPLACEMENT_SPAN_UM:e} µm): \
+                 is `displacement_um` in micrometres?",
+                span(y)
+            ),
+        ));
     }
     // The column the model is driven by (`command_V` with an amplifier model, though the file
     // has `current_A`), then those it is scored on: a constant one has no span for its NRMSE.
@@ -72,11 +75,13 @@ pub fn drive_for(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
         Drive::CommandIdeal | Drive::CommandDynamic => rec.command_v.as_deref(),
     };
     if span(input.unwrap_or_default()) <= 0.0 {
-        bail!(
-            "{}: the drive column `{}` never changes: the model's response cannot be identified",
-            rec.name,
-            drive.column()
-        );
+        return Err(InRecording::error(
+            &rec.name,
+            format!(
+                "the drive column `{}` never changes: the model's response cannot be identified",
+                drive.column()
+            ),
+        ));
     }
     let scored = [
         ("current_A", rec.current_a.as_deref().filter(|_| drive == Drive::CommandDynamic)),
@@ -84,11 +89,13 @@ pub fn drive_for(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
         ("temperature_C", rec.temperature_c.as_deref().filter(|_| spec.has(Effect::ThermalDrift))),
     ];
     if let Some((column, _)) = scored.iter().find(|(_, v)| v.is_some_and(|v| span(v) <= 0.0)) {
-        bail!(
-            "{}: `{column}` never changes, and the model is scored on it: a constant channel has no span for \
-             its NRMSE (sensor unplugged or stuck?); leave the column out of the file if it carries nothing",
-            rec.name
-        );
+        return Err(InRecording::error(
+            &rec.name,
+            format!(
+                "`{column}` never changes, and the model is scored on it: a constant channel has no span for \
+                 its NRMSE (sensor unplugged or stuck?); leave the column out of the file if it carries nothing"
+            ),
+        ));
     }
     Ok(drive)
 }
@@ -99,7 +106,10 @@ pub fn drive_for(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
 pub fn model_input(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
     if spec.has(Effect::AmplifierDynamics) {
         if rec.command_v.is_none() {
-            bail!("{}: the model has amplifier_dynamics, which needs a `command_V` column", rec.name);
+            return Err(InRecording::error(
+                &rec.name,
+                "the model has amplifier_dynamics, which needs a `command_V` column",
+            ));
         }
         Ok(Drive::CommandDynamic)
     } else if rec.current_a.is_some() {
@@ -107,7 +117,7 @@ pub fn model_input(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
     } else if rec.command_v.is_some() {
         Ok(Drive::CommandIdeal)
     } else {
-        bail!("{}: no drive column: the model needs `current_A` or `command_V`", rec.name)
+        Err(InRecording::error(&rec.name, "no drive column: the model needs `current_A` or `command_V`"))
     }
 }
 

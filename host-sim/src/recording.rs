@@ -134,7 +134,10 @@ impl Recording {
     pub fn no_displacement_error(&self) -> anyhow::Error {
         let what = "nothing to compare the model with";
         if self.header.is_empty() {
-            return anyhow::anyhow!("{}: no `displacement_um` column: {what}", self.name);
+            return crate::error::InRecording::error(
+                &self.name,
+                format!("no `displacement_um` column: {what}"),
+            );
         }
         let units = crate::columns::UNITS[3];
         let candidate = self.header.iter().find(|h| looks_like_displacement(h));

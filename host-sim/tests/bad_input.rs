@@ -579,6 +579,14 @@ fn a_constant_channel_the_model_uses_is_refused_naming_it() {
         ] {
             refused(&gma(&args), &[name, what], &format!("{} --model {model} {name}", args[0]));
         }
+        // The whole file's fault: `--json` names it as the error's `file` (it was null).
+        let o = gma(&["fit", "--model", model, "--json", &file]);
+        let e: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(
+            (&e["error"]["file"], &e["error"]["line"]),
+            (&file.as_str().into(), &serde_json::Value::Null),
+            "{e}"
+        );
     }
 }
 

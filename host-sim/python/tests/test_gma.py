@@ -229,6 +229,12 @@ def test_nan_in_an_array_names_the_array_and_index():
     # The dict came from a file, but the fault is in the arrays: `file` stays None.
     assert (e.value.array, e.value.index, e.value.file, e.value.line) == ("current_A", 17, None, None)
     assert "current_A" in str(e.value) and "17" in str(e.value) and "not a finite number" in str(e.value)
+    # A fault of the whole recording (a drive that never changes) names it in the message; as it
+    # may be arrays under a label, `file` stays None (the CLI's JSON names the file).
+    rec["current_A"] = np.full_like(rec["current_A"], 0.5)
+    with pytest.raises(gma.GmaError) as e:
+        gma.fit("ja+mech", rec)
+    assert "never changes" in str(e.value) and e.value.file is None, (str(e.value), e.value.file)
 
 
 def test_arrays_are_checked_as_the_csv_reader_checks_a_file():

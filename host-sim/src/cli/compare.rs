@@ -230,7 +230,10 @@ fn write_time_series(
         let model = y + offset_um;
         let residual = m - model;
         if !(model.is_finite() && residual.is_finite()) {
-            anyhow::bail!("{}: the model output at t = {t} s is not a finite number", rec.name);
+            return Err(crate::error::InRecording::error(
+                &rec.name,
+                format!("the model output at t = {t} s is not a finite number"),
+            ));
         }
         let mut row =
             vec![rec.name.clone(), t.to_string(), m.to_string(), model.to_string(), residual.to_string()];

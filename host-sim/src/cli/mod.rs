@@ -154,8 +154,14 @@ pub fn main() -> ExitCode {
             let message = escape_control(&format!("{e:#}"));
             eprintln!("gma: error: {message}");
             if json {
-                let at = e.chain().find_map(|c| c.downcast_ref::<Located>());
-                print_json_error(&message, at, EXIT_FAILURE);
+                // A whole recording's fault points at its file: here every recording is one.
+                let at = e.chain().find_map(|c| {
+                    c.downcast_ref::<Located>().cloned().or_else(|| {
+                        c.downcast_ref::<crate::error::InRecording>()
+                            .map(|r| Located::file(&r.recording, r.message.clone()))
+                    })
+                });
+                print_json_error(&message, at.as_ref(), EXIT_FAILURE);
             }
             ExitCode::from(EXIT_FAILURE)
         }
