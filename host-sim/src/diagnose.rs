@@ -337,7 +337,7 @@ impl Diagnosis {
         }
         let done = self.candidates.len().saturating_sub(self.cut_short.len());
         format!(
-            "undecided — the time limit {}{}; raise the time limit",
+            "undecided — the time limit {}{}; raise the time limit (`--time-limit`, Python's `time_limit_s`)",
             what.join(" and "),
             match done {
                 0 => String::new(),
@@ -970,17 +970,30 @@ pub fn diagnose(
     } else {
         format!("residual is close to white: {:.0} % of lags 1–20 outside the 95 % band", white * 100.0)
     });
-    // A parameter the fit left at its range's end, as `gma fit` warns: a structure that lacks
-    // an effect often bends a parameter that far to stand in for it.
-    for f in &base.free {
-        let value = (f.get)(&base.params);
-        if f.bound.at_edge(value) {
-            let w = Warning::AtEdge { param: f.name(), value, lo: f.bound.lo, hi: f.bound.hi };
-            findings.push(format!(
-                "in the fit of `{spec}`, {w}: a structure that lacks an effect often bends a parameter to the \
-                 end of its range to stand in for it; a parameter the data do not need ends there too"
-            ));
-        }
+    // λ_s far outside the materials' range is most often a displacement in another unit, said
+    // as `gma fit` says it; the other parameters the fit left at a range's end, in one finding:
+    // a structure that lacks an effect often bends a parameter that far to stand in for it.
+    if let Some(w) = fit::strain_scale_doubt(&base.params, &fit::Constraints::default()) {
+        findings.push(format!("in the fit of `{spec}`: {w}"));
+    }
+    let at_edge: Vec<String> = base
+        .free
+        .iter()
+        .filter(|f| f.name() != model_core::effects::STRAIN_SCALE.key)
+        .filter_map(|f| {
+            let value = (f.get)(&base.params);
+            f.bound.at_edge(value).then(|| {
+                Warning::AtEdge { param: f.name(), value, lo: f.bound.lo, hi: f.bound.hi }.to_string()
+            })
+        })
+        .collect();
+    if !at_edge.is_empty() {
+        findings.push(format!(
+            "in the fit of `{spec}`, {}: a structure that lacks an effect often bends a parameter to the end \
+             of its range to stand in for it (refitted with that effect, the parameter moves off the end); a \
+             parameter the data do not need ends there too",
+            at_edge.join("; ")
+        ));
     }
     let mut per_file: Vec<(f64, f64, f64, f64)> = Vec::new(); // freq, amplitude, duration, nrmse
     let all_files: Vec<&Recording> = fit_files.iter().chain(val_files).collect();
@@ -1448,7 +1461,7 @@ pub fn diagnose(
     if !skipped.is_empty() {
         time_limited = true;
         findings.push(format!(
-            "--time-limit reached: `{}` not refitted; the verdict weighs only the candidates refitted in time",
+            "the time limit was reached: `{}` not refitted; the verdict weighs only the candidates refitted in time",
             skipped.iter().map(|e| e.name()).collect::<Vec<_>>().join("`, `")
         ));
     }
@@ -1560,7 +1573,7 @@ mod tests {
         assert_eq!(d(vec![], vec![]).no_verdict(), "nothing significant is missing");
         let cut = d(vec![], vec![Effect::EddyCurrent]).to_string();
         assert!(
-            cut.ends_with("verdict: undecided — the time limit stopped the refit of `eddy_current` before it converged; raise the time limit"),
+            cut.ends_with("verdict: undecided — the time limit stopped the refit of `eddy_current` before it converged; raise the time limit (`--time-limit`, Python's `time_limit_s`)"),
             "{cut}"
         );
         let both = d(vec![Effect::MechanicalDynamics], vec![Effect::EddyCurrent]).no_verdict();

@@ -245,16 +245,18 @@ fn at_rate_of(spec: ModelSpec, params: &ActuatorParams, prep: &Prepared) -> Resu
         let samples = params.delay_samples as f64 * ratio;
         let line = model_core::chain::MAX_DELAY_SAMPLES as f64;
         if samples >= line {
-            bail!(
-                "{}: the sensor delay, delay_samples = {} at the parameters' dt_s ({:.4} ms), is {:.3} ms: \
-                 {samples:.1} samples of this recording ({:.4} ms per sample); the delay line holds fewer \
-                 than {line}",
-                prep.rec.name,
-                params.delay_samples,
-                params.dt_s as f64 * 1e3,
-                params.delay_samples as f64 * params.dt_s as f64 * 1e3,
-                prep.dt_s * 1e3
-            );
+            return Err(InRecording::error(
+                &prep.rec.name,
+                format!(
+                    "the sensor delay, delay_samples = {} at the parameters' dt_s ({:.4} ms), is {:.3} ms: \
+                     {samples:.1} samples of this recording ({:.4} ms per sample); the delay line holds fewer \
+                     than {line}",
+                    params.delay_samples,
+                    params.dt_s as f64 * 1e3,
+                    params.delay_samples as f64 * params.dt_s as f64 * 1e3,
+                    prep.dt_s * 1e3
+                ),
+            ));
         }
         p.delay_samples = samples as f32;
     }
@@ -341,7 +343,7 @@ pub fn run_model(
                 let u = 0.5 * (input[k] + input[(k + 1).min(n - 1)]);
                 let o = model
                     .step_magnetic(&mut s, u as f32, |h| h)
-                    .map_err(|e| anyhow::anyhow!("{}: sample {k}: {e}", rec.name))?;
+                    .map_err(|e| InRecording::error(&rec.name, format!("sample {k}: {e}")))?;
                 if let Some(run) = &mut to_keep {
                     run.push(o);
                 }

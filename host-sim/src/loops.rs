@@ -913,8 +913,8 @@ pub fn html(
     let roles =
         files.iter().map(|f| (f, "fit", h_fit)).chain(val_files.iter().map(|f| (f, "validation", h_all)));
     for (f, role, h_max) in roles {
-        let m =
-            run(fit.model, &fit.values(), &f.h, h_max).map_err(|e| anyhow::anyhow!("{}: {}", f.name, e.0))?;
+        let m = run(fit.model, &fit.values(), &f.h, h_max)
+            .map_err(|e| crate::error::InRecording::error(&f.name, e.0))?;
         let e = nrmse(&f.value, &f.channel_from_m(&m));
         if role == "validation" {
             val_nrmse.push(e);

@@ -112,6 +112,16 @@ pub fn load(path: Option<&Path>, spec: ModelSpec) -> Result<ActuatorParams> {
     Ok(load_input(path.map(Input::open).transpose()?, spec, "the parameter set")?.0)
 }
 
+/// As [`load`] from a file (or `-`), also giving the name messages call it by and its text, for
+/// a caller that checks more and points into it ([`located_parameter`]).
+pub fn load_with_text(path: &Path, spec: ModelSpec) -> Result<(ActuatorParams, String, String)> {
+    let input = Input::open(path)?;
+    let name = input.name.clone();
+    let text = input.into_text(MAX_PARAM_FILE_BYTES)?;
+    let (params, _) = load_text(&name, &text, spec, None)?;
+    Ok((params, name, text))
+}
+
 /// Where a command's parameters came from, so no default is silent: said on stderr when loaded
 /// and carried into the JSON (`parameters_source`, `parameters_defaulted`).
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
@@ -287,9 +297,12 @@ pub fn parse_file(file: &str, text: &str, spec: ModelSpec) -> Result<ParamFile> 
 /// table the file left out, the demo set's).
 pub fn located_parameter(file: &str, text: &str, name: &str, what: String) -> Located {
     match line_of(text, name) {
+        // Not reached from `drive load`: parsing refuses such a number before the board's check.
         Some((line, value)) if beyond_f32(value) => {
             Located::at(file, line, None, beyond_f32_words(name, value))
         }
+        // A whole table (`[mech]`) is named at its header, which has no value to quote.
+        Some((line, "")) => Located::at(file, line, None, what),
         Some((line, value)) => Located::at(file, line, None, format!("{what}; found `{}`", echo(value))),
         None => Located::file(file, what),
     }

@@ -217,11 +217,13 @@ impl Recording {
         let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(false).from_reader(input);
         let headers = rdr.headers().map_err(|e| csv_error(file, e))?.clone();
         if headers.iter().all(|h| h.trim().is_empty()) {
+            // The header is the line before the reader's position (blank lines before it skipped).
+            let line = rdr.position().line().saturating_sub(1).max(1);
             if headers.len() > 1 || rdr.records().next().is_some() {
-                located!(file, Some(1), None; "the header line names no columns (only separators or blanks); expected a header such as `time_s,current_A,displacement_um`");
+                located!(file, Some(line), None; "the header line names no columns (only separators or blanks); expected a header such as `time_s,current_A,displacement_um`");
             }
-            if !headers.is_empty() {
-                located!(file, Some(1), None; "the header line is blank and nothing follows it; expected a header such as `time_s,current_A,displacement_um`");
+            if rdr.position().byte() > 0 {
+                located!(file; "the file holds only blank lines (no header line); expected a header such as `time_s,current_A,displacement_um`");
             }
             located!(file, Some(1), None; "empty file (no header line); expected a header such as `time_s,current_A,displacement_um`");
         }

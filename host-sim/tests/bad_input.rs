@@ -42,7 +42,13 @@ fn bad_csvs() -> Vec<(&'static str, Vec<u8>, Vec<&'static str>)> {
     junk.extend((0..2000u32).map(|k| (k.wrapping_mul(2_654_435_761) >> 24) as u8));
     vec![
         ("empty.csv", Vec::new(), vec!["empty.csv:1:", "empty file"]),
-        ("blank_line.csv", b"   \n".to_vec(), vec!["blank_line.csv:1:", "the header line is blank"]),
+        ("blank_line.csv", b"   \n".to_vec(), vec!["blank_line.csv: ", "only blank lines"]),
+        ("blank_lines.csv", b"\n\n".to_vec(), vec!["blank_lines.csv:", "only blank lines"]),
+        (
+            "blank_then_commas.csv",
+            b"\n,,\n0,0.1,1.0\n".to_vec(),
+            vec!["blank_then_commas.csv:2:", "names no columns"],
+        ),
         // Not empty: its rows are there, its header names nothing.
         (
             "commas_header.csv",

@@ -172,6 +172,18 @@ fn a_start_outside_its_range_and_a_multivalued_file_are_said_not_passed_over() {
         err.contains(&format!("{params}:{line}: the board would refuse")) && err.contains("found `0.5"),
         "{err}"
     );
+    // From standard input too: the set is read once, so the refusal points into what was read.
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_gma"))
+        .args(["drive", "load", "--params", "-", "--model", "ja", "--out", frame.to_str().unwrap()])
+        .stdin(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::io::Write::write_all(&mut child.stdin.take().unwrap(), text.as_bytes()).unwrap();
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && !frame.exists(), "{err}");
+    assert!(err.contains(&format!("<stdin>:{line}: the board would refuse")), "{err}");
 }
 
 /// The sensor delay is identified as a real number of samples: a rig whose sensor lags by 2.6

@@ -282,8 +282,8 @@ fn compare_loops(
     let mut total = 0.0;
     for (f, stem) in files.iter().zip(stems) {
         let h_max = f.h.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let m =
-            loops::run(model, &values, &f.h, h_max).map_err(|e| anyhow::anyhow!("{}: {}", f.name, e.0))?;
+        let m = loops::run(model, &values, &f.h, h_max)
+            .map_err(|e| crate::error::InRecording::error(&f.name, e.0))?;
         let e = fit::nrmse(&f.value, &f.channel_from_m(&m));
         total += e;
         let out = plot_path(a, stem, "loop");

@@ -201,13 +201,10 @@ fn shape_name(s: WaveShape) -> &'static str {
 
 fn load(l: &LoadArgs) -> Result<Command> {
     let spec = crate::params::parse_spec(&l.model)?;
-    let params = crate::params::load(Some(l.params.as_path()), spec)?;
+    let (params, file, text) = crate::params::load_with_text(&l.params, spec)?;
     // The board's validation, before anything is sent.
     gma_control::compensator_model(spec, &params, gma_control::ControlConfig::REFERENCE.current_loop.tick_s)
         .map_err(|e| {
-            let file = display(&l.params);
-            // Read once more only to point at the line; the load above read it whole.
-            let text = std::fs::read_to_string(&l.params).unwrap_or_default();
             crate::params::located_parameter(
                 &file,
                 &text,

@@ -213,7 +213,7 @@ pub(crate) fn fit_loops(
         fit_files.iter().chain(val_files).flat_map(|f| f.h.iter()).fold(0.0f64, |m, v| m.max(v.abs()));
     for f in val_files {
         let m = loops::run(model, &res.values(), &f.h, h_max)
-            .map_err(|e| anyhow::anyhow!("{}: {}", f.name, e.0))?;
+            .map_err(|e| crate::error::InRecording::error(&f.name, e.0))?;
         let e = fit::nrmse(&f.value, &f.channel_from_m(&m));
         files.push(FileScoreRow::new(&f.name, Some("val"), f.channel.name(), e));
         val_nrmse.push(e);

@@ -154,7 +154,7 @@ pub fn main() -> ExitCode {
             let message = escape_control(&format!("{e:#}"));
             eprintln!("gma: error: {message}");
             if json {
-                // A whole recording's fault points at its file: here every recording is one.
+                // A whole recording's fault points at its file (the demo's are named after the files it writes).
                 let at = e.chain().find_map(|c| {
                     c.downcast_ref::<Located>().cloned().or_else(|| {
                         c.downcast_ref::<crate::error::InRecording>()

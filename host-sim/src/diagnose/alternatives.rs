@@ -173,7 +173,7 @@ impl Comparison {
         let mut words = String::new();
         if !self.not_refitted.is_empty() {
             words += &format!(
-                "; not refitted (--time-limit reached first), left out: `{}`",
+                "; not refitted (the time limit was reached first), left out: `{}`",
                 self.not_refitted.join("`, `")
             );
         }
