@@ -33,6 +33,7 @@
 //!    structured after the final structure is reported with its size.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 
 use anyhow::Result;
 use model_core::effects::{Candidacy, MagnetizationLaw, Signature, Stage};
@@ -922,8 +923,81 @@ pub fn diagnose(
             ));
         }
     }
-    progress::phase(opts.progress, &format!("diagnose: fitting the given model `{spec}`"));
-    let base = fit::fit(spec, init, fit_files, opts)?;
+    // Each candidate is fitted afresh from the engineer's start values (swarm and all, at
+    // [`FRESH_EFFORT`]), and refined from the baseline's optimum with the effect's parameters at
+    // their start values: the lower fit cost is its refit. Either alone can lose: a baseline that
+    // bent its lags to mimic a missing delay starts that refit in a basin of its own, and a fresh
+    // search can miss the basin the baseline found. The fresh fits need nothing from the
+    // baseline and run beside it and the refinements, on the cores their serial stretches (one
+    // seed's simplex) leave idle; each fit's result is the same whichever finishes first. With a
+    // time limit the baseline has the cores to itself first: a limit that ends it leaves no
+    // refit, and the baseline is then the result.
+    let cands = candidates_for(spec, fit_files);
+    let refit_opts = FitOptions { progress: false, ..opts };
+    let fresh_opts = FitOptions { effort: FRESH_EFFORT * refit_opts.effort, ..refit_opts };
+    let fresh_beside_baseline = opts.deadline.is_none();
+    // Past the deadline a candidate is not refitted at all (and said so).
+    let late = || fit::time_left(opts.deadline).is_some_and(|t| t.is_zero());
+    progress::phase(
+        opts.progress,
+        &if fresh_beside_baseline {
+            format!(
+                "diagnose: fitting the given model `{spec}`; beside it, `{spec}` plus each of {} candidate effects \
+                 from the start values",
+                cands.len()
+            )
+        } else {
+            format!("diagnose: fitting the given model `{spec}`")
+        },
+    );
+    type Search = Option<Result<FitResult>>;
+    // The candidates' searches finished (fresh and refined), and the phase that counts them from
+    // the baseline's end (before it, the baseline's own progress is shown).
+    let searches: Mutex<(u64, Option<progress::Phase>)> = Mutex::new((0, None));
+    let searches_lock = || searches.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let searched = |r: Search| {
+        let mut g = searches_lock();
+        g.0 += 1;
+        if let Some(phase) = &g.1 {
+            phase.step("");
+        }
+        r
+    };
+    let fresh_searches = || -> Vec<Search> {
+        cands
+            .par_iter()
+            .map(|&e| searched((!late()).then(|| fit::fit(spec.with(e), init, fit_files, fresh_opts))))
+            .collect()
+    };
+    let (base_and_refined, fresh_beside) = rayon::join(
+        || -> Result<(FitResult, Vec<Search>, Vec<Search>)> {
+            let base = fit::fit(spec, init, fit_files, opts)?;
+            {
+                let mut g = searches_lock();
+                let label = format!(
+                    "diagnose: `{spec}` plus each candidate effect, searched afresh and refined from the fit of \
+                     `{spec}`"
+                );
+                let phase = progress::Phase::start(opts.progress, &label, 2 * cands.len() as u64);
+                (0..g.0).for_each(|_| phase.step(""));
+                g.1 = Some(phase);
+            }
+            let refine = |&e: &Effect| {
+                searched((!late()).then(|| fit::refine(spec.with(e), &base.params, fit_files, refit_opts)))
+            };
+            let (refined, fresh_after) = rayon::join(
+                || cands.par_iter().map(refine).collect(),
+                || if fresh_beside_baseline { Vec::new() } else { fresh_searches() },
+            );
+            Ok((base, refined, fresh_after))
+        },
+        || if fresh_beside_baseline { fresh_searches() } else { Vec::new() },
+    );
+    if let Some(phase) = searches_lock().1.take() {
+        phase.finish();
+    }
+    let (base, warm_fits, fresh_after) = base_and_refined?;
+    let fresh_fits = if fresh_beside_baseline { fresh_beside } else { fresh_after };
     let mut time_limited = base.time_limited;
     let score_files = if val_files.is_empty() { fit_files } else { val_files };
     // Per-file scores of the baseline, for the refits to be compared with. Scores leave out each
@@ -1036,12 +1110,10 @@ pub fn diagnose(
     findings.extend(trend_findings(&trends, &per_file, &names));
     evidence_phase.finish();
 
-    // Refit every candidate (in parallel), warm-started from the baseline.
-    let cands = candidates_for(spec, fit_files);
-    let refit_opts = FitOptions { progress: false, ..opts };
+    // Each candidate's refit, scored on the scored files.
     let refitting = progress::Phase::start(
         opts.progress,
-        &format!("diagnose: refitting `{spec}` plus each of {} candidate effects", cands.len()),
+        &format!("diagnose: scoring the refits of `{spec}` plus each of {} candidate effects", cands.len()),
         cands.len() as u64,
     );
     let done = AtomicUsize::new(0);
@@ -1049,21 +1121,14 @@ pub fn diagnose(
     type Refit = Option<Result<(FitResult, f64)>>;
     let results: Vec<(Effect, Refit)> = cands
         .par_iter()
-        .map(|&e| {
-            // Past the deadline a candidate is not refitted at all (and said so).
-            if fit::time_left(opts.deadline).is_some_and(|t| t.is_zero()) {
-                return (e, None);
-            }
+        .zip(fresh_fits)
+        .zip(warm_fits)
+        .map(|((&e, fresh), warm)| {
+            let (Some(fresh), Some(warm)) = (fresh, warm) else { return (e, None) };
             let s2 = spec.with(e);
-            // Fitted afresh from the engineer's start values (swarm and all, at
-            // [`FRESH_EFFORT`]), and refined from the baseline's optimum with the effect's
-            // parameters at their start values: the lower fit cost is the refit. Either alone
-            // can lose: a baseline that bent its lags to mimic a missing delay starts that refit
-            // in a basin of its own, and a fresh search can miss the basin the baseline found.
-            let fresh_opts = FitOptions { effort: FRESH_EFFORT * refit_opts.effort, ..refit_opts };
-            let r = fit::fit(s2, init, fit_files, fresh_opts)
+            let r = fresh
                 .and_then(|fresh| {
-                    let warm = fit::refine(s2, &base.params, fit_files, refit_opts)?;
+                    let warm = warm?;
                     // The kept one reports the search as a whole: both runs' evaluations, and a
                     // time limit that cut either short.
                     let (evaluations, time_limited) =
