@@ -28,7 +28,9 @@ use crate::search::{minimize, Bound, Fidelity, Found, Local, Plan, SearchOptions
 use crate::warning::Warning;
 
 mod magnetic_memo;
+mod run;
 pub use magnetic_memo::MagneticMemo;
+pub use run::{run_model, run_models};
 
 /// How a file drives the model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -261,126 +263,6 @@ fn at_rate_of(spec: ModelSpec, params: &ActuatorParams, prep: &Prepared) -> Resu
         p.delay_samples = samples as f32;
     }
     Ok(p)
-}
-
-/// [`simulate`]; `all_channels: false` keeps only the channels the file measured (the fit's inner
-/// loop: displacement and current, and field and magnetization for a measured flux density).
-pub fn run_model(
-    spec: ModelSpec,
-    params: &ActuatorParams,
-    prep: &Prepared,
-    all_channels: bool,
-) -> Result<Simulation> {
-    let (rec, drive) = (prep.rec, prep.drive);
-    let p = at_rate_of(spec, params, prep)?;
-    // The ideal amplifier's gain is used without `amplifier_dynamics` too, which model-core
-    // then does not check.
-    let gain = p.amp.gain_a_per_v;
-    if drive == Drive::CommandIdeal && !(gain > 0.0 && gain <= 1e3) {
-        bail!(
-            "{}: parameter `amp.gain_a_per_v` = {gain} is out of range (0, 1e3] A/V: it is the ideal \
-             amplifier's gain, which turns this file's `command_V` into the coil current",
-            rec.name
-        );
-    }
-    let model = Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let n = rec.len();
-    let all_channels = all_channels || rec.flux_density_t.is_some();
-    // Borrowed from the recording (this runs at every fit evaluation); only the ideal amplifier's
-    // scaled command is a new vector.
-    let input: std::borrow::Cow<[f64]> = match drive {
-        Drive::Current => rec.current_a.as_deref().unwrap_or_default().into(),
-        Drive::CommandIdeal => {
-            rec.command_v.iter().flatten().map(|u| u * p.amp.gain_a_per_v as f64).collect::<Vec<_>>().into()
-        }
-        Drive::CommandDynamic => rec.command_v.as_deref().unwrap_or_default().into(),
-    };
-    let excursion = match prep.initial {
-        _ if !model.has_magnetic_memory() => 0.0,
-        InitialState::Demagnetized => 0.0,
-        InitialState::Excursion(x) => x,
-        InitialState::Estimated if rec.displacement_um.is_none() => 0.0,
-        InitialState::Estimated => estimate_excursion(spec, params, prep)?,
-    };
-    let mut s = model.rest_state_after(excursion as f32);
-    // The magnetic stages' run kept in the memo (parameters that differ only downstream), or
-    // none: then they run here, interleaved with the mechanical ones, and are kept.
-    let keyed = prep.memo.map(|memo| (memo, magnetic_key(spec, &p, excursion, drive)));
-    let kept = keyed.as_ref().and_then(|(memo, key)| memo.get(key));
-    let mut to_keep = (keyed.is_some() && kept.is_none()).then(|| Vec::with_capacity(n));
-    let mut out = Simulation {
-        displacement_um: Vec::with_capacity(n),
-        current_a: Vec::with_capacity(n),
-        field_a_per_m: Vec::with_capacity(n),
-        magnetization_a_per_m: Vec::with_capacity(n),
-        temperature_rise_c: Vec::new(),
-        initial_excursion_a_per_m: excursion,
-    };
-    let heating = spec.has(Effect::ThermalDrift);
-    if heating {
-        out.temperature_rise_c.reserve(n);
-    }
-    let mut y = s.mech.displacement_m as f64; // rest: the delay line holds this value too
-    let mut i = if drive == Drive::CommandDynamic { 0.0 } else { input[0] };
-    let (mut h, mut m) = (p.coil.bias_a_per_m as f64, f64::NAN);
-    for k in 0..n {
-        // Simultaneous sampling: the output at t_k, then the step to t_{k+1}.
-        out.displacement_um.push(y * 1e6);
-        out.current_a.push(i);
-        if all_channels {
-            out.field_a_per_m.push(h);
-            out.magnetization_a_per_m.push(m);
-        }
-        if heating {
-            out.temperature_rise_c.push(s.temperature_rise_c.value() as f64);
-        }
-        let magnetic = match &kept {
-            Some(run) => run[k],
-            None => {
-                // The drive between samples k and k+1 is known only at its ends: hold their
-                // mean (an O(dt²) hold, where a plain zero-order hold of u_k would lag by half a
-                // sample).
-                let u = 0.5 * (input[k] + input[(k + 1).min(n - 1)]);
-                let o = model
-                    .step_magnetic(&mut s, u as f32, |h| h)
-                    .map_err(|e| InRecording::error(&rec.name, format!("sample {k}: {e}")))?;
-                if let Some(run) = &mut to_keep {
-                    run.push(o);
-                }
-                o
-            }
-        };
-        let o = model.step_mechanical(&mut s, magnetic);
-        y = o.displacement_m as f64;
-        i = o.current_a as f64;
-        h = o.field_a_per_m as f64;
-        m = o.magnetization_a_per_m as f64;
-    }
-    if let (Some((memo, key)), Some(run)) = (keyed, to_keep) {
-        memo.keep(key, run);
-    }
-    // Sample 0 is the rest state's: its magnetization is the first step's (the field is the bias).
-    if let Some(first) = out.magnetization_a_per_m.get(1).copied() {
-        out.magnetization_a_per_m[0] = first;
-    }
-    Ok(out)
-}
-
-/// What decides a run's magnetic stages on one file ([`MagneticMemo`]'s key): the spec, the
-/// parameters at the file's rate with the mechanical stages' (magnetostriction, rod length,
-/// mechanics, thermal drift, sensor delay) set aside, the initial excursion and the drive. Debug
-/// text prints every float exactly (shortest round trip, −0 kept).
-fn magnetic_key(spec: ModelSpec, p: &ActuatorParams, excursion: f64, drive: Drive) -> String {
-    let reference = ActuatorParams::TERFENOL_DEMO;
-    let magnetic = ActuatorParams {
-        magnetostriction: reference.magnetostriction,
-        rod_length_m: reference.rod_length_m,
-        mech: reference.mech,
-        thermal: reference.thermal,
-        delay_samples: reference.delay_samples,
-        ..*p
-    };
-    format!("{spec:?} {magnetic:?} {excursion:?} {drive:?}")
 }
 
 /// Whether `spec`'s magnetization law carries a history (J–A, Preisach), so that each file
@@ -782,11 +664,11 @@ fn projected_runs(
     let lambda_ref = params.magnetostriction.lambda_s as f64;
     let thermal = spec.has(Effect::ThermalDrift);
     // Per file: (g, t, simulation) with y = λ g + t.
-    let parts: Vec<(Vec<f64>, Vec<f64>, Simulation)> = files
-        .par_iter()
-        .map(|prep| {
+    let parts: Vec<(Vec<f64>, Vec<f64>, Simulation)> = run_models(spec, params, files, false)?
+        .into_par_iter()
+        .zip(files)
+        .map(|(sim_a, prep)| {
             let rec = prep.rec;
-            let sim_a = run_model(spec, params, prep, false)?;
             if thermal {
                 let t = thermal_share(spec, params, prep, &sim_a)?;
                 let g = sim_a.displacement_um.iter().zip(&t).map(|(y, t)| (y - t) / lambda_ref).collect();
@@ -834,9 +716,7 @@ fn projected_residuals(
 ) -> Option<Vec<f64>> {
     let sims = match lambda {
         Some(range) => projected_runs(spec, params, files, range).ok()?.0,
-        None => {
-            files.par_iter().map(|prep| run_model(spec, params, prep, false)).collect::<Result<_>>().ok()?
-        }
+        None => run_models(spec, params, files, false).ok()?,
     };
     let blocks: Vec<Vec<f64>> =
         files.iter().zip(&sims).flat_map(|(prep, sim)| blocks_of(spec, prep.rec, sim)).map(|b| b.1).collect();
@@ -866,11 +746,10 @@ fn thermal_share(
 
 /// Scores `params` as they are (λ_s included; offsets in closed form) on prepared files.
 fn evaluate_prepared(spec: ModelSpec, params: &ActuatorParams, files: &[Prepared]) -> Result<Evaluation> {
-    let files = files
-        .par_iter()
-        .map(|prep| Ok(score(spec, prep.rec, &run_model(spec, params, prep, false)?)))
-        .collect::<Result<Vec<_>>>()?;
-    Ok(Evaluation { files })
+    let sims = run_models(spec, params, files, false)?;
+    Ok(Evaluation {
+        files: files.par_iter().zip(&sims).map(|(prep, sim)| score(spec, prep.rec, sim)).collect(),
+    })
 }
 
 /// The residuals the fit's cost is made of, one block per file and channel (displacement with
@@ -884,10 +763,9 @@ pub fn residual_blocks(
     params: &ActuatorParams,
     files: &[Prepared],
 ) -> Result<Vec<(usize, Vec<f64>)>> {
-    let per_file: Vec<Vec<(usize, Vec<f64>)>> = files
-        .par_iter()
-        .map(|prep| Ok(blocks_of(spec, prep.rec, &run_model(spec, params, prep, false)?)))
-        .collect::<Result<Vec<_>>>()?;
+    let sims = run_models(spec, params, files, false)?;
+    let per_file: Vec<Vec<(usize, Vec<f64>)>> =
+        files.par_iter().zip(&sims).map(|(prep, sim)| blocks_of(spec, prep.rec, sim)).collect();
     Ok(per_file.into_iter().flatten().collect())
 }
 

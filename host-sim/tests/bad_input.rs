@@ -638,7 +638,8 @@ fn diagnose_says_which_candidate_refits_could_not_run() {
 
 /// `amp.gain_a_per_v` is the ideal amplifier's gain whenever a file gives the command but not the
 /// current, with or without `amplifier_dynamics` (docs/formats.md: (0, 1e3]); a model without
-/// that effect did not check it, and ran a command-only file through a gain of 0 or −2.
+/// that effect did not check it, and ran a command-only file through a gain of 0 or −2. The
+/// refusal names the file, in `--json` too.
 #[test]
 fn an_ideal_amplifier_gain_out_of_range_is_refused_for_a_command_only_file() {
     let dir = tempfile::tempdir().unwrap();
@@ -670,6 +671,10 @@ fn an_ideal_amplifier_gain_out_of_range_is_refused_for_a_command_only_file() {
             );
         }
         assert!(!Path::new(&sim).exists());
+        // `--json` names the file the gain would drive as the error's `file` (it was null).
+        let o = gma(&["compare", "--model", "ja", "--params", &p, "--json", &command_only]);
+        let e: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(e["error"]["file"], command_only.as_str(), "gain {gain}: {e}");
     }
 }
 

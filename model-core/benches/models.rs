@@ -39,6 +39,34 @@ fn bench(c: &mut Criterion) {
             ja.step(&mut s, black_box(sine(n, 6e4, 0.0)))
         })
     });
+    // Two rods stepped beside each other (the workbench runs two files on one core this way),
+    // and the same two one after the other: per pair of samples.
+    let ja_other = JilesAtherton::new(JaParams { k_a_per_m: 3000.0, ..JaParams::TSMA_ROD1_002 }).unwrap();
+    c.bench_function("ja_sample_400hz_fullscale_two_rods_in_turn", |b| {
+        let (mut s, mut s_other) = (JaState::default(), JaState::default());
+        let mut n = 0;
+        b.iter(|| {
+            n += 1;
+            (
+                ja.step(&mut s, black_box(sine(n, 6e4, 0.0))),
+                ja_other.step(&mut s_other, black_box(sine(n + 3, 5e4, 0.0))),
+            )
+        })
+    });
+    c.bench_function("ja_sample_400hz_fullscale_two_rods_beside", |b| {
+        let (mut s, mut s_other) = (JaState::default(), JaState::default());
+        let mut n = 0;
+        b.iter(|| {
+            n += 1;
+            ja.step_beside(
+                &mut s,
+                black_box(sine(n, 6e4, 0.0)),
+                &ja_other,
+                &mut s_other,
+                black_box(sine(n + 3, 5e4, 0.0)),
+            )
+        })
+    });
     let zoh = SecondOrderZoh::new(
         MassSpringDamper { mass_kg: 0.1, damping_n_s_per_m: 3000.0, stiffness_n_per_m: 9.9e6 },
         1e-4,

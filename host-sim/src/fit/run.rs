@@ -1,0 +1,395 @@
+//! One run of a model over a recording, and runs over several recordings at once.
+//!
+//! A run is a chain of dependent steps: each sample's J–A integration waits on the sample
+//! before, so one run leaves most of a core's issue slots idle (the integration is bound by
+//! latency, not throughput). [`run_models`] steps two files' runs in turn, sample by sample, on
+//! one thread: the core overlaps the two independent chains. Each run's arithmetic is unchanged,
+//! so the results are the same bits as [`run_model`]'s.
+
+use std::borrow::Cow;
+use std::sync::Arc;
+
+use anyhow::Result;
+use model_core::{Actuator, ActuatorParams, ActuatorState, Effect, MagneticOutput, ModelSpec};
+use rayon::prelude::*;
+
+use super::{at_rate_of, estimate_excursion, Drive, InitialState, MagneticMemo, Prepared, Simulation};
+use crate::error::InRecording;
+
+/// [`super::simulate`]; `all_channels: false` keeps only the channels the file measured (the
+/// fit's inner loop: displacement and current, and field and magnetization for a measured flux
+/// density).
+pub fn run_model(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    prep: &Prepared,
+    all_channels: bool,
+) -> Result<Simulation> {
+    Run::start(spec, params, prep, all_channels)?.run_to_end()
+}
+
+/// [`run_model`] on each of `files`: the runs of two files interleaved on one thread, the pairs
+/// in parallel. The first error in file order, if any.
+pub fn run_models(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    files: &[Prepared],
+    all_channels: bool,
+) -> Result<Vec<Simulation>> {
+    let runs: Vec<Result<Simulation>> = files
+        .par_chunks(2)
+        .flat_map_iter(|pair| match pair {
+            [a, b] => Vec::from(run_pair(spec, params, a, b, all_channels)),
+            one => one.iter().map(|prep| run_model(spec, params, prep, all_channels)).collect(),
+        })
+        .collect();
+    runs.into_iter().collect()
+}
+
+/// The runs on `a` and `b`, stepped in turn while both last.
+fn run_pair(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    a: &Prepared,
+    b: &Prepared,
+    all_channels: bool,
+) -> [Result<Simulation>; 2] {
+    match (Run::start(spec, params, a, all_channels), Run::start(spec, params, b, all_channels)) {
+        (Ok(mut x), Ok(mut y)) => {
+            while x.running() && y.running() {
+                x.step_beside(&mut y);
+            }
+            [x.run_to_end(), y.run_to_end()]
+        }
+        (x, y) => [x.and_then(Run::run_to_end), y.and_then(Run::run_to_end)],
+    }
+}
+
+/// A run in progress: the model, its state, and the channels recorded so far.
+struct Run<'a> {
+    rec: &'a crate::recording::Recording,
+    model: Actuator,
+    s: ActuatorState,
+    /// The model's input per sample: current [A] or command [V].
+    input: Cow<'a, [f64]>,
+    n: usize,
+    /// The magnetic stages' outputs, kept from an earlier run with the same upstream parameters.
+    kept: Option<Arc<[MagneticOutput]>>,
+    /// Where this run's magnetic stages are to be kept, under which key, and what they gave.
+    to_keep: Option<(&'a MagneticMemo, String, Vec<MagneticOutput>)>,
+    out: Simulation,
+    all_channels: bool,
+    heating: bool,
+    /// The next sample.
+    k: usize,
+    /// The outputs at sample k: displacement [m], current [A], field and magnetization [A/m].
+    y: f64,
+    i: f64,
+    h: f64,
+    m: f64,
+    failed: Option<anyhow::Error>,
+}
+
+impl<'a> Run<'a> {
+    fn start(
+        spec: ModelSpec,
+        params: &ActuatorParams,
+        prep: &Prepared<'a>,
+        all_channels: bool,
+    ) -> Result<Self> {
+        let (rec, drive) = (prep.rec, prep.drive);
+        let p = at_rate_of(spec, params, prep)?;
+        // The ideal amplifier's gain is used without `amplifier_dynamics` too, which model-core
+        // then does not check.
+        let gain = p.amp.gain_a_per_v;
+        if drive == Drive::CommandIdeal && !(gain > 0.0 && gain <= 1e3) {
+            return Err(InRecording::error(
+                &rec.name,
+                format!(
+                    "parameter `amp.gain_a_per_v` = {gain} is out of range (0, 1e3] A/V: it is the ideal amplifier's \
+                     gain, which turns this file's `command_V` into the coil current"
+                ),
+            ));
+        }
+        let model = Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let n = rec.len();
+        let all_channels = all_channels || rec.flux_density_t.is_some();
+        // Borrowed from the recording (this runs at every fit evaluation); only the ideal
+        // amplifier's scaled command is a new vector.
+        let input: Cow<[f64]> = match drive {
+            Drive::Current => rec.current_a.as_deref().unwrap_or_default().into(),
+            Drive::CommandIdeal => rec
+                .command_v
+                .iter()
+                .flatten()
+                .map(|u| u * p.amp.gain_a_per_v as f64)
+                .collect::<Vec<_>>()
+                .into(),
+            Drive::CommandDynamic => rec.command_v.as_deref().unwrap_or_default().into(),
+        };
+        let excursion = match prep.initial {
+            _ if !model.has_magnetic_memory() => 0.0,
+            InitialState::Demagnetized => 0.0,
+            InitialState::Excursion(x) => x,
+            InitialState::Estimated if rec.displacement_um.is_none() => 0.0,
+            InitialState::Estimated => estimate_excursion(spec, params, prep)?,
+        };
+        let s = model.rest_state_after(excursion as f32);
+        // The magnetic stages' run kept in the memo (parameters that differ only downstream),
+        // or none: then they run here, interleaved with the mechanical ones, and are kept.
+        let (mut kept, mut to_keep) = (None, None);
+        if let Some(memo) = prep.memo {
+            let key = magnetic_key(spec, &p, excursion, drive);
+            kept = memo.get(&key);
+            if kept.is_none() {
+                to_keep = Some((memo, key, Vec::with_capacity(n)));
+            }
+        }
+        let heating = spec.has(Effect::ThermalDrift);
+        let out = Simulation {
+            displacement_um: Vec::with_capacity(n),
+            current_a: Vec::with_capacity(n),
+            field_a_per_m: Vec::with_capacity(if all_channels { n } else { 0 }),
+            magnetization_a_per_m: Vec::with_capacity(if all_channels { n } else { 0 }),
+            temperature_rise_c: Vec::with_capacity(if heating { n } else { 0 }),
+            initial_excursion_a_per_m: excursion,
+        };
+        let y = s.mech.displacement_m as f64; // rest: the delay line holds this value too
+        let i = if drive == Drive::CommandDynamic { 0.0 } else { input[0] };
+        let h = p.coil.bias_a_per_m as f64;
+        Ok(Run {
+            rec,
+            model,
+            s,
+            input,
+            n,
+            kept,
+            to_keep,
+            out,
+            all_channels,
+            heating,
+            k: 0,
+            y,
+            i,
+            h,
+            m: f64::NAN,
+            failed: None,
+        })
+    }
+
+    /// Samples left, and no fault.
+    #[inline(always)]
+    fn running(&self) -> bool {
+        self.k < self.n && self.failed.is_none()
+    }
+
+    /// Records sample k's outputs and steps to sample k + 1 (a fault ends the run).
+    #[inline(always)]
+    fn step(&mut self) {
+        self.record();
+        let magnetic = match &self.kept {
+            Some(run) => Ok(run[self.k]),
+            None => {
+                let u = self.drive();
+                self.model.step_magnetic(&mut self.s, u, |h| h)
+            }
+        };
+        self.advance(magnetic);
+    }
+
+    /// [`Self::step`] of this run and `other`, their magnetic stages interleaved
+    /// ([`Actuator::step_magnetic_beside`]) unless either has them kept.
+    #[inline(always)]
+    fn step_beside(&mut self, other: &mut Run) {
+        if self.kept.is_some() || other.kept.is_some() {
+            self.step();
+            other.step();
+            return;
+        }
+        self.record();
+        other.record();
+        let (u, u_other) = (self.drive(), other.drive());
+        let [magnetic, magnetic_other] =
+            self.model.step_magnetic_beside(&mut self.s, u, &other.model, &mut other.s, u_other);
+        self.advance(magnetic);
+        other.advance(magnetic_other);
+    }
+
+    /// The outputs at sample k, recorded (simultaneous sampling: the output at t_k, then the
+    /// step to t_{k+1}).
+    #[inline(always)]
+    fn record(&mut self) {
+        self.out.displacement_um.push(self.y * 1e6);
+        self.out.current_a.push(self.i);
+        if self.all_channels {
+            self.out.field_a_per_m.push(self.h);
+            self.out.magnetization_a_per_m.push(self.m);
+        }
+        if self.heating {
+            self.out.temperature_rise_c.push(self.s.temperature_rise_c.value() as f64);
+        }
+    }
+
+    /// The drive from sample k to k + 1. It is known only at their ends: their mean is held
+    /// (an O(dt²) hold, where a plain zero-order hold of u_k would lag by half a sample).
+    #[inline(always)]
+    fn drive(&self) -> f32 {
+        let k = self.k;
+        (0.5 * (self.input[k] + self.input[(k + 1).min(self.n - 1)])) as f32
+    }
+
+    /// The mechanical stages from the magnetic ones' output (kept, or just stepped and then
+    /// kept if asked), to sample k + 1; a fault ends the run.
+    #[inline(always)]
+    fn advance(&mut self, magnetic: Result<MagneticOutput, model_core::StepError>) {
+        let magnetic = match magnetic {
+            Ok(o) => o,
+            Err(e) => {
+                self.failed = Some(InRecording::error(&self.rec.name, format!("sample {}: {e}", self.k)));
+                return;
+            }
+        };
+        if let (None, Some((_, _, run))) = (&self.kept, &mut self.to_keep) {
+            run.push(magnetic);
+        }
+        let o = self.model.step_mechanical(&mut self.s, magnetic);
+        self.y = o.displacement_m as f64;
+        self.i = o.current_a as f64;
+        self.h = o.field_a_per_m as f64;
+        self.m = o.magnetization_a_per_m as f64;
+        self.k += 1;
+    }
+
+    /// Steps to the last sample; the run's channels, or its fault.
+    fn run_to_end(mut self) -> Result<Simulation> {
+        while self.running() {
+            self.step();
+        }
+        if let Some(e) = self.failed {
+            return Err(e);
+        }
+        if let Some((memo, key, run)) = self.to_keep {
+            memo.keep(key, run);
+        }
+        let mut out = self.out;
+        // Sample 0 is the rest state's: its magnetization is the first step's (the field is the bias).
+        if let Some(first) = out.magnetization_a_per_m.get(1).copied() {
+            out.magnetization_a_per_m[0] = first;
+        }
+        Ok(out)
+    }
+}
+
+/// What decides a run's magnetic stages on one file ([`MagneticMemo`]'s key): the spec, the
+/// parameters at the file's rate with the mechanical stages' (magnetostriction, rod length,
+/// mechanics, thermal drift, sensor delay) set aside, the initial excursion and the drive. Debug
+/// text prints every float exactly (shortest round trip, −0 kept).
+fn magnetic_key(spec: ModelSpec, p: &ActuatorParams, excursion: f64, drive: Drive) -> String {
+    let reference = ActuatorParams::TERFENOL_DEMO;
+    let magnetic = ActuatorParams {
+        magnetostriction: reference.magnetostriction,
+        rod_length_m: reference.rod_length_m,
+        mech: reference.mech,
+        thermal: reference.thermal,
+        delay_samples: reference.delay_samples,
+        ..*p
+    };
+    format!("{spec:?} {magnetic:?} {excursion:?} {drive:?}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::excitation::Excitation;
+    use crate::plant::Plant;
+    use crate::recording::Recording;
+
+    fn bits(sim: &Simulation) -> Vec<u64> {
+        [
+            &sim.displacement_um,
+            &sim.current_a,
+            &sim.field_a_per_m,
+            &sim.magnetization_a_per_m,
+            &sim.temperature_rise_c,
+        ]
+        .iter()
+        .flat_map(|v| v.iter().map(|x| x.to_bits()))
+        .collect()
+    }
+
+    /// Files run in pairs give the runs one at a time gives, bit for bit: files of different
+    /// lengths (the longer finishes alone), an odd one out, and a file whose magnetic stages go
+    /// to the memo and then come from it (that pair then steps one after the other).
+    #[test]
+    fn runs_in_pairs_are_the_runs_one_at_a_time() {
+        let spec = ModelSpec::parse("amp+eddy+ja+aftereffect+mech+thermal+delay").unwrap();
+        let truth = ActuatorParams::TERFENOL_DEMO;
+        let plant = Plant::new(spec, truth);
+        let record = |name: &str, freq_hz: f64, seconds: f64| {
+            plant.record(name, &Excitation::Sine { freq_hz, amplitude: 1.0, bias: 0.2 }, seconds, 3).unwrap()
+        };
+        let recs = [record("a", 150.0, 0.05), record("b", 70.0, 0.08), record("c", 300.0, 0.03)];
+        let mut preps: Vec<Prepared> = recs
+            .iter()
+            .zip([1500.0, -800.0, 0.0])
+            .map(|(r, x)| Prepared::new(spec, r).unwrap().starting(InitialState::Excursion(x)))
+            .collect();
+        let mut p = truth;
+        p.ja.k_a_per_m *= 1.1;
+        let alone = |preps: &[Prepared], all_channels| -> Vec<Vec<u64>> {
+            preps.iter().map(|prep| bits(&run_model(spec, &p, prep, all_channels).unwrap())).collect()
+        };
+        let paired = |preps: &[Prepared], all_channels| -> Vec<Vec<u64>> {
+            run_models(spec, &p, preps, all_channels).unwrap().iter().map(bits).collect()
+        };
+        for all_channels in [false, true] {
+            assert!(
+                paired(&preps, all_channels) == alone(&preps, all_channels),
+                "all_channels = {all_channels}"
+            );
+        }
+        // Another order pairs other files.
+        preps.reverse();
+        assert!(paired(&preps, false) == alone(&preps, false), "reversed");
+        // File b through the memo: kept by the first paired run, taken from it by the second.
+        let expected = alone(&preps, false);
+        let memo = MagneticMemo::default();
+        preps[1].memo = Some(&memo);
+        for pass in ["kept", "taken from the memo"] {
+            assert!(paired(&preps, false) == expected, "{pass}");
+            assert_eq!(memo.kept(), 1);
+        }
+    }
+
+    /// A fault in a file ends its run only: the error is that file's, the first in file order
+    /// when several fail, and it names the file and the sample.
+    #[test]
+    fn a_fault_in_one_file_of_a_pair_is_that_files() {
+        let spec = ModelSpec::parse("ja+mech").unwrap();
+        let plant = Plant::new(spec, ActuatorParams::TERFENOL_DEMO);
+        let good = plant
+            .record("good.csv", &Excitation::Sine { freq_hz: 100.0, amplitude: 1.0, bias: 0.2 }, 0.02, 1)
+            .unwrap();
+        let broken = |name: &str, at: usize| -> Recording {
+            let mut r = good.clone();
+            r.name = name.into();
+            r.current_a.as_mut().unwrap()[at] = 1e9;
+            r
+        };
+        let (late, early) = (broken("late.csv", 150), broken("early.csv", 20));
+        let run = |recs: &[&Recording]| {
+            let preps: Vec<Prepared> = recs.iter().map(|r| Prepared::new(spec, r).unwrap()).collect();
+            run_models(spec, &ActuatorParams::TERFENOL_DEMO, &preps, false).map(|s| s.len())
+        };
+        assert_eq!(run(&[&good, &good, &good]).unwrap(), 3);
+        for (recs, file, sample) in [
+            (vec![&good, &late], "late.csv", 149),
+            (vec![&late, &good], "late.csv", 149),
+            (vec![&late, &early], "late.csv", 149),
+            (vec![&good, &good, &early], "early.csv", 19),
+        ] {
+            let e = format!("{:#}", run(&recs).unwrap_err());
+            assert!(e.contains(file) && e.contains(&format!("sample {sample}")), "{e}");
+        }
+    }
+}
