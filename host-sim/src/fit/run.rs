@@ -2,9 +2,10 @@
 //!
 //! A run is a chain of dependent steps: each sample's J–A integration waits on the sample
 //! before, so one run leaves most of a core's issue slots idle (the integration is bound by
-//! latency, not throughput). [`run_models`] steps two files' runs in turn, sample by sample, on
-//! one thread: the core overlaps the two independent chains. Each run's arithmetic is unchanged,
-//! so the results are the same bits as [`run_model`]'s.
+//! latency, not throughput). Where files outnumber threads, [`run_models`] steps two files' runs
+//! in turn on one thread, sample by sample and, within a sample, J–A sub-step by sub-step
+//! ([`Actuator::step_magnetic_beside`]): the core overlaps the two independent chains. Each
+//! run's arithmetic is unchanged, so the results are the same bits as [`run_model`]'s.
 
 use std::borrow::Cow;
 use std::sync::Arc;
@@ -28,20 +29,23 @@ pub fn run_model(
     Run::start(spec, params, prep, all_channels)?.run_to_end()
 }
 
-/// [`run_model`] on each of `files`: the runs of two files interleaved on one thread, the pairs
-/// in parallel. The first error in file order, if any.
+/// [`run_model`] on each of `files`, in parallel; the files beyond one per thread in pairs, the
+/// two runs of a pair interleaved on one thread (consecutive files, in the order given). The
+/// first error in file order, if any.
 pub fn run_models(
     spec: ModelSpec,
     params: &ActuatorParams,
     files: &[Prepared],
     all_channels: bool,
 ) -> Result<Vec<Simulation>> {
-    let runs: Vec<Result<Simulation>> = files
+    // A pair takes ≈ 1.3–1.6× one run's time on one thread: worth it only where the files
+    // outnumber the threads (with no more files than threads, each gets a core of its own).
+    let pairs = (files.len() / 2).min(files.len().saturating_sub(rayon::current_num_threads()));
+    let (paired, alone) = files.split_at(2 * pairs);
+    let runs: Vec<Result<Simulation>> = paired
         .par_chunks(2)
-        .flat_map_iter(|pair| match pair {
-            [a, b] => Vec::from(run_pair(spec, params, a, b, all_channels)),
-            one => one.iter().map(|prep| run_model(spec, params, prep, all_channels)).collect(),
-        })
+        .flat_map_iter(|pair| Vec::from(run_pair(spec, params, &pair[0], &pair[1], all_channels)))
+        .chain(alone.par_iter().map(|prep| run_model(spec, params, prep, all_channels)))
         .collect();
     runs.into_iter().collect()
 }
@@ -317,18 +321,25 @@ mod tests {
         .collect()
     }
 
+    /// `f` with one rayon thread: every file beyond the first is then paired.
+    fn on_one_thread<T: Send>(f: impl FnOnce() -> T + Send) -> T {
+        rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap().install(f)
+    }
+
+    fn sine(plant: &Plant, name: &str, freq_hz: f64, seconds: f64) -> Recording {
+        plant.record(name, &Excitation::Sine { freq_hz, amplitude: 1.0, bias: 0.2 }, seconds, 3).unwrap()
+    }
+
     /// Files run in pairs give the runs one at a time gives, bit for bit: files of different
     /// lengths (the longer finishes alone), an odd one out, and a file whose magnetic stages go
-    /// to the memo and then come from it (that pair then steps one after the other).
+    /// to the memo and then come from it (its pair then alternates whole samples).
     #[test]
     fn runs_in_pairs_are_the_runs_one_at_a_time() {
         let spec = ModelSpec::parse("amp+eddy+ja+aftereffect+mech+thermal+delay").unwrap();
         let truth = ActuatorParams::TERFENOL_DEMO;
         let plant = Plant::new(spec, truth);
-        let record = |name: &str, freq_hz: f64, seconds: f64| {
-            plant.record(name, &Excitation::Sine { freq_hz, amplitude: 1.0, bias: 0.2 }, seconds, 3).unwrap()
-        };
-        let recs = [record("a", 150.0, 0.05), record("b", 70.0, 0.08), record("c", 300.0, 0.03)];
+        let recs =
+            [sine(&plant, "a", 150.0, 0.05), sine(&plant, "b", 70.0, 0.08), sine(&plant, "c", 300.0, 0.03)];
         let mut preps: Vec<Prepared> = recs
             .iter()
             .zip([1500.0, -800.0, 0.0])
@@ -340,7 +351,7 @@ mod tests {
             preps.iter().map(|prep| bits(&run_model(spec, &p, prep, all_channels).unwrap())).collect()
         };
         let paired = |preps: &[Prepared], all_channels| -> Vec<Vec<u64>> {
-            run_models(spec, &p, preps, all_channels).unwrap().iter().map(bits).collect()
+            on_one_thread(|| run_models(spec, &p, preps, all_channels).unwrap().iter().map(bits).collect())
         };
         for all_channels in [false, true] {
             assert!(
@@ -361,15 +372,63 @@ mod tests {
         }
     }
 
+    /// `Run`'s bookkeeping against model-core stepped by hand, sample by sample (simultaneous
+    /// sampling: the output at t_k, then the step to t_{k+1} with the mean of the drive's two
+    /// ends), alone and paired.
+    #[test]
+    fn a_run_is_model_core_stepped_sample_by_sample() {
+        let spec = ModelSpec::parse("eddy+ja+aftereffect+mech+thermal+delay").unwrap();
+        let plant = Plant::new(spec, ActuatorParams::TERFENOL_DEMO);
+        let recs = [sine(&plant, "a", 150.0, 0.05), sine(&plant, "b", 70.0, 0.03)];
+        let excursion = 1500.0;
+        let preps: Vec<Prepared> = recs
+            .iter()
+            .map(|r| Prepared::new(spec, r).unwrap().starting(InitialState::Excursion(excursion)))
+            .collect();
+        let mut p = ActuatorParams::TERFENOL_DEMO;
+        p.ja.alpha *= 0.9;
+        let by_hand = |prep: &Prepared| -> (Vec<u64>, Vec<u64>) {
+            let model = Actuator::new(spec, &at_rate_of(spec, &p, prep).unwrap()).unwrap();
+            let input = prep.rec.current_a.as_deref().unwrap();
+            let n = input.len();
+            let mut s = model.rest_state_after(excursion as f32);
+            let (mut y, mut i) = (s.mech.displacement_m as f64, input[0]);
+            let (mut ys, mut is) = (Vec::new(), Vec::new());
+            for k in 0..n {
+                ys.push((y * 1e6).to_bits());
+                is.push(i.to_bits());
+                let u = (0.5 * (input[k] + input[(k + 1).min(n - 1)])) as f32;
+                let magnetic = model.step_magnetic(&mut s, u, |h| h).unwrap();
+                let o = model.step_mechanical(&mut s, magnetic);
+                (y, i) = (o.displacement_m as f64, o.current_a as f64);
+            }
+            (ys, is)
+        };
+        let channels = |sim: &Simulation| -> (Vec<u64>, Vec<u64>) {
+            (
+                sim.displacement_um.iter().map(|x| x.to_bits()).collect(),
+                sim.current_a.iter().map(|x| x.to_bits()).collect(),
+            )
+        };
+        let paired = on_one_thread(|| run_models(spec, &p, &preps, false).unwrap());
+        for (prep, sim) in preps.iter().zip(&paired) {
+            let expected = by_hand(prep);
+            assert!(
+                channels(&run_model(spec, &p, prep, false).unwrap()) == expected,
+                "{} alone",
+                prep.rec.name
+            );
+            assert!(channels(sim) == expected, "{} paired", prep.rec.name);
+        }
+    }
+
     /// A fault in a file ends its run only: the error is that file's, the first in file order
     /// when several fail, and it names the file and the sample.
     #[test]
     fn a_fault_in_one_file_of_a_pair_is_that_files() {
         let spec = ModelSpec::parse("ja+mech").unwrap();
         let plant = Plant::new(spec, ActuatorParams::TERFENOL_DEMO);
-        let good = plant
-            .record("good.csv", &Excitation::Sine { freq_hz: 100.0, amplitude: 1.0, bias: 0.2 }, 0.02, 1)
-            .unwrap();
+        let good = sine(&plant, "good.csv", 100.0, 0.02);
         let broken = |name: &str, at: usize| -> Recording {
             let mut r = good.clone();
             r.name = name.into();
@@ -379,7 +438,7 @@ mod tests {
         let (late, early) = (broken("late.csv", 150), broken("early.csv", 20));
         let run = |recs: &[&Recording]| {
             let preps: Vec<Prepared> = recs.iter().map(|r| Prepared::new(spec, r).unwrap()).collect();
-            run_models(spec, &ActuatorParams::TERFENOL_DEMO, &preps, false).map(|s| s.len())
+            on_one_thread(|| run_models(spec, &ActuatorParams::TERFENOL_DEMO, &preps, false).map(|s| s.len()))
         };
         assert_eq!(run(&[&good, &good, &good]).unwrap(), 3);
         for (recs, file, sample) in [
