@@ -33,7 +33,6 @@
 //!    structured after the final structure is reported with its size.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 
 use anyhow::Result;
 use model_core::effects::{Candidacy, MagnetizationLaw, Signature, Stage};
@@ -44,6 +43,8 @@ use serde::Serialize;
 use crate::fit::{self, evaluate, simulate, FitOptions, FitResult, Simulation};
 
 mod alternatives;
+mod judge;
+mod searches;
 use crate::error::InRecording;
 use crate::progress;
 use crate::recording::Recording;
@@ -895,8 +896,141 @@ pub fn diagnose(
     val_files: &[Recording],
     opts: FitOptions,
 ) -> Result<Diagnosis> {
-    // Validation files too: each is scored after its first drive cycle (the burn-in), and votes
-    // in the sign test as a whole file.
+    check_files(fit_files, val_files)?;
+    let cands = candidates_for(spec, fit_files);
+    let searches::Searches { base, refined, fresh } = searches::search(spec, init, fit_files, &cands, opts)?;
+    let mut time_limited = base.time_limited;
+    let held_out = !val_files.is_empty();
+    let score_files = if held_out { val_files } else { fit_files };
+    // Per-file scores of the baseline, for the refits to be compared with. Scores leave out each
+    // file's burn-in (the unknown initial magnetic state).
+    let fit_skip: Vec<usize> = fit_files.iter().map(burn_in).collect();
+    let score_skip: Vec<usize> = score_files.iter().map(burn_in).collect();
+    let base_fit_disp = displacement_scores(spec, &base.params, fit_files, &fit_skip)?;
+    let base_score_disp = if held_out {
+        displacement_scores(spec, &base.params, score_files, &score_skip)?
+    } else {
+        base_fit_disp.clone()
+    };
+    let before = mean(base_score_disp.iter().map(|s| s.nrmse));
+
+    // Evidence on the fit files' residuals.
+    let evidence_phase =
+        progress::Phase::start(opts.progress, "diagnose: residual evidence and trends across files", 0);
+    // With a search coil on every file, the stages before the strain are judged on its flux.
+    let measured = Measured::in_every(fit_files, score_files);
+    let base_sims: Vec<Simulation> =
+        fit_files.iter().map(|rec| simulate(spec, &base.params, rec)).collect::<Result<_>>()?;
+    let signals_on = |flux: bool| -> Vec<Signals> {
+        fit_files
+            .iter()
+            .zip(&base.fit.files)
+            .zip(&base_sims)
+            .map(|((rec, sc), sim)| signals(rec, sim, sc.offset_um, flux).skip(burn_in(rec)))
+            .collect()
+    };
+    let sigs = signals_on(false);
+    let flux_sigs = if measured.flux { signals_on(true) } else { Vec::new() };
+    let mut findings = Measured::partly(fit_files, score_files);
+    findings.extend(baseline_findings(spec, &base, &sigs));
+    findings.extend(file_trends(spec, &base.params, fit_files, val_files)?);
+    evidence_phase.finish();
+
+    let results = score_refits(spec, &cands, fresh, refined, score_files, opts.progress);
+    let (base_fit_flux, base_score_flux) = if measured.flux {
+        (
+            channel_scores(spec, &base.params, fit_files, &fit_skip, Channel::FluxDensity)?,
+            channel_scores(spec, &base.params, score_files, &score_skip, Channel::FluxDensity)?,
+        )
+    } else {
+        (Vec::new(), Vec::new())
+    };
+    let baseline = judge::Baseline {
+        spec,
+        fit: &base,
+        fit_files,
+        score_files,
+        fit_skip: &fit_skip,
+        score_skip: &score_skip,
+        held_out,
+        measured,
+        // With `current_A` and `command_V` in every file, amplifier dynamics is judged on the
+        // current channel: command → current by a static gain (the baseline) against the refit's
+        // amplifier.
+        static_amp: measured.current.then(|| StaticGain::fit(fit_files, &fit_skip)),
+        disp: (base_fit_disp, base_score_disp),
+        flux: (base_fit_flux, base_score_flux),
+        sims: &base_sims,
+        sigs: &sigs,
+        flux_sigs: &flux_sigs,
+    };
+    let mut candidates = Vec::new();
+    let mut skipped = Vec::new();
+    let mut cut_short = Vec::new();
+    let (mut failed_refits, mut errored_refits, mut unpinned) = (Vec::new(), Vec::new(), Vec::new());
+    for (e, r) in results {
+        let Some(r) = r else {
+            skipped.push(e);
+            continue;
+        };
+        if let Ok(f) = &r {
+            time_limited |= f.time_limited;
+            if f.time_limited {
+                cut_short.push(e);
+            }
+        }
+        let judged = baseline.judge(e, r)?;
+        failed_refits.extend(judged.failed_refit);
+        errored_refits.extend(judged.errored_refit);
+        unpinned.extend(judged.unpinned);
+        candidates.push(judged.candidate);
+    }
+    findings.extend(unpinned);
+    if !failed_refits.is_empty() {
+        findings.push(format!(
+            "refits that ended worse on the fit files than the structure they extend (rms of the fit cost): {}: the \
+             search failed there, so these candidates are not judged fairly",
+            failed_refits.join(", ")
+        ));
+    }
+    if !errored_refits.is_empty() {
+        findings.push(format!(
+            "refits that could not be run: {}: these candidates are not judged (their rows show the baseline's \
+             error before and after)",
+            errored_refits.join(", ")
+        ));
+    }
+    let (verdict, undistinguished) = decide(&mut candidates, &mut findings);
+    findings.extend(what_is_left(&baseline, &candidates, verdict, before)?);
+    if !skipped.is_empty() {
+        time_limited = true;
+        findings.push(format!(
+            "the time limit was reached: `{}` not refitted; the verdict weighs only the candidates refitted in time",
+            skipped.iter().map(|e| e.name()).collect::<Vec<_>>().join("`, `")
+        ));
+    }
+    Ok(Diagnosis {
+        time_limited,
+        model: spec.to_string(),
+        nrmse_fit: base.fit.mean_nrmse(),
+        nrmse_val: held_out.then_some(before),
+        candidates,
+        verdict,
+        undistinguished,
+        not_refitted: skipped,
+        cut_short,
+        findings,
+        baseline: Some(base),
+        ja_variants: None,
+        laws: None,
+    })
+}
+
+/// Files a diagnosis can judge: at least one drive cycle (each file is scored after its first,
+/// the burn-in) and [`MIN_SAMPLES`] samples.
+fn check_files(fit_files: &[Recording], val_files: &[Recording]) -> Result<()> {
+    // Validation files too: each is scored after its burn-in, and votes in the sign test as a
+    // whole file.
     for rec in fit_files.iter().chain(val_files) {
         let drive = rec.current_a.as_deref().or(rec.command_v.as_deref()).unwrap_or_default();
         let n = reversals(drive);
@@ -923,115 +1057,13 @@ pub fn diagnose(
             ));
         }
     }
-    // Each candidate is fitted afresh from the engineer's start values (swarm and all, at
-    // [`FRESH_EFFORT`]), and refined from the baseline's optimum with the effect's parameters at
-    // their start values: the lower fit cost is its refit. Either alone can lose: a baseline that
-    // bent its lags to mimic a missing delay starts that refit in a basin of its own, and a fresh
-    // search can miss the basin the baseline found. The fresh fits need nothing from the
-    // baseline and run beside it and the refinements, on the cores their serial stretches (one
-    // seed's simplex) leave idle; each fit's result is the same whichever finishes first. With a
-    // time limit the baseline has the cores to itself first: a limit that ends it leaves no
-    // refit, and the baseline is then the result.
-    let cands = candidates_for(spec, fit_files);
-    let refit_opts = FitOptions { progress: false, ..opts };
-    let fresh_opts = FitOptions { effort: FRESH_EFFORT * refit_opts.effort, ..refit_opts };
-    let fresh_beside_baseline = opts.deadline.is_none();
-    // Past the deadline a candidate is not refitted at all (and said so).
-    let late = || fit::time_left(opts.deadline).is_some_and(|t| t.is_zero());
-    progress::phase(
-        opts.progress,
-        &if fresh_beside_baseline {
-            format!(
-                "diagnose: fitting the given model `{spec}`; beside it, `{spec}` plus each of {} candidate effects \
-                 from the start values",
-                cands.len()
-            )
-        } else {
-            format!("diagnose: fitting the given model `{spec}`")
-        },
-    );
-    type Search = Option<Result<FitResult>>;
-    // The candidates' searches finished (fresh and refined), and the phase that counts them from
-    // the baseline's end (before it, the baseline's own progress is shown).
-    let searches: Mutex<(u64, Option<progress::Phase>)> = Mutex::new((0, None));
-    let searches_lock = || searches.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-    let searched = |r: Search| {
-        let mut g = searches_lock();
-        g.0 += 1;
-        if let Some(phase) = &g.1 {
-            phase.step("");
-        }
-        r
-    };
-    let fresh_searches = || -> Vec<Search> {
-        cands
-            .par_iter()
-            .map(|&e| searched((!late()).then(|| fit::fit(spec.with(e), init, fit_files, fresh_opts))))
-            .collect()
-    };
-    let (base_and_refined, fresh_beside) = rayon::join(
-        || -> Result<(FitResult, Vec<Search>, Vec<Search>)> {
-            let base = fit::fit(spec, init, fit_files, opts)?;
-            {
-                let mut g = searches_lock();
-                let label = format!(
-                    "diagnose: `{spec}` plus each candidate effect, searched afresh and refined from the fit of \
-                     `{spec}`"
-                );
-                let phase = progress::Phase::start(opts.progress, &label, 2 * cands.len() as u64);
-                (0..g.0).for_each(|_| phase.step(""));
-                g.1 = Some(phase);
-            }
-            let refine = |&e: &Effect| {
-                searched((!late()).then(|| fit::refine(spec.with(e), &base.params, fit_files, refit_opts)))
-            };
-            let (refined, fresh_after) = rayon::join(
-                || cands.par_iter().map(refine).collect(),
-                || if fresh_beside_baseline { Vec::new() } else { fresh_searches() },
-            );
-            Ok((base, refined, fresh_after))
-        },
-        || if fresh_beside_baseline { fresh_searches() } else { Vec::new() },
-    );
-    if let Some(phase) = searches_lock().1.take() {
-        phase.finish();
-    }
-    let (base, warm_fits, fresh_after) = base_and_refined?;
-    let fresh_fits = if fresh_beside_baseline { fresh_beside } else { fresh_after };
-    let mut time_limited = base.time_limited;
-    let score_files = if val_files.is_empty() { fit_files } else { val_files };
-    // Per-file scores of the baseline, for the refits to be compared with. Scores leave out each
-    // file's burn-in (the unknown initial magnetic state).
-    let fit_skip: Vec<usize> = fit_files.iter().map(burn_in).collect();
-    let score_skip: Vec<usize> = score_files.iter().map(burn_in).collect();
-    let base_fit_disp = displacement_scores(spec, &base.params, fit_files, &fit_skip)?;
-    let base_score_disp = if val_files.is_empty() {
-        base_fit_disp.clone()
-    } else {
-        displacement_scores(spec, &base.params, score_files, &score_skip)?
-    };
-    let before = mean(base_score_disp.iter().map(|s| s.nrmse));
-    let nrmse_val = if val_files.is_empty() { None } else { Some(before) };
+    Ok(())
+}
 
-    // Evidence on the fit files' residuals.
-    let evidence_phase =
-        progress::Phase::start(opts.progress, "diagnose: residual evidence and trends across files", 0);
-    // With a search coil on every file, the stages before the strain are judged on its flux.
-    let measured = Measured::in_every(fit_files, score_files);
-    let flux_measured = measured.flux;
-    let base_sims: Vec<Simulation> =
-        fit_files.iter().map(|rec| simulate(spec, &base.params, rec)).collect::<Result<_>>()?;
-    let signals_on = |flux: bool| -> Vec<Signals> {
-        fit_files
-            .iter()
-            .zip(&base.fit.files)
-            .zip(&base_sims)
-            .map(|((rec, sc), sim)| signals(rec, sim, sc.offset_um, flux).skip(burn_in(rec)))
-            .collect()
-    };
-    let sigs = signals_on(false);
-    let flux_sigs = if flux_measured { signals_on(true) } else { Vec::new() };
-    let mut findings = Measured::partly(fit_files, score_files);
+/// What the baseline's fit says by itself: whether its residual is white, and the parameters it
+/// bent to the end of their range.
+fn baseline_findings(spec: ModelSpec, base: &FitResult, sigs: &[Signals]) -> Vec<String> {
+    let mut findings = Vec::new();
     let white = whiteness(&sigs.iter().map(|s| s.residual.as_slice()).collect::<Vec<_>>());
     let (not_white, white_limit) = structured_residual(white, sigs.len());
     findings.push(if not_white {
@@ -1069,10 +1101,20 @@ pub fn diagnose(
             at_edge.join("; ")
         ));
     }
+    findings
+}
+
+/// The baseline's error across all files against excitation frequency, drive amplitude and
+/// record length: a finding where it follows one of them.
+fn file_trends(
+    spec: ModelSpec,
+    params: &model_core::ActuatorParams,
+    fit_files: &[Recording],
+    val_files: &[Recording],
+) -> Result<Vec<String>> {
     let mut per_file: Vec<(f64, f64, f64, f64)> = Vec::new(); // freq, amplitude, duration, nrmse
     let all_files: Vec<&Recording> = fit_files.iter().chain(val_files).collect();
-    let all_scores =
-        evaluate(spec, &base.params, &all_files.iter().map(|r| (*r).clone()).collect::<Vec<_>>())?;
+    let all_scores = evaluate(spec, params, &all_files.iter().map(|r| (*r).clone()).collect::<Vec<_>>())?;
     for (rec, sc) in all_files.iter().zip(&all_scores.files) {
         let (f, a) = drive_stats(rec);
         per_file.push((f, a, rec.duration_s(), sc.nrmse));
@@ -1107,40 +1149,37 @@ pub fn diagnose(
     .flatten()
     .collect();
     let names: Vec<&str> = all_files.iter().map(|r| r.name.as_str()).collect();
-    findings.extend(trend_findings(&trends, &per_file, &names));
-    evidence_phase.finish();
+    Ok(trend_findings(&trends, &per_file, &names))
+}
 
-    // Each candidate's refit, scored on the scored files.
+/// Per candidate, its refit (the better of its two searches, [`searches::keep_the_better`]), or
+/// `None` where the time limit left it out; each scored on the scored files for the progress
+/// line.
+fn score_refits(
+    spec: ModelSpec,
+    cands: &[Effect],
+    fresh: Vec<searches::Search>,
+    refined: Vec<searches::Search>,
+    score_files: &[Recording],
+    show_progress: bool,
+) -> Vec<(Effect, Option<Result<FitResult>>)> {
     let refitting = progress::Phase::start(
-        opts.progress,
+        show_progress,
         &format!("diagnose: scoring the refits of `{spec}` plus each of {} candidate effects", cands.len()),
         cands.len() as u64,
     );
     let done = AtomicUsize::new(0);
-    // Per candidate: its refit and validation NRMSE, or None when the time limit left it out.
-    type Refit = Option<Result<(FitResult, f64)>>;
-    let results: Vec<(Effect, Refit)> = cands
+    let results = cands
         .par_iter()
-        .zip(fresh_fits)
-        .zip(warm_fits)
-        .map(|((&e, fresh), warm)| {
-            let (Some(fresh), Some(warm)) = (fresh, warm) else { return (e, None) };
-            let s2 = spec.with(e);
-            let r = fresh
-                .and_then(|fresh| {
-                    let warm = warm?;
-                    // The kept one reports the search as a whole: both runs' evaluations, and a
-                    // time limit that cut either short.
-                    let (evaluations, time_limited) =
-                        (warm.evaluations + fresh.evaluations, warm.time_limited || fresh.time_limited);
-                    let kept = if warm.fit.cost() < fresh.fit.cost() { warm } else { fresh };
-                    Ok(FitResult { evaluations, time_limited, ..kept })
-                })
-                .and_then(|f| Ok((evaluate(s2, &f.params, score_files)?.mean_nrmse(), f)))
-                .map(|(after, f)| (f, after));
+        .zip(fresh)
+        .zip(refined)
+        .map(|((&e, fresh), refined)| {
+            let (Some(fresh), Some(refined)) = (fresh, refined) else { return (e, None) };
+            let r = searches::keep_the_better(fresh, refined)
+                .and_then(|f| Ok((evaluate(spec.with(e), &f.params, score_files)?.mean_nrmse(), f)));
             let k = done.fetch_add(1, Ordering::Relaxed) + 1;
             let note = match &r {
-                Ok((_, after)) => {
+                Ok((after, _)) => {
                     format!(
                         "diagnose: refit {k}/{} done: `+{}`, mean NRMSE of the scored files and channels {:.2} % \
                          (whole files; the candidates' figures leave out each file's burn-in)",
@@ -1152,194 +1191,17 @@ pub fn diagnose(
                 Err(_) => String::new(),
             };
             refitting.step(&note);
-            (e, Some(r))
+            (e, Some(r.map(|(_, f)| f)))
         })
         .collect();
     refitting.finish();
-    // With `current_A` and `command_V` in every file, amplifier dynamics is judged on the current
-    // channel: command → current by a static gain (the baseline) against the refit's amplifier.
-    let static_amp = measured.current.then(|| StaticGain::fit(fit_files, &fit_skip));
-    let (base_fit_flux, base_score_flux) = if flux_measured {
-        (
-            channel_scores(spec, &base.params, fit_files, &fit_skip, Channel::FluxDensity)?,
-            channel_scores(spec, &base.params, score_files, &score_skip, Channel::FluxDensity)?,
-        )
-    } else {
-        (Vec::new(), Vec::new())
-    };
-    let mut candidates = Vec::new();
-    let mut skipped = Vec::new();
-    let mut cut_short = Vec::new();
-    let mut failed_refits = Vec::new();
-    let mut errored_refits = Vec::new();
-    let mut unpinned = Vec::new();
-    for (e, r) in results {
-        let Some(r) = r else {
-            skipped.push(e);
-            continue;
-        };
-        if let Ok((f, _)) = &r {
-            time_limited |= f.time_limited;
-            if f.time_limited {
-                cut_short.push(e);
-            }
-        }
-        let s2 = spec.with(e);
-        let channel = Channel::judging(e, measured);
-        let (base_fit_s, base_score_s, r2) = match (&static_amp, channel) {
-            (Some(amp), Channel::Current) => (
-                amp.scores(fit_files, &fit_skip),
-                amp.scores(score_files, &score_skip),
-                amp.lag_evidence(fit_files, &fit_skip),
-            ),
-            (_, Channel::FluxDensity) => {
-                (base_fit_flux.clone(), base_score_flux.clone(), evidence(e, &flux_sigs))
-            }
-            (_, Channel::Temperature) => (
-                channel_scores(spec, &base.params, fit_files, &fit_skip, channel)?,
-                channel_scores(spec, &base.params, score_files, &score_skip, channel)?,
-                heating_evidence(fit_files, &base_sims, &fit_skip),
-            ),
-            _ => (base_fit_disp.clone(), base_score_disp.clone(), evidence(e, &sigs)),
-        };
-        let n_eff: f64 = base_fit_s.iter().map(|s| effective_samples(&s.residual)).sum();
-        let refit = match r {
-            Ok((f, _)) => Some(f),
-            Err(why) => {
-                errored_refits.push(format!("`{e}` ({why:#})"));
-                None
-            }
-        };
-        // The refit contains the given structure (the effect switched off or negligible), so a
-        // fit cost above the baseline's is a failed search, not evidence against the effect.
-        // Compared only where both costs weigh the same channels (not when `amp` adds the current
-        // or coil heating the temperature).
-        let adds_a_channel = e == Effect::AmplifierDynamics || channel == Channel::Temperature;
-        if let Some(f) = refit.as_ref().filter(|_| !adds_a_channel) {
-            let (b, a) = (base.fit.cost(), f.fit.cost());
-            if a > b * 1.0001 {
-                failed_refits.push(format!("`{e}` ({:.4} % > {:.4} %)", a.sqrt() * 100.0, b.sqrt() * 100.0));
-            }
-        }
-        let cand_scores = |files: &[Recording], skip: &[usize]| -> Result<Vec<Scored>> {
-            let f = refit.as_ref().expect("checked");
-            channel_scores(s2, &f.params, files, skip, channel)
-        };
-        let after_score_s = match &refit {
-            Some(_) => cand_scores(score_files, &score_skip)?,
-            None => base_score_s.clone(),
-        };
-        let before_c = mean(base_score_s.iter().map(|s| s.nrmse));
-        let after_c = mean(after_score_s.iter().map(|s| s.nrmse));
-        let files_improved =
-            base_score_s.iter().zip(&after_score_s).filter(|(b, a)| a.nrmse < b.nrmse).count();
-        // Where the effect shows: the refit's own parameters with the effect switched off (the
-        // given structure) against the refit, file by file, measured against the noise. A law refinement cannot be switched
-        // off that way (the coarser law's parameters were not fitted), nor can the amplifier on
-        // the current (judged against a static gain): there every file votes.
-        let law_refinement = e.info().candidacy == Candidacy::RefinesLaw;
-        let showing: Vec<bool> = match &refit {
-            Some(f) if !law_refinement && channel != Channel::Current => {
-                let off = channel_scores(spec, &f.params, score_files, &score_skip, channel)?;
-                off.iter().zip(&after_score_s).map(|(o, a)| effect_shows(&o.residual, &a.residual)).collect()
-            }
-            _ => vec![true; after_score_s.len()],
-        };
-        let files_showing = showing.iter().filter(|&&v| v).count();
-        let files_improved_showing = base_score_s
-            .iter()
-            .zip(&after_score_s)
-            .zip(&showing)
-            .filter(|((b, a), &shows)| shows && a.nrmse < b.nrmse)
-            .count();
-        if let Some(f) = refit.as_ref().filter(|_| !val_files.is_empty() && channel == Channel::Displacement)
-        {
-            let fit_nrmse = (base.fit.mean_nrmse(), f.fit.mean_nrmse());
-            let scored: Vec<(f64, f64)> =
-                base_score_s.iter().zip(&after_score_s).map(|(b, a)| (b.nrmse, a.nrmse)).collect();
-            if not_pinned_by_the_fit_files(fit_nrmse, &scored) {
-                unpinned.push(format!(
-                    "`{e}` fits the fit files better ({:.2} % → {:.2} %) but every validation file worse ({:.2} % → \
-                     {:.2} %): what it adds is fitted to other model error, not determined by these fit files. It \
-                     shows in {}: without such a fit file, add one; with one, its form here is not the rig's",
-                    fit_nrmse.0 * 100.0,
-                    fit_nrmse.1 * 100.0,
-                    mean(scored.iter().map(|v| v.0)) * 100.0,
-                    mean(scored.iter().map(|v| v.1)) * 100.0,
-                    where_it_shows(e)
-                ));
-            }
-        }
-        let added = refit
-            .as_ref()
-            .map_or(0, |f| {
-                (f.free.len() + estimated_states(s2, score_files.len()))
-                    .saturating_sub(base.free.len() + estimated_states(spec, score_files.len()))
-            })
-            .max(1);
-        // Judged on the scored files: with validation files a gain there is one the added
-        // parameters could not buy by fitting (the fit files reward any flexibility that absorbs
-        // model-form error, and punish a refit that stops doing so).
-        let n_eff_files: Vec<f64> = base_score_s.iter().map(|s| effective_samples(&s.residual)).collect();
-        let n_eff_scored: f64 = n_eff_files.iter().sum();
-        let delta_bic = information_gain(&base_score_s, &after_score_s, &n_eff_files)
-            - added as f64 * n_eff_scored.max(2.0).ln();
-        let cut = error_cut(before_c, after_c);
-        let evidence = format!(
-            "{} explains {:.0} % of the residual variance ({}); adding it and \
-             refitting takes the {} {channel} NRMSE from {:.2} % to {:.2} % ({}), lower on {files_improved} of {} \
-             files ({files_improved_showing} of the {files_showing} it shows in); ΔBIC {:+.1}",
-            match channel {
-                Channel::Current => "the amplifier lag −di/dt of command → current",
-                Channel::FluxDensity => flux_signature_words(e.info().signature),
-                Channel::Temperature => "the accumulated coil heating ∫i² dt of the temperature",
-                Channel::Displacement => signature_words(e.info().signature),
-            },
-            r2 * 100.0,
-            significance_words(n_eff),
-            if val_files.is_empty() { "fit" } else { "validation" },
-            before_c * 100.0,
-            after_c * 100.0,
-            cut_words(cut),
-            after_score_s.len(),
-            delta_bic,
-            channel = channel.name(),
-        );
-        let score = (0.5 * r2 + 0.5 * (1.0 - after_c / before_c).max(0.0)).clamp(0.0, 1.0);
-        candidates.push(Candidate {
-            effect: e,
-            channel: channel.name(),
-            score,
-            evidence,
-            nrmse_before: before_c,
-            nrmse_after: after_c,
-            evidence_r2: r2,
-            files_improved,
-            files_scored: after_score_s.len(),
-            files_showing,
-            files_improved_showing,
-            held_out: !val_files.is_empty(),
-            delta_bic,
-            n_eff,
-            per_file_after: after_score_s.iter().map(|s| s.nrmse).collect(),
-            refit,
-        });
-    }
-    findings.extend(unpinned);
-    if !failed_refits.is_empty() {
-        findings.push(format!(
-            "refits that ended worse on the fit files than the structure they extend (rms of the fit cost): {}: the \
-             search failed there, so these candidates are not judged fairly",
-            failed_refits.join(", ")
-        ));
-    }
-    if !errored_refits.is_empty() {
-        findings.push(format!(
-            "refits that could not be run: {}: these candidates are not judged (their rows show the baseline's \
-             error before and after)",
-            errored_refits.join(", ")
-        ));
-    }
+    results
+}
+
+/// The verdict, and the passing candidates the data do not separate from it: `candidates`
+/// ordered most likely first (passing first, then by cut and ΔBIC; the verdict chosen among the
+/// undistinguished by the data, never by the list order), with what decided it in `findings`.
+fn decide(candidates: &mut Vec<Candidate>, findings: &mut Vec<String>) -> (Option<Effect>, Vec<Effect>) {
     // Candidates that pass every test first, then by the size of their cut.
     candidates.sort_by(|a, b| {
         b.passes()
@@ -1470,8 +1332,19 @@ pub fn diagnose(
             best.evidence_r2 * 100.0
         ));
     }
-    // What the final structure (verdict added, or the given one) still leaves: its size and
-    // whether it is structured.
+    (verdict, undistinguished)
+}
+
+/// What the final structure (the verdict added, or the given one) still leaves, in findings.
+fn what_is_left(
+    baseline: &judge::Baseline,
+    candidates: &[Candidate],
+    verdict: Option<Effect>,
+    before: f64,
+) -> Result<Vec<String>> {
+    let judge::Baseline { spec, fit: base, fit_files, score_files, fit_skip, score_skip, held_out, .. } =
+        *baseline;
+    let mut findings = Vec::new();
     let (final_spec, final_params, final_val) = match candidates.first().filter(|c| Some(c.effect) == verdict)
     {
         Some(c) if c.channel == "displacement" => {
@@ -1480,7 +1353,7 @@ pub fn diagnose(
         // Judged on another channel: what is left is reported on the displacement.
         Some(c) => {
             let p = c.refit.as_ref().map_or(base.params, |f| f.params);
-            let val = displacement_scores(spec.with(c.effect), &p, score_files, &score_skip)?;
+            let val = displacement_scores(spec.with(c.effect), &p, score_files, score_skip)?;
             (spec.with(c.effect), p, mean(val.iter().map(|s| s.nrmse)))
         }
         _ => (spec, base.params, before),
@@ -1500,7 +1373,7 @@ pub fn diagnose(
             ));
         }
     }
-    let final_fit = displacement_scores(final_spec, &final_params, fit_files, &fit_skip)?;
+    let final_fit = displacement_scores(final_spec, &final_params, fit_files, fit_skip)?;
     let white_final = whiteness(&final_fit.iter().map(|s| s.residual.as_slice()).collect::<Vec<_>>());
     let (structured, band) = structured_residual(white_final, final_fit.len());
     if structured {
@@ -1509,7 +1382,7 @@ pub fn diagnose(
                 "{:.2} % unexplained ({} NRMSE), not one of the known effects: the residual is structured ({:.0} % of \
                  autocorrelation lags 1–20 outside the 95 % band, white noise leaves at most {:.0} %) yet no candidate passes",
                 final_val * 100.0,
-                if val_files.is_empty() { "fit-file" } else { "validation" },
+                if held_out { "validation" } else { "fit-file" },
                 white_final * 100.0,
                 band * 100.0
             ),
@@ -1523,28 +1396,7 @@ pub fn diagnose(
             ),
         });
     }
-    if !skipped.is_empty() {
-        time_limited = true;
-        findings.push(format!(
-            "the time limit was reached: `{}` not refitted; the verdict weighs only the candidates refitted in time",
-            skipped.iter().map(|e| e.name()).collect::<Vec<_>>().join("`, `")
-        ));
-    }
-    Ok(Diagnosis {
-        time_limited,
-        model: spec.to_string(),
-        nrmse_fit: base.fit.mean_nrmse(),
-        nrmse_val,
-        candidates,
-        verdict,
-        undistinguished,
-        not_refitted: skipped,
-        cut_short,
-        findings,
-        baseline: Some(base),
-        ja_variants: None,
-        laws: None,
-    })
+    Ok(findings)
 }
 
 /// The files at the two ends of one quantity (frequency, amplitude, length) whose errors differ.

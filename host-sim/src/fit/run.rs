@@ -253,7 +253,8 @@ impl<'a> Run<'a> {
                 return;
             }
         };
-        if let (None, Some((_, _, run))) = (&self.kept, &mut self.to_keep) {
+        // Only a run without kept magnetic stages has them to keep.
+        if let Some((_, _, run)) = &mut self.to_keep {
             run.push(magnetic);
         }
         let o = self.model.step_mechanical(&mut self.s, magnetic);

@@ -1,0 +1,196 @@
+//! One candidate judged against the baseline: its refit scored on the channel nearest where the
+//! effect acts, file by file, with the evidence in words.
+
+use anyhow::Result;
+use model_core::effects::Candidacy;
+use model_core::{Effect, ModelSpec};
+
+use super::{
+    channel_scores, cut_words, error_cut, estimated_states, evidence, flux_signature_words, heating_evidence,
+    information_gain, mean, not_pinned_by_the_fit_files, signature_words, significance_words, where_it_shows,
+    Candidate, Channel, Measured, Scored, Signals, StaticGain,
+};
+use crate::fit::{FitResult, Simulation};
+use crate::recording::Recording;
+use crate::spectral::effective_samples;
+
+/// The given structure's fit and everything a candidate is judged against.
+pub(super) struct Baseline<'a> {
+    pub spec: ModelSpec,
+    pub fit: &'a FitResult,
+    pub fit_files: &'a [Recording],
+    /// The validation files, else the fit files.
+    pub score_files: &'a [Recording],
+    /// Each file's burn-in ([`super::burn_in`]).
+    pub fit_skip: &'a [usize],
+    pub score_skip: &'a [usize],
+    /// The scored files are validation files.
+    pub held_out: bool,
+    pub measured: Measured,
+    /// With `current_A` and `command_V` in every file: command → current by a static gain, the
+    /// amplifier's baseline on the current.
+    pub static_amp: Option<StaticGain>,
+    /// The baseline's displacement and flux scores on the fit and the scored files (flux: empty
+    /// without a search coil).
+    pub disp: (Vec<Scored>, Vec<Scored>),
+    pub flux: (Vec<Scored>, Vec<Scored>),
+    /// The baseline's runs on the fit files, and the signatures' signals from them.
+    pub sims: &'a [Simulation],
+    pub sigs: &'a [Signals],
+    pub flux_sigs: &'a [Signals],
+}
+
+/// A candidate judged, and what its refit said about the search.
+pub(super) struct Judged {
+    pub candidate: Candidate,
+    /// The refit ended above the baseline's fit cost: a failed search.
+    pub failed_refit: Option<String>,
+    /// The refit could not be run.
+    pub errored_refit: Option<String>,
+    /// The refit fits the fit files better and every validation file worse.
+    pub unpinned: Option<String>,
+}
+
+impl Baseline<'_> {
+    /// `e` judged by its refit (or its error).
+    pub fn judge(&self, e: Effect, refit: Result<FitResult>) -> Result<Judged> {
+        let (spec, base) = (self.spec, self.fit);
+        let (fit_files, score_files) = (self.fit_files, self.score_files);
+        let (fit_skip, score_skip) = (self.fit_skip, self.score_skip);
+        let s2 = spec.with(e);
+        let channel = Channel::judging(e, self.measured);
+        let (base_fit_s, base_score_s, r2) = match (&self.static_amp, channel) {
+            (Some(amp), Channel::Current) => (
+                amp.scores(fit_files, fit_skip),
+                amp.scores(score_files, score_skip),
+                amp.lag_evidence(fit_files, fit_skip),
+            ),
+            (_, Channel::FluxDensity) => {
+                (self.flux.0.clone(), self.flux.1.clone(), evidence(e, self.flux_sigs))
+            }
+            (_, Channel::Temperature) => (
+                channel_scores(spec, &base.params, fit_files, fit_skip, channel)?,
+                channel_scores(spec, &base.params, score_files, score_skip, channel)?,
+                heating_evidence(fit_files, self.sims, fit_skip),
+            ),
+            _ => (self.disp.0.clone(), self.disp.1.clone(), evidence(e, self.sigs)),
+        };
+        let n_eff: f64 = base_fit_s.iter().map(|s| effective_samples(&s.residual)).sum();
+        let (refit, errored_refit) = match refit {
+            Ok(f) => (Some(f), None),
+            Err(why) => (None, Some(format!("`{e}` ({why:#})"))),
+        };
+        // The refit contains the given structure (the effect switched off or negligible), so a
+        // fit cost above the baseline's is a failed search, not evidence against the effect.
+        // Compared only where both costs weigh the same channels (not when `amp` adds the current
+        // or coil heating the temperature).
+        let adds_a_channel = e == Effect::AmplifierDynamics || channel == Channel::Temperature;
+        let failed_refit = refit.as_ref().filter(|_| !adds_a_channel).and_then(|f| {
+            let (b, a) = (base.fit.cost(), f.fit.cost());
+            (a > b * 1.0001).then(|| format!("`{e}` ({:.4} % > {:.4} %)", a.sqrt() * 100.0, b.sqrt() * 100.0))
+        });
+        let after_score_s = match &refit {
+            Some(f) => channel_scores(s2, &f.params, score_files, score_skip, channel)?,
+            None => base_score_s.clone(),
+        };
+        let before_c = mean(base_score_s.iter().map(|s| s.nrmse));
+        let after_c = mean(after_score_s.iter().map(|s| s.nrmse));
+        let files_improved =
+            base_score_s.iter().zip(&after_score_s).filter(|(b, a)| a.nrmse < b.nrmse).count();
+        // Where the effect shows: the refit's own parameters with the effect switched off (the
+        // given structure) against the refit, file by file, measured against the noise. A law
+        // refinement cannot be switched off that way (the coarser law's parameters were not
+        // fitted), nor can the amplifier on the current (judged against a static gain): there
+        // every file votes.
+        let law_refinement = e.info().candidacy == Candidacy::RefinesLaw;
+        let showing: Vec<bool> = match &refit {
+            Some(f) if !law_refinement && channel != Channel::Current => {
+                let off = channel_scores(spec, &f.params, score_files, score_skip, channel)?;
+                off.iter()
+                    .zip(&after_score_s)
+                    .map(|(o, a)| super::effect_shows(&o.residual, &a.residual))
+                    .collect()
+            }
+            _ => vec![true; after_score_s.len()],
+        };
+        let files_showing = showing.iter().filter(|&&v| v).count();
+        let files_improved_showing = base_score_s
+            .iter()
+            .zip(&after_score_s)
+            .zip(&showing)
+            .filter(|((b, a), &shows)| shows && a.nrmse < b.nrmse)
+            .count();
+        let unpinned = refit.as_ref().filter(|_| self.held_out && channel == Channel::Displacement).and_then(|f| {
+            let fit_nrmse = (base.fit.mean_nrmse(), f.fit.mean_nrmse());
+            let scored: Vec<(f64, f64)> =
+                base_score_s.iter().zip(&after_score_s).map(|(b, a)| (b.nrmse, a.nrmse)).collect();
+            not_pinned_by_the_fit_files(fit_nrmse, &scored).then(|| {
+                format!(
+                    "`{e}` fits the fit files better ({:.2} % → {:.2} %) but every validation file worse ({:.2} % → \
+                     {:.2} %): what it adds is fitted to other model error, not determined by these fit files. It \
+                     shows in {}: without such a fit file, add one; with one, its form here is not the rig's",
+                    fit_nrmse.0 * 100.0,
+                    fit_nrmse.1 * 100.0,
+                    mean(scored.iter().map(|v| v.0)) * 100.0,
+                    mean(scored.iter().map(|v| v.1)) * 100.0,
+                    where_it_shows(e)
+                )
+            })
+        });
+        let added = refit
+            .as_ref()
+            .map_or(0, |f| {
+                (f.free.len() + estimated_states(s2, score_files.len()))
+                    .saturating_sub(base.free.len() + estimated_states(spec, score_files.len()))
+            })
+            .max(1);
+        // Judged on the scored files: with validation files a gain there is one the added
+        // parameters could not buy by fitting (the fit files reward any flexibility that absorbs
+        // model-form error, and punish a refit that stops doing so).
+        let n_eff_files: Vec<f64> = base_score_s.iter().map(|s| effective_samples(&s.residual)).collect();
+        let n_eff_scored: f64 = n_eff_files.iter().sum();
+        let delta_bic = information_gain(&base_score_s, &after_score_s, &n_eff_files)
+            - added as f64 * n_eff_scored.max(2.0).ln();
+        let cut = error_cut(before_c, after_c);
+        let evidence = format!(
+            "{} explains {:.0} % of the residual variance ({}); adding it and \
+             refitting takes the {} {channel} NRMSE from {:.2} % to {:.2} % ({}), lower on {files_improved} of {} \
+             files ({files_improved_showing} of the {files_showing} it shows in); ΔBIC {:+.1}",
+            match channel {
+                Channel::Current => "the amplifier lag −di/dt of command → current",
+                Channel::FluxDensity => flux_signature_words(e.info().signature),
+                Channel::Temperature => "the accumulated coil heating ∫i² dt of the temperature",
+                Channel::Displacement => signature_words(e.info().signature),
+            },
+            r2 * 100.0,
+            significance_words(n_eff),
+            if self.held_out { "validation" } else { "fit" },
+            before_c * 100.0,
+            after_c * 100.0,
+            cut_words(cut),
+            after_score_s.len(),
+            delta_bic,
+            channel = channel.name(),
+        );
+        let score = (0.5 * r2 + 0.5 * (1.0 - after_c / before_c).max(0.0)).clamp(0.0, 1.0);
+        let candidate = Candidate {
+            effect: e,
+            channel: channel.name(),
+            score,
+            evidence,
+            nrmse_before: before_c,
+            nrmse_after: after_c,
+            evidence_r2: r2,
+            files_improved,
+            files_scored: after_score_s.len(),
+            files_showing,
+            files_improved_showing,
+            held_out: self.held_out,
+            delta_bic,
+            n_eff,
+            per_file_after: after_score_s.iter().map(|s| s.nrmse).collect(),
+            refit,
+        };
+        Ok(Judged { candidate, failed_refit, errored_refit, unpinned })
+    }
+}
