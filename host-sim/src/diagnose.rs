@@ -936,7 +936,7 @@ pub fn diagnose(
     findings.extend(file_trends(spec, &base.params, fit_files, val_files)?);
     evidence_phase.finish();
 
-    let results = score_refits(spec, &cands, fresh, refined, score_files, opts.progress);
+    let results = refits(spec, &cands, fresh, refined, score_files, opts.progress);
     let (base_fit_flux, base_score_flux) = if measured.flux {
         (
             channel_scores(spec, &base.params, fit_files, &fit_skip, Channel::FluxDensity)?,
@@ -947,19 +947,18 @@ pub fn diagnose(
     };
     let baseline = judge::Baseline {
         spec,
-        fit: &base,
+        base: &base,
         fit_files,
         score_files,
         fit_skip: &fit_skip,
         score_skip: &score_skip,
         held_out,
         measured,
-        // With `current_A` and `command_V` in every file, amplifier dynamics is judged on the
-        // current channel: command → current by a static gain (the baseline) against the refit's
-        // amplifier.
         static_amp: measured.current.then(|| StaticGain::fit(fit_files, &fit_skip)),
-        disp: (base_fit_disp, base_score_disp),
-        flux: (base_fit_flux, base_score_flux),
+        fit_disp: base_fit_disp,
+        score_disp: base_score_disp,
+        fit_flux: base_fit_flux,
+        score_flux: base_score_flux,
         sims: &base_sims,
         sigs: &sigs,
         flux_sigs: &flux_sigs,
@@ -1001,7 +1000,7 @@ pub fn diagnose(
         ));
     }
     let (verdict, undistinguished) = decide(&mut candidates, &mut findings);
-    findings.extend(what_is_left(&baseline, &candidates, verdict, before)?);
+    findings.extend(what_is_left(&baseline, &candidates, verdict)?);
     if !skipped.is_empty() {
         time_limited = true;
         findings.push(format!(
@@ -1153,9 +1152,9 @@ fn file_trends(
 }
 
 /// Per candidate, its refit (the better of its two searches, [`searches::keep_the_better`]), or
-/// `None` where the time limit left it out; each scored on the scored files for the progress
-/// line.
-fn score_refits(
+/// `None` where the time limit left it out. Each is scored on the scored files for the progress
+/// line; a scoring error becomes that candidate's error ("refits that could not be run").
+fn refits(
     spec: ModelSpec,
     cands: &[Effect],
     fresh: Vec<searches::Search>,
@@ -1340,10 +1339,10 @@ fn what_is_left(
     baseline: &judge::Baseline,
     candidates: &[Candidate],
     verdict: Option<Effect>,
-    before: f64,
 ) -> Result<Vec<String>> {
-    let judge::Baseline { spec, fit: base, fit_files, score_files, fit_skip, score_skip, held_out, .. } =
+    let judge::Baseline { spec, base, fit_files, score_files, fit_skip, score_skip, held_out, .. } =
         *baseline;
+    let before = mean(baseline.score_disp.iter().map(|s| s.nrmse));
     let mut findings = Vec::new();
     let (final_spec, final_params, final_val) = match candidates.first().filter(|c| Some(c.effect) == verdict)
     {

@@ -6,23 +6,24 @@ use model_core::effects::Candidacy;
 use model_core::{Effect, ModelSpec};
 
 use super::{
-    channel_scores, cut_words, error_cut, estimated_states, evidence, flux_signature_words, heating_evidence,
-    information_gain, mean, not_pinned_by_the_fit_files, signature_words, significance_words, where_it_shows,
-    Candidate, Channel, Measured, Scored, Signals, StaticGain,
+    channel_scores, cut_words, effective_samples, error_cut, estimated_states, evidence,
+    flux_signature_words, heating_evidence, information_gain, mean, not_pinned_by_the_fit_files,
+    signature_words, significance_words, where_it_shows, Candidate, Channel, Measured, Scored, Signals,
+    StaticGain,
 };
 use crate::fit::{FitResult, Simulation};
 use crate::recording::Recording;
-use crate::spectral::effective_samples;
 
 /// The given structure's fit and everything a candidate is judged against.
 pub(super) struct Baseline<'a> {
     pub spec: ModelSpec,
-    pub fit: &'a FitResult,
+    pub base: &'a FitResult,
     pub fit_files: &'a [Recording],
     /// The validation files, else the fit files.
     pub score_files: &'a [Recording],
-    /// Each file's burn-in ([`super::burn_in`]).
+    /// Each fit file's burn-in ([`super::burn_in`]), left out of its scores.
     pub fit_skip: &'a [usize],
+    /// Each scored file's burn-in.
     pub score_skip: &'a [usize],
     /// The scored files are validation files.
     pub held_out: bool,
@@ -30,10 +31,12 @@ pub(super) struct Baseline<'a> {
     /// With `current_A` and `command_V` in every file: command → current by a static gain, the
     /// amplifier's baseline on the current.
     pub static_amp: Option<StaticGain>,
-    /// The baseline's displacement and flux scores on the fit and the scored files (flux: empty
-    /// without a search coil).
-    pub disp: (Vec<Scored>, Vec<Scored>),
-    pub flux: (Vec<Scored>, Vec<Scored>),
+    /// The baseline's displacement scores on the fit files and on the scored files.
+    pub fit_disp: Vec<Scored>,
+    pub score_disp: Vec<Scored>,
+    /// Its flux-density scores likewise (empty without a search coil).
+    pub fit_flux: Vec<Scored>,
+    pub score_flux: Vec<Scored>,
     /// The baseline's runs on the fit files, and the signatures' signals from them.
     pub sims: &'a [Simulation],
     pub sigs: &'a [Signals],
@@ -54,7 +57,7 @@ pub(super) struct Judged {
 impl Baseline<'_> {
     /// `e` judged by its refit (or its error).
     pub fn judge(&self, e: Effect, refit: Result<FitResult>) -> Result<Judged> {
-        let (spec, base) = (self.spec, self.fit);
+        let (spec, base) = (self.spec, self.base);
         let (fit_files, score_files) = (self.fit_files, self.score_files);
         let (fit_skip, score_skip) = (self.fit_skip, self.score_skip);
         let s2 = spec.with(e);
@@ -66,14 +69,14 @@ impl Baseline<'_> {
                 amp.lag_evidence(fit_files, fit_skip),
             ),
             (_, Channel::FluxDensity) => {
-                (self.flux.0.clone(), self.flux.1.clone(), evidence(e, self.flux_sigs))
+                (self.fit_flux.clone(), self.score_flux.clone(), evidence(e, self.flux_sigs))
             }
             (_, Channel::Temperature) => (
                 channel_scores(spec, &base.params, fit_files, fit_skip, channel)?,
                 channel_scores(spec, &base.params, score_files, score_skip, channel)?,
                 heating_evidence(fit_files, self.sims, fit_skip),
             ),
-            _ => (self.disp.0.clone(), self.disp.1.clone(), evidence(e, self.sigs)),
+            _ => (self.fit_disp.clone(), self.score_disp.clone(), evidence(e, self.sigs)),
         };
         let n_eff: f64 = base_fit_s.iter().map(|s| effective_samples(&s.residual)).sum();
         let (refit, errored_refit) = match refit {

@@ -107,8 +107,9 @@ pub(super) fn search(
     Ok(Searches { base, refined, fresh })
 }
 
-/// A candidate's refit: of its two searches the lower fit cost, reporting the search as a whole
-/// (both runs' evaluations, and a time limit that cut either short).
+/// A candidate's refit: of its two searches the lower fit cost (the fresh one on a tie),
+/// reporting the search as a whole (both runs' evaluations, and a time limit that cut either
+/// short); the fresh search's error first where both failed.
 pub(super) fn keep_the_better(fresh: Result<FitResult>, refined: Result<FitResult>) -> Result<FitResult> {
     let (fresh, refined) = (fresh?, refined?);
     let (evaluations, time_limited) =
