@@ -167,14 +167,19 @@ fn error_cut(before: f64, after: f64) -> f64 {
     }
 }
 
-/// A cut in words: "2.4× lower", "1.3× higher", "to zero".
+/// A cut in words: "2.4× lower", "1.3× higher", "1.02× lower" (two decimals near 1, where one
+/// would print "1.0× lower" beside two different errors), "unchanged", "to zero".
 fn cut_words(cut: f64) -> String {
+    let ratio = if cut >= 1.0 { cut } else { 1.0 / cut };
+    let direction = if cut >= 1.0 { "lower" } else { "higher" };
     if cut.is_infinite() {
         "to zero".into()
-    } else if cut >= 1.0 {
-        format!("{cut:.1}× lower")
+    } else if ratio < 1.005 {
+        "unchanged".into()
+    } else if ratio < 1.095 {
+        format!("{ratio:.2}× {direction}")
     } else {
-        format!("{:.1}× higher", 1.0 / cut)
+        format!("{ratio:.1}× {direction}")
     }
 }
 
@@ -290,12 +295,20 @@ impl std::fmt::Display for Diagnosis {
         for finding in &self.findings {
             writeln!(f, "  - {finding}")?;
         }
-        writeln!(f, "  candidates (most likely first):")?;
+        if !self.candidates.is_empty() {
+            // The order `decide` gives; the score (R² and cut combined, for scripts) is not it.
+            writeln!(
+                f,
+                "  candidates (most likely first: the verdict, then those that pass every test, then by cut; \
+                 score = ½ R² + ½ the relative error drop):"
+            )?;
+        }
         for c in &self.candidates {
             writeln!(
                 f,
-                "    {:22} score {:.2}  {:.2} % → {:.2} %  {}",
+                "    {:22} cut {:>5}  score {:.2}  {:.2} % → {:.2} %  {}",
                 c.effect,
+                format!("{:.2}×", c.cut()).replace("inf×", "∞"),
                 c.score,
                 c.nrmse_before * 100.0,
                 c.nrmse_after * 100.0,
@@ -1641,6 +1654,11 @@ mod tests {
         assert_eq!(error_cut(f64::NAN, 0.01), 1.0);
         assert_eq!(error_cut(0.0, 0.0), 1.0);
         assert_eq!(cut_words(0.5), "2.0× higher");
+        assert_eq!(cut_words(1.003), "unchanged");
+        assert_eq!(cut_words(1.0 / 1.003), "unchanged");
+        assert_eq!(cut_words(1.02), "1.02× lower");
+        assert_eq!(cut_words(1.0 / 1.06), "1.06× higher");
+        assert_eq!(cut_words(1.12), "1.1× lower");
     }
 
     /// A law with a memory starts each scored file from a fitted pre-history: one parameter per

@@ -214,6 +214,12 @@ fn a_failed_fit_never_replaces_a_good_parameter_file_and_json_gets_only_the_erro
     assert!(j.get("params").is_none(), "a failed fit printed its result as JSON: {j}");
     assert_eq!(j["error"]["exit_code"], 1);
     assert_eq!(std::fs::read(&good).unwrap(), b"# a good parameter file\n");
+
+    // `--params-out` given a recording's name (one slot early): refused, the recording kept.
+    let other = write(dir.path(), "other.csv", s.as_bytes());
+    let o = gma(&["fit", "--model", "ja", "--params-out", path(&square), path(&other)]);
+    refused(&o, &["--params-out", "square.csv", "not a parameter file"], "a recording as --params-out");
+    assert_eq!(std::fs::read_to_string(&square).unwrap(), s);
 }
 
 #[test]

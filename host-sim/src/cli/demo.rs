@@ -123,6 +123,24 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         display(&html),
         t.elapsed().as_secs_f64()
     );
+    if let (Some(last), Some(params_last)) = (rungs.last(), param_files.last()) {
+        // The same steps by hand, on the files just written: what an engineer does next with
+        // recordings of their own.
+        let dir = display(&a.out_dir);
+        let fit: Vec<String> = fit_files.iter().map(|r| format!("{dir}/{}", r.name)).collect();
+        let val: String = val_files.iter().map(|r| format!(" --val {dir}/{}", r.name)).collect();
+        say!(
+            j,
+            "\n  next, the same steps by hand (your own recordings in place of these; `gma <command> --help`):\n    \
+             gma diagnose --model {first} {fit}{val}\n    \
+             gma fit --model {spec} {fit}{val} --params-out fitted.toml\n    \
+             gma compare --model {spec} --params {params_last} {val_only} --format png",
+            first = case.model,
+            fit = fit.join(" "),
+            spec = last.spec,
+            val_only = val_files.iter().map(|r| format!("{dir}/{}", r.name)).collect::<Vec<_>>().join(" "),
+        );
+    }
     if j {
         let mean = |v: &[f64]| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
         out!(

@@ -36,6 +36,26 @@ pub struct FitArgs {
     pub bound: Vec<String>,
 }
 
+/// `--params-out` onto an existing file that is not a parameter file is refused before any work:
+/// a recording's name typed one slot early (`--params-out fit1.csv fit2.csv`) would replace a
+/// measurement with TOML. New paths, devices (`/dev/null`) and files that read as TOML pass.
+fn replaces_only_a_parameter_file(out: &std::path::Path) -> Result<()> {
+    let Ok(meta) = std::fs::metadata(out) else { return Ok(()) };
+    // A parameter file is a few kB; anything over 1 MiB is not one, and is not read.
+    let reads_as_toml = || {
+        meta.len() <= 1 << 20
+            && std::fs::read_to_string(out).is_ok_and(|text| text.parse::<toml::Table>().is_ok())
+    };
+    if meta.is_file() && !reads_as_toml() {
+        bail!(
+            "--params-out {}: the file exists and is not a parameter file (it does not read as TOML), so \
+             gma will not replace it; remove it first or choose another path (e.g. fitted.toml)",
+            display(out)
+        );
+    }
+    Ok(())
+}
+
 /// Runs `gma fit`.
 /// The time limit is a doubt like the others: said, and in the JSON's `warnings` too.
 pub(crate) fn add_time_limit_warning(
@@ -53,6 +73,10 @@ pub(crate) fn add_time_limit_warning(
 pub fn run(a: &FitArgs) -> Result<()> {
     let outputs: Vec<&std::path::Path> = a.params_out.as_deref().into_iter().collect();
     let mut p = a.mf.prepare(&outputs)?;
+    // After `prepare`'s output checks: an input named as the output is said as such.
+    if let Some(out) = &a.params_out {
+        replaces_only_a_parameter_file(out)?;
+    }
     let (mut summary, params, mut warnings) = match &p.data {
         Data::Loops(fit_files, val_files) => {
             if !(a.fix.is_empty() && a.bound.is_empty()) {

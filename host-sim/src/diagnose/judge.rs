@@ -14,6 +14,13 @@ use super::{
 use crate::fit::{FitResult, Simulation};
 use crate::recording::Recording;
 
+/// How far above the baseline's fit NRMSE (a fraction of it) a refit must end to count as a
+/// failed search. The refinement starts from the baseline with the effect's parameters at their
+/// start values, not switched off, and stops on its evaluation budget: an effect the data do not
+/// need ends a few 1e-5 above the baseline (coil heating in short files: 2.8352 % against
+/// 2.8350 %), the same point to within what the search resolves, and no failure.
+const FAILED_SEARCH_MARGIN: f64 = 1e-3;
+
 /// The given structure's fit and everything a candidate is judged against.
 pub(super) struct Baseline<'a> {
     pub spec: ModelSpec,
@@ -90,7 +97,8 @@ impl Baseline<'_> {
         let adds_a_channel = e == Effect::AmplifierDynamics || channel == Channel::Temperature;
         let failed_refit = refit.as_ref().filter(|_| !adds_a_channel).and_then(|f| {
             let (b, a) = (base.fit.cost(), f.fit.cost());
-            (a > b * 1.0001).then(|| format!("`{e}` ({:.4} % > {:.4} %)", a.sqrt() * 100.0, b.sqrt() * 100.0))
+            (a.sqrt() > b.sqrt() * (1.0 + FAILED_SEARCH_MARGIN))
+                .then(|| format!("`{e}` ({:.3} % > {:.3} %)", a.sqrt() * 100.0, b.sqrt() * 100.0))
         });
         let after_score_s = match &refit {
             Some(f) => channel_scores(s2, &f.params, score_files, score_skip, channel)?,
@@ -166,7 +174,12 @@ impl Baseline<'_> {
                 Channel::Displacement => signature_words(e.info().signature),
             },
             r2 * 100.0,
-            significance_words(n_eff),
+            if self.held_out {
+                // The signature test applies only on the fit files (docs/cli.md, step 4).
+                format!("{}; not required on validation files, where the cut is the evidence", significance_words(n_eff))
+            } else {
+                significance_words(n_eff)
+            },
             if self.held_out { "validation" } else { "fit" },
             before_c * 100.0,
             after_c * 100.0,
