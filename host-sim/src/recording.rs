@@ -232,11 +232,19 @@ impl Recording {
         if index[0].is_none() {
             let found: Vec<&str> = headers.iter().collect();
             let joined = found.join(", ");
+            let comment = headers.get(0).is_some_and(|h| h.trim_start().starts_with('#'));
             let hint = [(';', "`;`"), ('\t', "tabs")]
                 .iter()
                 .find(|(c, _)| joined.contains(*c) && joined.contains("time_s"))
                 .map(|(_, name)| format!(" — the file seems to separate columns with {name}; measurement files are comma-separated"))
                 .or_else(|| case_hint(&headers, "time_s"))
+                .or_else(|| {
+                    comment.then(|| {
+                        " — the first line starts with `#`: measurement files have no comment lines; the header \
+                         must be the first line (move notes into a file of their own)"
+                            .to_string()
+                    })
+                })
                 .unwrap_or_default();
             if let Some(loop_hint) = crate::loops::loop_header_hint(&headers) {
                 located!(file, Some(1), None; "no `time_s` column (header has: {}){loop_hint}", echo(&joined));
@@ -676,6 +684,8 @@ mod tests {
         assert!(e.contains("rig.csv:4:1") && e.contains("median step"), "{e}");
         let e = err("t,current_A\n0,1\n");
         assert!(e.contains("no `time_s` column"), "{e}");
+        let e = err("# rig A, 2024\ntime_s,current_A\n0,1\n");
+        assert!(e.contains("rig.csv:1") && e.contains("starts with `#`"), "{e}");
         let e = err("time_s,displacement_um\n0,1\n0.001,1\n0.002,1\n");
         assert!(e.contains("drive column"), "{e}");
         let e = err("time_s,current_A,current_A\n0,1,1\n");

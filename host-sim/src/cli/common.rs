@@ -44,7 +44,7 @@ pub struct ModelFiles {
     /// the search short).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Search effort (1 = default; 2 doubles the swarm iterations, simplex steps and
+    /// Search effort in (0, 20] (1 = default; 2 doubles the swarm iterations, simplex steps and
     /// least-squares Jacobians).
     #[arg(long, default_value_t = 1.0)]
     pub effort: f64,

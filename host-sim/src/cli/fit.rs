@@ -109,8 +109,14 @@ pub fn run(a: &FitArgs) -> Result<()> {
         let made = Provenance::now(Some(a.mf.seed));
         let inputs: String =
             made.inputs.iter().map(|i| format!("\ninput {} sha256 {}", i.file, i.sha256)).collect();
+        let validation = summary
+            .nrmse_val
+            .map(|v| {
+                format!("\nvalidation NRMSE {:.4} % on {} (scored, not fitted)", v * 100.0, names(&a.mf.val))
+            })
+            .unwrap_or_default();
         let header = format!(
-            "gma fit --model {} (seed {}) on {}\nfit NRMSE {:.4} %{}{fixed}\nmade by gma {} on {}{inputs}",
+            "gma fit --model {} (seed {}) on {}\nfit NRMSE {:.4} %{validation}{}{fixed}\nmade by gma {} on {}{inputs}",
             summary.model,
             a.mf.seed,
             names(&a.mf.files),
