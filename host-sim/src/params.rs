@@ -472,8 +472,43 @@ pub fn to_toml(p: &ActuatorParams, header: &str) -> Result<String> {
     Ok(out)
 }
 
-/// Parses a spec, turning an error's byte range into the offending word.
+/// Parses a spec, turning an error's byte range into the offending word. An effect named twice
+/// is read once (the documented rule) and warned about: most often it is a typo for another.
 pub fn parse_spec(text: &str) -> Result<ModelSpec> {
+    let spec = parse_spec_quietly(text)?;
+    if let Some(warning) = repeated_effect(text) {
+        crate::warning::warn(warning);
+    }
+    Ok(spec)
+}
+
+/// The first effect `text` (a valid spec) names twice, said as a warning. What an effect implies
+/// is not named by it: `hysteresis+saturation` names each once, `ja+anhysteretic` saturation twice.
+fn repeated_effect(text: &str) -> Option<String> {
+    let mut named: Vec<(Effect, &str, usize)> = Vec::new();
+    let mut offset = 0;
+    for raw in text.split('+') {
+        let word = raw.trim();
+        let at = offset + raw.len() - raw.trim_start().len();
+        offset += raw.len() + 1;
+        let effects: Vec<Effect> = match Effect::from_name(word) {
+            Some(e) => vec![e],
+            None => ModelSpec::parse(word).map(|s| s.effects().collect()).unwrap_or_default(),
+        };
+        for e in effects {
+            if let Some((_, first, first_at)) = named.iter().find(|(n, ..)| *n == e) {
+                return Some(format!(
+                    "model spec `{text}`: `{e}` is named twice (`{first}` at byte {first_at}, `{word}` at byte \
+                     {at}) and counted once; a typo for another effect? (`gma effects` lists them)"
+                ));
+            }
+            named.push((e, word, at));
+        }
+    }
+    None
+}
+
+fn parse_spec_quietly(text: &str) -> Result<ModelSpec> {
     ModelSpec::parse(text).map_err(|e| match e {
         model_core::SpecError::UnknownEffect { start, end, suggestion } => {
             // `ja,mech` or `ja mech`: the nearest single word would drop an effect.

@@ -255,6 +255,27 @@ fn model_spec_typos_are_named_with_the_nearest_effect_by_every_command() {
             refused(&gma(&args), &exp, &format!("{} --model {spec}", args[0]));
         }
     }
+    // An effect named twice is read once (the documented rule), with a warning naming both
+    // words: most often it is a typo for another effect.
+    for (spec, words) in [
+        ("ja+mech+mech", "(`mech` at byte 3, `mech` at byte 8)"),
+        ("ja+anhysteretic", "(`ja` at byte 0, `anhysteretic` at byte 3)"),
+    ] {
+        let o = gma(&["simulate", "--model", spec, "--out", &out]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{spec}: {err}");
+        assert!(
+            err.contains("warning") && err.contains("named twice") && err.contains(words),
+            "{spec}: {err}"
+        );
+        std::fs::remove_file(&out).unwrap();
+    }
+    let o = gma(&["simulate", "--model", "hysteresis+saturation", "--out", &out]);
+    assert!(
+        o.status.success() && !String::from_utf8_lossy(&o.stderr).contains("twice"),
+        "implied is not named"
+    );
+    std::fs::remove_file(&out).unwrap();
     for (spec, expected) in [("", "empty"), ("ja+preisach", "preisach"), ("ja++mech", "mech")] {
         refused(&gma(&["simulate", "--model", spec, "--out", &out]), &[expected], spec);
     }
