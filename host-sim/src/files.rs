@@ -225,6 +225,18 @@ pub fn display(path: &Path) -> String {
     escape_control(&path.display().to_string())
 }
 
+/// A path as a printed command line needs it: as [`display`] prints it, in single quotes when it
+/// holds anything a POSIX shell would split or expand (a space, `$`, `*`, a quote, …).
+pub fn shell_word(path: &Path) -> String {
+    let s = display(path);
+    let plain = |c: char| c.is_alphanumeric() || "_-./:@%+=,".contains(c);
+    if !s.is_empty() && s.chars().all(plain) {
+        s
+    } else {
+        format!("'{}'", s.replace('\'', r"'\''"))
+    }
+}
+
 /// `s` with control characters (ESC, BEL, CR, …; not newlines) written as escapes, so nothing
 /// from an input can drive the terminal.
 pub fn escape_control(s: &str) -> String {
@@ -414,6 +426,14 @@ pub fn names(paths: &[PathBuf]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn printed_command_words_survive_a_shell() {
+        assert_eq!(shell_word(Path::new("gma-demo/demo-fit1.csv")), "gma-demo/demo-fit1.csv");
+        assert_eq!(shell_word(Path::new("my runs/a.csv")), "'my runs/a.csv'");
+        assert_eq!(shell_word(Path::new("it's/$x.csv")), r"'it'\''s/$x.csv'");
+        assert_eq!(shell_word(Path::new("")), "''");
+    }
 
     #[test]
     fn a_line_without_end_is_refused_with_its_line_number() {

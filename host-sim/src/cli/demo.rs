@@ -6,7 +6,7 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 
-use crate::files::{check_outputs, display, output_folder, write_atomic};
+use crate::files::{check_outputs, display, output_folder, shell_word, write_atomic};
 use crate::fit::FitOptions;
 use crate::{cases, params, report};
 
@@ -123,12 +123,14 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         display(&html),
         t.elapsed().as_secs_f64()
     );
-    if let (Some(last), Some(params_last)) = (rungs.last(), param_files.last()) {
+    if let (Some(last), Some(params_last)) = (rungs.last(), param_paths.last()) {
         // The same steps by hand, on the files just written: what an engineer does next with
         // recordings of their own.
-        let dir = display(&a.out_dir);
-        let fit: Vec<String> = fit_files.iter().map(|r| format!("{dir}/{}", r.name)).collect();
-        let val: String = val_files.iter().map(|r| format!(" --val {dir}/{}", r.name)).collect();
+        let word = |r: &crate::recording::Recording| shell_word(&a.out_dir.join(&r.name));
+        let fit: Vec<String> = fit_files.iter().map(word).collect();
+        let val: String = val_files.iter().map(|r| format!(" --val {}", word(r))).collect();
+        let val_only: Vec<String> = val_files.iter().map(word).collect();
+        let params_last = shell_word(params_last);
         say!(
             j,
             "\n  next, the same steps by hand (your own recordings in place of these; `gma <command> --help`):\n    \
@@ -138,7 +140,7 @@ pub fn run(a: &DemoArgs) -> Result<()> {
             first = case.model,
             fit = fit.join(" "),
             spec = last.spec,
-            val_only = val_files.iter().map(|r| format!("{dir}/{}", r.name)).collect::<Vec<_>>().join(" "),
+            val_only = val_only.join(" "),
         );
     }
     if j {
