@@ -65,6 +65,8 @@ fn write_drive_params(out: &std::path::Path) {
     let bytes = postcard::to_stdvec(&params).expect("serialise parameters");
     let body = format!(
         "/// Model spec of the drive (GMA_MODEL at build time).\npub const MODEL_SPEC: &str = {spec:?};\n\
+         /// Where the parameter set came from (GMA_PARAMS at build time, or the demo set).\n\
+         pub const PARAMS_SOURCE: &str = {source:?};\n\
          /// Identified parameter set, postcard-encoded (GMA_PARAMS at build time).\n\
          pub const PARAMS_POSTCARD: &[u8] = &{bytes:?};\n"
     );

@@ -21,6 +21,7 @@ use gma_control::command::{Command, Decoder, Received, Reply, MAX_REPLY_ENCODED}
 use gma_control::current::CurrentLoopParams;
 use gma_control::faults::FaultCode;
 use gma_control::gate::{GateAction, OutputGate};
+use gma_control::reference::Waveform;
 use gma_control::telemetry::TimedFrame;
 use gma_control::timing::TickPeriod;
 use gma_control::units::{AdcCode, Volts, ADC_FULL_SCALE};
@@ -92,8 +93,9 @@ pub fn bus_code(v: Volts) -> u16 {
     }
 }
 
-/// The controller's configuration on this board: the reference design with its duty limit at
-/// the bridge's quiet-window clamp, so that the current loop's anti-windup knows the clamp.
+/// The reference design on this board's bridge: its duty limit at the quiet-window clamp, so that
+/// the current loop's anti-windup knows the clamp; the 100 Hz sine reference of the tests and
+/// benchmarks. The board itself boots with [`boot_config`].
 pub const fn control_config() -> ControlConfig {
     let r = ControlConfig::REFERENCE;
     ControlConfig {
@@ -101,6 +103,17 @@ pub const fn control_config() -> ControlConfig {
         ..r
     }
 }
+
+/// The configuration the board boots with: [`control_config`] holding the rest position (a
+/// constant 0 µm reference) until a `reference` command sets a waveform, so that an `arm` sent
+/// before any reference energises the coil without moving the rod. The reference design's 100 Hz
+/// sine stays the workload of the tests and benchmarks.
+pub const fn boot_config() -> ControlConfig {
+    ControlConfig { reference: Waveform::Constant { bias: 0.0 }, ..control_config() }
+}
+
+// The board's boot reference holds rest: no waveform runs before one is commanded.
+const _: () = assert!(matches!(boot_config().reference, Waveform::Constant { bias } if bias == 0.0));
 
 /// Telemetry records buffered between the interrupt and thread mode (25 ms at 10 kHz; one slot
 /// of the ring stays empty).
@@ -394,7 +407,7 @@ pub type ReplyQueue = Queue<Reply, REPLY_QUEUE>;
 #[inline(never)]
 pub fn stage(received: &Received, staged: &mut StagedParameters) {
     if let Received::Command(_, Command::LoadParameters { spec, params }) = received {
-        staged.rebuild(&control_config(), *spec, params);
+        staged.rebuild(&boot_config(), *spec, params);
     }
 }
 

@@ -225,12 +225,15 @@ pub fn display(path: &Path) -> String {
     escape_control(&path.display().to_string())
 }
 
-/// A path as a printed command line needs it: as [`display`] prints it, in single quotes when it
-/// holds anything a POSIX shell would split or expand (a space, `$`, `*`, a quote, …).
+/// A path as a printed command line needs it: as [`display`] prints it (control characters
+/// escaped, so such a path is shown, not reproduced), in single quotes when it holds anything a
+/// POSIX shell would split or expand (a space, `$`, `*`, a quote, a leading `=` or `~`, …), and
+/// after `./` when it starts with `-` (else an option to the command).
 pub fn shell_word(path: &Path) -> String {
     let s = display(path);
+    let s = if s.starts_with('-') { format!("./{s}") } else { s };
     let plain = |c: char| c.is_alphanumeric() || "_-./:@%+=,".contains(c);
-    if !s.is_empty() && s.chars().all(plain) {
+    if !s.is_empty() && !s.starts_with('=') && s.chars().all(plain) {
         s
     } else {
         format!("'{}'", s.replace('\'', r"'\''"))
@@ -433,6 +436,8 @@ mod tests {
         assert_eq!(shell_word(Path::new("my runs/a.csv")), "'my runs/a.csv'");
         assert_eq!(shell_word(Path::new("it's/$x.csv")), r"'it'\''s/$x.csv'");
         assert_eq!(shell_word(Path::new("")), "''");
+        assert_eq!(shell_word(Path::new("-out/a.csv")), "./-out/a.csv");
+        assert_eq!(shell_word(Path::new("=x")), "'=x'");
     }
 
     #[test]

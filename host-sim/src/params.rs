@@ -472,6 +472,36 @@ pub fn to_toml(p: &ActuatorParams, header: &str) -> Result<String> {
     Ok(out)
 }
 
+/// The model a parameter file says it was fitted or written for, from its header (`# gma fit
+/// --model SPEC …`, `# gma demo, model SPEC`, `# gma.fit (Python) --model SPEC …`), when the
+/// drive's compensator would differ from that model's ([`ModelSpec::for_compensator`]: the
+/// effects left to feedback do not count): the file's values for the other effects were never
+/// fitted.
+pub fn written_for_another_model(file: &str, text: &str, spec: ModelSpec) -> Option<String> {
+    let header = text.lines().next().filter(|l| l.starts_with('#'))?;
+    let after = header.split_once("--model ").or_else(|| header.split_once(", model "))?.1;
+    let word = after.split_whitespace().next()?;
+    let written = ModelSpec::parse(word).ok()?;
+    (written.for_compensator() != spec.for_compensator()).then(|| {
+        let unfitted: Vec<&str> = spec
+            .for_compensator()
+            .effects()
+            .filter(|e| !written.has(*e))
+            .map(|e| e.alias().unwrap_or(e.name()))
+            .collect();
+        let unfitted = if unfitted.is_empty() {
+            String::new()
+        } else {
+            format!(" (its values for `{}` were not fitted)", unfitted.join("`, `"))
+        };
+        format!(
+            "{file} was written for model `{written}` and is loaded as `{spec}`: a set fitted with one \
+             structure is not a fit of the other{unfitted}; refit with `--model {spec}`, or load it with \
+             `--model {written}`"
+        )
+    })
+}
+
 /// Parses a spec, turning an error's byte range into the offending word. An effect named twice
 /// is read once (the documented rule) and warned about: most often it is a typo for another.
 pub fn parse_spec(text: &str) -> Result<ModelSpec> {
@@ -553,6 +583,27 @@ mod tests {
 
     fn spec(text: &str) -> ModelSpec {
         parse_spec(text).unwrap()
+    }
+
+    #[test]
+    fn a_file_written_for_another_model_is_said_by_its_header() {
+        let said = written_for_another_model("p.toml", FORMAT_1, spec("ja+eddy+mech")).unwrap();
+        assert!(
+            said.contains("written for model `ja`") && said.contains("for `eddy` were not fitted"),
+            "{said}"
+        );
+        // The effects the drive leaves to feedback do not change its compensator: nothing to say.
+        assert_eq!(written_for_another_model("p.toml", FORMAT_1, spec("ja+mech")), None);
+        assert_eq!(written_for_another_model("p.toml", FORMAT_1, spec("ja")), None);
+        let demo = "# gma demo, model eddy+ja+mech\nformat_version = 2\n";
+        assert_eq!(written_for_another_model("p.toml", demo, spec("ja+mech+eddy")), None);
+        assert!(
+            written_for_another_model("p.toml", demo, spec("ja")).is_some_and(|s| !s.contains("not fitted"))
+        );
+        let python = "# gma.fit (Python) --model ja (seed 1) on a.csv\nformat_version = 2\n";
+        assert!(written_for_another_model("p.toml", python, spec("preisach")).is_some());
+        // No header, or one that names no model: nothing to say.
+        assert_eq!(written_for_another_model("p.toml", "format_version = 2\n", spec("ja")), None);
     }
 
     #[test]

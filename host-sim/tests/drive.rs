@@ -9,6 +9,7 @@ use gma_control::command::{Decoder, Received, Reply, MAX_REPLY_ENCODED};
 use gma_control::sim::{CoilActuator, Rig};
 use gma_control::{ControlConfig, Controller, ResetCause};
 use model_core::{ActuatorParams, ModelSpec};
+use std::path::Path;
 
 fn run_ok(args: &[&str]) {
     let o = gma(args);
@@ -147,6 +148,14 @@ fn bad_commands_are_refused_on_the_host_before_sending() {
         &["model spec `ja+bogus`: unknown effect `bogus`"],
         "bad spec",
     );
+    // A serial port that does not exist is not created as a file.
+    let port = "/dev/gma-test-no-such-ttyACM9";
+    refused(
+        &gma(&["drive", "disarm", "-o", port]),
+        &["no device /dev/gma-test-no-such-ttyACM9"],
+        "mistyped port",
+    );
+    assert!(!Path::new(port).exists(), "a mistyped port must not become a file");
     assert!(!out.exists(), "nothing may be written for a refused command");
     // Line noise and a corrupted reply are skipped and counted, never a wrong reply.
     let noise = dir.path().join("noise.bin");

@@ -41,11 +41,11 @@ use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, dma, interrupt, pac, peripherals, Config};
 use embassy_time::{Instant, Timer};
 use firmware::drive::{
-    control_config, dead_time_ticks, encode_queued, encode_replies, execute, quiet_window_max_duty,
+    boot_config, dead_time_ticks, encode_queued, encode_replies, execute, quiet_window_max_duty,
     BridgeTiming, CommandPort, DriveCounters, DriveLoop, PowerStage, ReplyQueue, Slot, TelemetryQueue,
     PWM_HZ, TELEMETRY_QUEUE, TICK_CYCLES,
 };
-use firmware::drive_params::{MODEL_SPEC, PARAMS_POSTCARD};
+use firmware::drive_params::{MODEL_SPEC, PARAMS_POSTCARD, PARAMS_SOURCE};
 use gma_control::command::{Reply, MAX_REPLY_ENCODED};
 use gma_control::crash::{Crash, CrashRecord};
 use gma_control::telemetry::{TimedFrame, MAX_ENCODED};
@@ -322,8 +322,8 @@ fn controller(reset: ResetCause) -> Controller {
     let spec = model_core::ModelSpec::parse(MODEL_SPEC);
     let params = postcard::from_bytes::<model_core::ActuatorParams>(PARAMS_POSTCARD);
     match (spec, params) {
-        (Ok(spec), Ok(params)) => Controller::new(control_config(), spec, &params, reset),
-        _ => Controller::refused(control_config(), reset),
+        (Ok(spec), Ok(params)) => Controller::new(boot_config(), spec, &params, reset),
+        _ => Controller::refused(boot_config(), reset),
     }
 }
 
@@ -354,8 +354,9 @@ async fn main(spawner: Spawner) {
         w.set_eccl(true);
     });
     info!(
-        "gma-drive: SYSCLK 170 MHz, model `{}`, reset by {}",
+        "gma-drive: SYSCLK 170 MHz, model `{}` with {}, reset by {}",
         MODEL_SPEC,
+        PARAMS_SOURCE,
         defmt::Debug2Format(&reset_cause)
     );
     if let Some(record) = last_crash {

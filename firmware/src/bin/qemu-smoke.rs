@@ -245,10 +245,10 @@ impl Operator {
 fn drive_loop() -> u32 {
     use core::sync::atomic::Ordering;
     use firmware::drive::{
-        control_config, encode_queued, quiet_window_max_duty, trip, BridgeTiming, CommandPort, DriveCounters,
+        boot_config, encode_queued, quiet_window_max_duty, trip, BridgeTiming, CommandPort, DriveCounters,
         DriveLoop, MemoryStage, ReplyQueue, Slot, TelemetryQueue,
     };
-    use gma_control::command::{Command, Refusal};
+    use gma_control::command::{Command, ReferenceCommand, Refusal, Shape};
     use gma_control::faults::FaultCode;
     use gma_control::sim::{CoilActuator, Fault, Injection};
     use gma_control::telemetry::{Decoder, MAX_ENCODED};
@@ -273,7 +273,8 @@ fn drive_loop() -> u32 {
     let acked = |r: Option<gma_control::command::Reply>| r.is_some_and(|r| r.outcome.is_ok());
     let Ok(spec) = ModelSpec::parse("ja+eddy+mech") else { return 1 };
     let p = ActuatorParams::TERFENOL_DEMO;
-    let cfg = control_config();
+    // The board's own boot configuration: it holds rest until a reference is commanded.
+    let cfg = boot_config();
     let timing = BridgeTiming { period_ticks: 4250, max_duty: quiet_window_max_duty() };
     let rig = || CoilActuator::new(spec, &p, 1e-4).map(|plant| Rig::new(plant, 1));
     // Each phase below builds its own rig and drive in a block of its own: alive together, the
@@ -321,6 +322,18 @@ fn drive_loop() -> u32 {
             acked(arm) && arm.is_some_and(|r| r.armed),
             "arm command frame decoded, executed, acknowledged",
         );
+        // Armed before any reference: the rod is held at rest, no waveform runs.
+        let mut held = true;
+        for _ in 0..200 {
+            let out = trigger(&mut drive, &mut rig_a);
+            held &= out.bridge_enabled && out.frame.reference_um == 0.0;
+        }
+        let rest = rig_a.displacement_from_rest_um();
+        hprintln!("qemu-smoke: drive loop: armed without a reference, 200 ticks: {} µm from rest", rest);
+        check(held && rest.abs() < 1.0, "armed before any reference: held at rest (reference 0 µm)");
+        let sine = ReferenceCommand { shape: Shape::Sine, amplitude_um: 12.5, bias_um: 15.0, freq_hz: 100.0 };
+        check(acked(op.send(&mut drive, &Command::SetReference(sine))), "reference command: 100 Hz sine");
+        while consumer.dequeue().is_some() {}
         let mut decoder = Decoder::default();
         let mut bytes = [0u8; 8 * MAX_ENCODED];
         let (mut decoded, mut in_order, mut timed, mut first_seq) = (0u32, true, true, None);

@@ -202,6 +202,9 @@ fn shape_name(s: WaveShape) -> &'static str {
 fn load(l: &LoadArgs) -> Result<Command> {
     let spec = crate::params::parse_spec(&l.model)?;
     let (params, file, text) = crate::params::load_with_text(&l.params, spec)?;
+    if let Some(warning) = crate::params::written_for_another_model(&file, &text, spec) {
+        crate::warning::warn(warning);
+    }
     // The board's validation, before anything is sent.
     gma_control::compensator_model(spec, &params, gma_control::ControlConfig::REFERENCE.current_loop.tick_s)
         .map_err(|e| {
@@ -225,11 +228,18 @@ fn send(out: &Path, frame: &[u8]) -> Result<()> {
     if out.is_dir() {
         bail!("cannot write {name}: it is a folder");
     }
-    let mut f = std::fs::OpenOptions::new()
-        .append(true)
-        .create(true)
-        .open(out)
-        .with_context(|| format!("cannot open {name}"))?;
+    // Under /dev nothing is created: a mistyped serial port would otherwise become a new file,
+    // and the command "succeed" without reaching the board (a keep-alive loop would never stop).
+    let device = out.starts_with("/dev");
+    let mut f = match std::fs::OpenOptions::new().append(true).create(!device).open(out) {
+        Ok(f) => f,
+        Err(e) if device && e.kind() == std::io::ErrorKind::NotFound => bail!(
+            "no device {name}: a serial port must exist before a command is sent to it (is the board \
+             plugged in, and is it ttyACM0 or ttyUSB0? `ls /dev/tty*`); to write frames to a file, \
+             name one outside /dev"
+        ),
+        Err(e) => return Err(e).with_context(|| format!("cannot open {name}")),
+    };
     f.write_all(frame).and_then(|()| f.flush()).with_context(|| format!("writing {name}"))
 }
 
