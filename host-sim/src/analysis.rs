@@ -282,7 +282,15 @@ impl FileAnalysis {
     pub fn bode_charts(&self, model_label: &str) -> Vec<Chart> {
         let fr = &self.summary.frequency_response;
         let f = &self.measured.spectra.freq_hz;
-        let band_note = if self.band.is_empty() { " (no excited band)" } else { "" };
+        // Without an excited band the panels are empty: the title says why, short enough to show.
+        let title = if self.band.is_empty() {
+            format!(
+                "{} — H1 {}: no excited band in {:.0} Hz bins",
+                self.name, fr.input, self.summary.residual_spectrum.resolution_hz
+            )
+        } else {
+            format!("{} — frequency response {} to displacement (H1)", self.name, fr.input)
+        };
         let gain = |h: &FrequencyResponse| {
             self.band.iter().filter_map(|&k| Some((f[k], spectral::gain_db(h.h[k])?))).collect::<Vec<_>>()
         };
@@ -293,10 +301,7 @@ impl FileAnalysis {
         let unit = fr.gain_unit.replace("um", "µm").replace("_per_", "/");
         vec![
             Chart {
-                title: format!(
-                    "{} — frequency response {} to displacement (H1){band_note}",
-                    self.name, fr.input
-                ),
+                title,
                 x_label: "frequency [Hz]".into(),
                 y_label: format!("gain [dB re 1 {unit}]"),
                 y_range: None,
@@ -350,7 +355,12 @@ impl std::fmt::Display for AnalysisSummary {
                 "  frequency response {} → displacement, excited band {lo:.1}–{hi:.1} Hz ({} bins): model − measured gain {g:.2} dB rms, phase {p:.1}° rms",
                 r.input, r.bins
             ),
-            _ => write!(f, "  frequency response {}: no excited band (input PSD or coherence too low)", r.input),
+            _ => write!(
+                f,
+                "  frequency response {}: no excited band (input PSD or coherence too low in {:.1} Hz bins: a drive \
+                 below about twice that needs a longer file)",
+                r.input, self.residual_spectrum.resolution_hz
+            ),
         }
     }
 }

@@ -318,7 +318,7 @@ impl std::fmt::Display for Diagnosis {
         match self.verdict {
             Some(v) => write!(
                 f,
-                "verdict: `{v}` is missing{} — try `--model {}+{}`",
+                "verdict: `{v}` is missing{} — try `--model {}`",
                 if self.undistinguished.is_empty() {
                     String::new()
                 } else {
@@ -327,8 +327,12 @@ impl std::fmt::Display for Diagnosis {
                         self.undistinguished.iter().map(|e| e.name()).collect::<Vec<_>>().join("`, `")
                     )
                 },
-                self.model,
-                v.alias().unwrap_or(v.name())
+                // The canonical text of the model with it, as every other line names models.
+                ModelSpec::parse(&self.model).map(|s| s.with(v).to_string()).unwrap_or_else(|_| format!(
+                    "{}+{}",
+                    self.model,
+                    v.alias().unwrap_or(v.name())
+                ))
             ),
             None => write!(f, "verdict: {}", self.no_verdict()),
         }
@@ -1400,11 +1404,11 @@ fn what_is_left(
             ),
             Some(v) => format!(
                 "with `{v}` added {:.2} % stays unexplained and structured ({:.0} % of lags outside the band, white noise at \
-                 most {:.0} %): diagnose `{spec}+{}` again; what is left may be none of the known effects",
+                 most {:.0} %): diagnose `{}` again; what is left may be none of the known effects",
                 final_val * 100.0,
                 white_final * 100.0,
                 band * 100.0,
-                v.alias().unwrap_or(v.name())
+                spec.with(v)
             ),
         });
     }

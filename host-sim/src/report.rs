@@ -241,7 +241,12 @@ pub fn html(
         };
         let _ = write!(h, "<td class=l>{verdict}</td></tr>");
     }
-    h.push_str("</table>");
+    h.push_str(
+        "</table><p>The ladder scores whole files, as <code>gma fit</code> and <code>gma compare</code> do. Each \
+         diagnosis below scores the validation files (the fit files when there are none) after each file's burn-in (its samples up to the \
+         drive's second reversal, where the rig's unknown initial magnetic state still shows), as \
+         <code>gma diagnose</code> does: the same model reads differently there.</p>",
+    );
     // Error falling.
     let _ = write!(h, "<div class=fig>{}</div>", error_ladder_svg(rungs)?);
     // Diagnoses.
@@ -251,7 +256,10 @@ pub fn html(
         for f in &d.findings {
             let _ = write!(h, "<li>{}</li>", esc(f));
         }
-        h.push_str("</ul><table><tr><th class=l>candidate</th><th>score</th><th>NRMSE before</th><th>after refit</th><th class=l>evidence</th></tr>");
+        h.push_str(
+            "</ul><table><tr><th class=l>candidate</th><th>score</th><th>NRMSE before (after burn-in)</th>\
+             <th>after refit</th><th class=l>evidence</th></tr>",
+        );
         for c in &d.candidates {
             let cls = if Some(c.effect) == d.verdict { " class=v" } else { "" };
             let _ = write!(
