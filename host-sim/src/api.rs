@@ -362,6 +362,8 @@ fn prepare(
         opts: FitOptions { seed: s.seed, progress: s.progress, effort: s.effort, deadline },
         params_source,
         input_warnings,
+        // The library API writes no files: nothing to check outputs against.
+        inputs: Vec::new(),
     })
 }
 
@@ -422,7 +424,7 @@ pub fn fit(
         names(&sources),
         summary.nrmse_fit * 100.0
     );
-    Ok(FitOutcome { params_toml: crate::params::to_toml(&fitted, &header)?, summary })
+    Ok(FitOutcome { params_toml: crate::params::to_toml_for(&fitted, &header, p.spec)?, summary })
 }
 
 /// `gma diagnose`: fit `model`, analyse what it leaves unexplained, name the missing effect.

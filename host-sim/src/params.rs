@@ -472,6 +472,32 @@ pub fn to_toml(p: &ActuatorParams, header: &str) -> Result<String> {
     Ok(out)
 }
 
+/// As [`to_toml`], for a set fitted with `spec`: each table (or top-level key) of an effect or
+/// law `spec` does not use is marked as such, since its values are the start values', not
+/// fitted (a file is kept whole, so that it loads into any model).
+pub fn to_toml_for(p: &ActuatorParams, header: &str, spec: ModelSpec) -> Result<String> {
+    let used = tables_used(spec);
+    let unused = |t: &str| parameter_tables().any(|u| u == t) && !used.contains(&t);
+    let note = format!("not used by model `{spec}`: the start values', not fitted");
+    let mut out = String::new();
+    let mut in_table = false;
+    for line in to_toml(p, header)?.lines() {
+        if let Some(table) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
+            in_table = true;
+            if unused(table) {
+                out.push_str(&format!("# [{table}]: {note}\n"));
+            }
+        }
+        out.push_str(line);
+        let top_level_key = (!in_table && !line.starts_with('#')).then(|| line.split('=').next()).flatten();
+        if top_level_key.is_some_and(|k| unused(k.trim())) {
+            out.push_str(&format!("  # {note}"));
+        }
+        out.push('\n');
+    }
+    Ok(out)
+}
+
 /// The model a parameter file says it was fitted or written for, from its header (`# gma fit
 /// --model SPEC …`, `# gma demo, model SPEC`, `# gma.fit (Python) --model SPEC …`), when the
 /// drive's compensator would differ from that model's ([`ModelSpec::for_compensator`]: the
@@ -617,6 +643,35 @@ mod tests {
         let again = parse_file("new.toml", &to_toml(&f.params, "test").unwrap(), spec("ja+mech")).unwrap();
         assert_eq!(again.format_version, FORMAT_VERSION);
         assert_eq!(again.params, f.params);
+    }
+
+    /// A fitted set's file marks the tables its model does not use (their values were not
+    /// fitted), each once, and reads back to the same set.
+    #[test]
+    fn a_fitted_file_marks_the_tables_its_model_does_not_use() {
+        let p = ActuatorParams::TERFENOL_DEMO;
+        let text = to_toml_for(&p, "gma fit --model ja+mech", spec("ja+mech")).unwrap();
+        let note = "not used by model `ja+mech`: the start values', not fitted";
+        for unused in ["[amp]", "[preisach]", "[aftereffect]", "[thermal]", "[linear]", "[anhysteretic]"] {
+            assert_eq!(
+                text.matches(&format!("# {unused}: {note}\n{unused}\n")).count(),
+                1,
+                "{unused}: {text}"
+            );
+        }
+        for key in ["eddy_tau_s", "delay_samples"] {
+            assert!(
+                text.lines().any(|l| l.starts_with(key) && l.ends_with(&format!("  # {note}"))),
+                "{key}: {text}"
+            );
+        }
+        // What the model uses, and the core every model uses, is not marked.
+        for used in ["[ja]", "[mech]", "[magnetostriction]", "[coil]"] {
+            assert!(!text.contains(&format!("# {used}")), "{used}: {text}");
+        }
+        assert!(text.lines().any(|l| l == "rod_length_m = 0.08"), "{text}");
+        assert_eq!(text.matches("not used by model").count(), 8, "{text}");
+        assert_eq!(parse_file("p.toml", &text, spec("ja+mech")).unwrap().params, p);
     }
 
     /// A whole sensor delay is written as an integer (as files held it before fractional

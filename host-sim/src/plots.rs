@@ -157,6 +157,8 @@ where
     ChartBuilder::on(area)
         .caption(title, ("sans-serif", CAPTION_FONT))
         .margin(MARGIN)
+        // Room for half of the last x tick's label, centred on the plot's right edge.
+        .margin_right(3 * MARGIN)
         .x_label_area_size(42)
         .y_label_area_size(64)
         .build_cartesian_2d(x, y)
@@ -363,13 +365,17 @@ where
                 .draw_series(points.iter().map(|&p| Circle::new(p, 3, color.filled())))
                 .map_err(|e| anyhow!("{e}"))?;
         }
-        let drawn =
-            chart.draw_series(LineSeries::new(points, color.stroke_width(1))).map_err(|e| anyhow!("{e}"))?;
+        // The measured trace is drawn wider, under the model's: where they agree it shows as
+        // a dark edge on both sides of the model's line instead of vanishing beneath it.
+        let width = if s.color == 0 { 3 } else { 1 };
+        let drawn = chart
+            .draw_series(LineSeries::new(points, color.stroke_width(width)))
+            .map_err(|e| anyhow!("{e}"))?;
         // An unlabelled series (a second bound line) shares its neighbour's legend entry.
         if !s.label.is_empty() {
-            drawn
-                .label(&s.label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2)));
+            drawn.label(&s.label).legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(width.max(2)))
+            });
         }
     }
     chart

@@ -340,7 +340,9 @@ pub fn uncertainty_html(
         );
         for p in &u.params {
             let (std, ci) = match (p.std, p.ci95) {
-                (Some(s), Some((lo, hi))) => (format!("{s:.3e}"), format!("[{lo:.4e}, {hi:.4e}]")),
+                (Some(s), Some((lo, hi))) => {
+                    (format!("{s:.3e}"), format!("[{lo:.4e}, {hi:.4e}]{}", p.clipped_note()))
+                }
                 _ => ("—".into(), "not identifiable".into()),
             };
             let _ = write!(

@@ -174,6 +174,9 @@ pub struct ParamEstimate {
     pub std: Option<f64>,
     /// 95 % interval; null when not identifiable.
     pub ci95: Option<[f64; 2]>,
+    /// The interval's ends the search range cut off (`"lower"`, `"upper"`); absent when none.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub ci95_clipped: Vec<&'static str>,
     /// `log` (log-normal interval, `std` = value·σ of ln) or `linear`.
     pub scale: &'static str,
 }
@@ -223,6 +226,10 @@ impl From<&Uncertainty> for UncertaintyFields {
                         value: p.value,
                         std: p.std,
                         ci95: p.ci95.map(|(a, b)| [a, b]),
+                        ci95_clipped: [(p.ci95_clipped.0, "lower"), (p.ci95_clipped.1, "upper")]
+                            .into_iter()
+                            .filter_map(|(c, end)| c.then_some(end))
+                            .collect(),
                         scale: if p.bound.log { "log" } else { "linear" },
                     };
                     (p.bound.name, e)
@@ -295,7 +302,8 @@ impl fmt::Display for FitSummary {
                         } else {
                             String::new()
                         };
-                        writeln!(f, "  {n:width$} = {v:.6e} ± {s:.2e}{rel:10}  95 % [{lo:.4e}, {hi:.4e}]")?
+                        let ci = format!("95 % [{lo:.4e}, {hi:.4e}]{}", e.clipped_note());
+                        writeln!(f, "  {n:width$} = {v:.6e} ± {s:.2e}{rel:10}  {ci}")?
                     }
                     _ => writeln!(f, "  {n:width$} = {v:.6e} ± ?  (not identifiable)")?,
                 },

@@ -67,6 +67,22 @@ pub struct ParamUncertainty {
     pub std_ln: Option<f64>,
     /// 95 % interval.
     pub ci95: Option<(f64, f64)>,
+    /// Which ends of the 95 % interval the search range cut off (lower, upper): there the
+    /// interval says only that the data allow the whole rest of the range.
+    pub ci95_clipped: (bool, bool),
+}
+
+impl ParamUncertainty {
+    /// Words after the interval when the search range cut it off, e.g. " (lower end cut to the
+    /// search range)"; empty when it did not.
+    pub fn clipped_note(&self) -> &'static str {
+        match self.ci95_clipped {
+            (true, true) => " (both ends cut to the search range)",
+            (true, false) => " (lower end cut to the search range)",
+            (false, true) => " (upper end cut to the search range)",
+            (false, false) => "",
+        }
+    }
 }
 
 /// The uncertainty of a fit's parameters.
@@ -133,6 +149,26 @@ fn coord(b: &Bound, v: f64) -> f64 {
     } else {
         v
     }
+}
+
+/// A parameter's std, std of ln θ, 95 % interval and which ends of it the search range cut
+/// off, from σ in its search coordinate (None: not identifiable).
+#[allow(clippy::type_complexity)]
+fn interval(
+    b: &Bound,
+    value: f64,
+    sd: Option<f64>,
+) -> (Option<f64>, Option<f64>, Option<(f64, f64)>, (bool, bool)) {
+    let (std, std_ln, raw) = match sd {
+        None => return (None, None, None, (false, false)),
+        Some(s) if b.log => (value * s, Some(s), (value * (-1.96 * s).exp(), value * (1.96 * s).exp())),
+        Some(s) => (s, None, (value - 1.96 * s, value + 1.96 * s)),
+    };
+    // An interval never leaves the parameter's physical range (the search range): a ratio in
+    // [0, 1) at 0 ± 0.16 has the interval [0, 0.32], not [−0.32, 0.32]. The ends it cut off are
+    // marked: there the data do not bound the parameter, the range does.
+    let ci95 = (raw.0.max(b.lo), raw.1.min(b.hi));
+    (Some(std), std_ln, Some(ci95), (raw.0 < b.lo, raw.1 > b.hi))
 }
 
 /// The uncertainty of `res`'s continuous parameters on its fit files.
@@ -278,20 +314,8 @@ pub fn analyse(spec: ModelSpec, res: &FitResult, files: &[Recording]) -> Result<
             // As reported in `params` (λ_s there is the closed form's f64, not its f32 copy).
             let value = res.identified.iter().find(|(n, _)| *n == f.name()).map_or((f.get)(&base), |x| x.1);
             let sd = cov[(k, k)].sqrt();
-            let sd = (sd.is_finite()).then_some(sd);
-            // An interval never leaves the parameter's physical range (the search range): a
-            // ratio in [0, 1) at 0 ± 0.16 has the interval [0, 0.32], not [−0.32, 0.32].
-            let within = |(a, b): (f64, f64)| (a.max(f.bound.lo), b.min(f.bound.hi));
-            let (std, std_ln, ci95) = match sd {
-                None => (None, None, None),
-                Some(s) if f.bound.log => (
-                    Some(value * s),
-                    Some(s),
-                    Some(within((value * (-1.96 * s).exp(), value * (1.96 * s).exp()))),
-                ),
-                Some(s) => (Some(s), None, Some(within((value - 1.96 * s, value + 1.96 * s)))),
-            };
-            ParamUncertainty { bound: f.bound, value, std, std_ln, ci95 }
+            let (std, std_ln, ci95, ci95_clipped) = interval(&f.bound, value, sd.is_finite().then_some(sd));
+            ParamUncertainty { bound: f.bound, value, std, std_ln, ci95, ci95_clipped }
         })
         .collect();
     let correlation =
@@ -304,4 +328,33 @@ pub fn analyse(spec: ModelSpec, res: &FitResult, files: &[Recording]) -> Result<
         lag1_autocorrelation: rho1,
         condition,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_interval_the_search_range_cuts_says_which_end() {
+        // A ratio in [0, 1) at 0.1 ± 0.1: the lower end −0.096 is cut to 0 and said to be.
+        let ratio = Bound::lin("ja.c", 0.0, 1.0);
+        let (std, _, ci, clipped) = interval(&ratio, 0.1, Some(0.1));
+        assert_eq!(std, Some(0.1));
+        assert_eq!(ci, Some((0.0, 0.1 + 0.196)));
+        assert_eq!(clipped, (true, false));
+        // Inside the range: nothing cut, nothing said.
+        let (_, _, ci, clipped) = interval(&ratio, 0.5, Some(0.1));
+        assert!((ci.unwrap().0 - 0.304).abs() < 1e-12 && (ci.unwrap().1 - 0.696).abs() < 1e-12);
+        assert_eq!(clipped, (false, false));
+        // Log scale, σ_ln = 1 near the top of [1e-6, 1e-3]: the upper end 2.6e-3 is cut.
+        let tau = Bound { name: "eddy_tau_s", lo: 1e-6, hi: 1e-3, log: true, swarm_holds: None };
+        let (std, std_ln, ci, clipped) = interval(&tau, 3.5e-4, Some(1.0));
+        assert_eq!((std, std_ln), (Some(3.5e-4), Some(1.0)));
+        assert_eq!(ci.unwrap().1, 1e-3);
+        assert_eq!(clipped, (false, true));
+        let p = ParamUncertainty { bound: tau, value: 3.5e-4, std, std_ln, ci95: ci, ci95_clipped: clipped };
+        assert_eq!(p.clipped_note(), " (upper end cut to the search range)");
+        // Not identifiable: no interval, nothing cut.
+        assert_eq!(interval(&tau, 3.5e-4, None), (None, None, None, (false, false)));
+    }
 }

@@ -1155,3 +1155,76 @@ fn with_the_coils_thermometer_the_fit_finds_the_rods_thermal_lag() {
     let f = json(&gma(&["fit", "--model", model, "--json", cold.to_str().unwrap()]));
     assert!(f["params"].get("thermal.rod_tau_s").is_none(), "{f}");
 }
+
+/// `report --params-out-dir` writes each model of the ladder as `fit --params-out` would, and
+/// each file reproduces its model's validation NRMSE in `compare`; the given model's file is
+/// checked against the inputs before any work.
+#[test]
+fn report_writes_each_models_parameters_that_compare_reproduces() {
+    let dir = tempfile::tempdir().unwrap();
+    let (fit, fit2, val) = rig(dir.path());
+    let out = dir.path().join("params");
+    let html = dir.path().join("r.html");
+    let r = json(&gma(&[
+        "report",
+        "--model",
+        "ja",
+        "--json",
+        &fit,
+        &fit2,
+        "--val",
+        &val,
+        "-o",
+        html.to_str().unwrap(),
+        "--params-out-dir",
+        out.to_str().unwrap(),
+    ]));
+    let ladder = r["ladder"].as_array().unwrap();
+    assert!(ladder.len() >= 2, "{r:#}");
+    for (k, rung) in ladder.iter().enumerate() {
+        let model = rung["model"].as_str().unwrap();
+        let file = rung["params_file"].as_str().unwrap();
+        assert!(file.ends_with(&format!("params-{k}-{}.toml", model.replace('+', "_"))), "{file}");
+        let text = std::fs::read_to_string(file).unwrap();
+        assert!(
+            text.starts_with(&format!("# gma report --model ja (seed 1), step {k}: `{model}` on ")),
+            "{text}"
+        );
+        let c = json(&gma(&[
+            "compare",
+            "--model",
+            model,
+            "--params",
+            file,
+            "--json",
+            &val,
+            "--out-dir",
+            dir.path().join(format!("c{k}")).to_str().unwrap(),
+        ]));
+        let (reported, compared) =
+            (rung["nrmse_val"][0].as_f64().unwrap(), c["files"][0]["nrmse"].as_f64().unwrap());
+        assert!(
+            (reported - compared).abs() < 1e-3 * reported,
+            "{model}: report {reported}, compare {compared}"
+        );
+    }
+    // Its own first parameter file as the start: refused at once, nothing overwritten.
+    let first = ladder[0]["params_file"].as_str().unwrap();
+    let before = std::fs::read(first).unwrap();
+    let o = gma(&[
+        "report",
+        "--model",
+        "ja",
+        "--params",
+        first,
+        &fit,
+        "-o",
+        html.to_str().unwrap(),
+        "--params-out-dir",
+        out.to_str().unwrap(),
+    ]);
+    let e = common::err(&o);
+    assert!(!o.status.success() && e.contains("it is the input"), "{e}");
+    assert!(!e.contains("diagnos"), "refused before the ladder: {e}");
+    assert_eq!(std::fs::read(first).unwrap(), before);
+}

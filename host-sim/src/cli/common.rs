@@ -9,7 +9,7 @@ use clap::Args;
 use model_core::{ActuatorParams, ModelSpec};
 
 use crate::columns::ReadOptions;
-use crate::files::{check_outputs, open_all, Input};
+use crate::files::{check_outputs, open_all, Input, InputId};
 use crate::fit::{self, FitOptions};
 use crate::loops::{self, LoopFile};
 use crate::params::{self, ParamSource};
@@ -135,6 +135,9 @@ pub struct Prepared {
     /// Doubts about the inputs themselves: a `--val` file with a fit file's content, a fit file
     /// typed right after a `--val` file, a Preisach plane far wider than the fields reached.
     pub input_warnings: Vec<Warning>,
+    /// Every input (files, `--val` files, `--params`): outputs planned after the work (named
+    /// after its results) are checked against them too.
+    pub inputs: Vec<InputId>,
 }
 
 impl Prepared {
@@ -246,7 +249,7 @@ impl ModelFiles {
         }));
         let deadline = time_limit.map(|t| Instant::now() + t);
         let opts = FitOptions { seed: self.seed, progress: true, effort: self.effort, deadline };
-        Ok(Prepared { spec, init, data, opts, params_source, input_warnings })
+        Ok(Prepared { spec, init, data, opts, params_source, input_warnings, inputs: all })
     }
 }
 

@@ -78,15 +78,15 @@ pub fn run(a: &DemoArgs) -> Result<()> {
             None => say!(j, "    → {}", d.no_verdict()),
         }
     })?;
-    let param_paths: Vec<PathBuf> = rungs
-        .iter()
-        .enumerate()
-        .map(|(k, r)| a.out_dir.join(format!("params-{k}-{}.toml", r.spec.to_string().replace('+', "_"))))
-        .collect();
+    let param_paths =
+        super::report::params_paths(&a.out_dir, &rungs.iter().map(|r| r.spec).collect::<Vec<_>>());
     check_outputs(&param_paths.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &[])?;
     let mut param_files = Vec::new();
     for (r, p) in rungs.iter().zip(&param_paths) {
-        write_atomic(p, params::to_toml(&r.params, &format!("gma demo, model {}", r.spec))?.as_bytes())?;
+        write_atomic(
+            p,
+            params::to_toml_for(&r.params, &format!("gma demo, model {}", r.spec), r.spec)?.as_bytes(),
+        )?;
         param_files.push(display(p));
     }
     let note = format!(

@@ -57,6 +57,34 @@ fn replaces_only_a_parameter_file(out: &std::path::Path) -> Result<()> {
 }
 
 /// Runs `gma fit`.
+/// The header of a fitted parameter file: what made it, its fit (and validation) NRMSE, the
+/// parameters held fixed (`# fixed: NAME`, which readers ignore), and where it came from: version,
+/// date and every input's digest.
+pub(crate) fn params_header(
+    made_by: &str,
+    mf: &ModelFiles,
+    nrmse_fit: f64,
+    nrmse_val: Option<f64>,
+    time_limited: bool,
+    fixed: &[&str],
+) -> String {
+    let fixed: String = fixed.iter().map(|n| format!("\nfixed: {n}")).collect();
+    let made = Provenance::now(Some(mf.seed));
+    let inputs: String =
+        made.inputs.iter().map(|i| format!("\ninput {} sha256 {}", i.file, i.sha256)).collect();
+    let validation = nrmse_val
+        .map(|v| format!("\nvalidation NRMSE {:.4} % on {} (scored, not fitted)", v * 100.0, names(&mf.val)))
+        .unwrap_or_default();
+    format!(
+        "{made_by} on {}\nfit NRMSE {:.4} %{validation}{}{fixed}\nmade by gma {} on {}{inputs}",
+        names(&mf.files),
+        nrmse_fit * 100.0,
+        if time_limited { "\nstopped by --time-limit: the best set found so far" } else { "" },
+        made.gma_version,
+        made.date_utc
+    )
+}
+
 /// The time limit is a doubt like the others: said, and in the JSON's `warnings` too.
 pub(crate) fn add_time_limit_warning(
     summary: &mut FitSummary,
@@ -104,32 +132,16 @@ pub fn run(a: &FitArgs) -> Result<()> {
         bail!("the loop fit did not produce a valid model: {}", invalid.join("; "));
     }
     if let Some(out) = &a.params_out {
-        let fixed: String = summary.text.fixed.iter().map(|(n, _)| format!("\nfixed: {n}")).collect();
-        // Where the set came from, in the file itself: version, date and every input's digest.
-        let made = Provenance::now(Some(a.mf.seed));
-        let inputs: String =
-            made.inputs.iter().map(|i| format!("\ninput {} sha256 {}", i.file, i.sha256)).collect();
-        let validation = summary
-            .nrmse_val
-            .map(|v| {
-                format!("\nvalidation NRMSE {:.4} % on {} (scored, not fitted)", v * 100.0, names(&a.mf.val))
-            })
-            .unwrap_or_default();
-        let header = format!(
-            "gma fit --model {} (seed {}) on {}\nfit NRMSE {:.4} %{validation}{}{fixed}\nmade by gma {} on {}{inputs}",
-            summary.model,
-            a.mf.seed,
-            names(&a.mf.files),
-            summary.nrmse_fit * 100.0,
-            if summary.time_limit_reached {
-                "\nstopped by --time-limit: the best set found so far"
-            } else {
-                ""
-            },
-            made.gma_version,
-            made.date_utc
+        let fixed: Vec<&str> = summary.text.fixed.iter().map(|(n, _)| *n).collect();
+        let header = params_header(
+            &format!("gma fit --model {} (seed {})", summary.model, a.mf.seed),
+            &a.mf,
+            summary.nrmse_fit,
+            summary.nrmse_val,
+            summary.time_limit_reached,
+            &fixed,
         );
-        write_atomic(out, params::to_toml(&params, &header)?.as_bytes())?;
+        write_atomic(out, params::to_toml_for(&params, &header, p.spec)?.as_bytes())?;
         say!(j, "  parameters written to {}", display(out));
     }
     if j {

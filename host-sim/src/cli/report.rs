@@ -1,13 +1,16 @@
 //! `gma report`: the model ladder (or a loop fit) as one self-contained HTML page.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{bail, Result};
 use clap::Args;
+use model_core::{ActuatorParams, ModelSpec};
 use serde_json::json;
 
 use super::common::{Data, ModelFiles};
-use crate::files::{display, write_atomic};
+use super::fit::params_header;
+use crate::files::{check_outputs, display, output_folder, write_atomic, InputId};
+use crate::params;
 use crate::progress::Phase;
 use crate::provenance::Provenance;
 use crate::results::UncertaintyFields;
@@ -21,11 +24,47 @@ pub struct ReportArgs {
     /// The HTML file to write (only when the report is complete; never one of the inputs).
     #[arg(long, short, default_value = "gma-report.html")]
     pub out: PathBuf,
+    /// Also write each fitted model's parameters into DIR (created if missing), as `gma fit
+    /// --params-out` writes them, for `compare`, `fit --params` or the board: `params-K-MODEL.toml`,
+    /// K its step on the ladder (0: the model given), `+` written `_`.
+    #[arg(long, value_name = "DIR")]
+    pub params_out_dir: Option<PathBuf>,
+}
+
+/// The parameter files of a ladder's models in `dir`, in ladder order (`report`, `demo`).
+pub(crate) fn params_paths(dir: &Path, specs: &[ModelSpec]) -> Vec<PathBuf> {
+    specs
+        .iter()
+        .enumerate()
+        .map(|(k, spec)| dir.join(format!("params-{k}-{}.toml", spec.to_string().replace('+', "_"))))
+        .collect()
+}
+
+/// Writes each model's parameter file (paths from [`params_paths`]), after checking them all.
+fn write_params(
+    paths: &[PathBuf],
+    sets: &[(ModelSpec, ActuatorParams, String)],
+    inputs: &[InputId],
+) -> Result<()> {
+    check_outputs(&paths.iter().map(PathBuf::as_path).collect::<Vec<_>>(), inputs)?;
+    for (path, (spec, set, header)) in paths.iter().zip(sets) {
+        write_atomic(path, params::to_toml_for(set, header, *spec)?.as_bytes())?;
+    }
+    Ok(())
 }
 
 /// Runs `gma report`.
 pub fn run(a: &ReportArgs) -> Result<()> {
     let p = a.mf.prepare(&[a.out.as_path()])?;
+    // The folder now, the file names (the models found) after the ladder.
+    let params_folder = match &a.params_out_dir {
+        Some(dir) => Some((dir.as_path(), output_folder(dir)?)),
+        None => None,
+    };
+    // The given model's file is named before any work (the ladder's others only once found).
+    if let Some((dir, _)) = params_folder {
+        check_outputs(&[params_paths(dir, &[p.spec])[0].as_path()], &p.inputs)?;
+    }
     p.warn_about_inputs();
     let j = a.mf.json;
     let spec = p.spec;
@@ -43,12 +82,44 @@ pub fn run(a: &ReportArgs) -> Result<()> {
                 true,
             )?;
             let (page, nrmse_val) = loops::html(&spec.to_string(), &res, files, val_files)?;
+            // As `gma fit` refuses to write an invalid loop model's parameters.
+            let invalid: Vec<String> =
+                res.warnings.iter().filter(|w| w.invalidates()).map(|w| w.to_string()).collect();
+            let params_file = match &params_folder {
+                Some(_) if !invalid.is_empty() => {
+                    bail!(
+                        "the loop fit did not produce a valid model, no parameter file written: {}",
+                        invalid.join("; ")
+                    )
+                }
+                Some((dir, _)) => {
+                    let paths = params_paths(dir, &[spec]);
+                    let mean = |v: &[f64]| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+                    let header = params_header(
+                        &format!("gma report --model {spec} (seed {}), loop fit", a.mf.seed),
+                        &a.mf,
+                        mean(&res.nrmse).unwrap_or(f64::NAN),
+                        mean(&nrmse_val),
+                        res.time_limited,
+                        &[],
+                    );
+                    write_params(&paths, &[(spec, res.apply_to(&p.init), header)], &p.inputs)?;
+                    Some(display(&paths[0]))
+                }
+                None => None,
+            };
             write_atomic(&a.out, report::with_sections(page, &provenance_section).as_bytes())?;
+            if let Some((_, folder)) = params_folder {
+                folder.keep();
+            }
             a.mf.warn_if_time_limited(res.time_limited);
             say!(j, "loop report written to {}", display(&a.out));
+            if let Some(f) = &params_file {
+                say!(j, "  parameters written to {f}");
+            }
             if j {
                 let result = json!({"report": display(&a.out), "nrmse": res.nrmse, "nrmse_val": nrmse_val, "warnings": p.input_warnings.iter().chain(&res.warnings).map(|w| w.to_string()).collect::<Vec<_>>(),
-                           "time_limit_reached": res.time_limited});
+                           "time_limit_reached": res.time_limited, "params_file": params_file});
                 out!("{}", super::merged_json(&result, &extra)?);
             }
         }
@@ -67,7 +138,38 @@ pub fn run(a: &ReportArgs) -> Result<()> {
                 Phase::start(p.opts.progress, "report: drawing the page (each model on each file)", 0);
             let html = report::html(&format!("gma report — {spec}"), &rungs, fit_files, val_files, "")?;
             let sections = report::uncertainty_html(&rungs, &uncertainties) + &provenance_section;
+            let params_files = match &params_folder {
+                Some((dir, _)) => {
+                    let specs: Vec<ModelSpec> = rungs.iter().map(|r| r.spec).collect();
+                    let paths = params_paths(dir, &specs);
+                    let sets: Vec<(ModelSpec, ActuatorParams, String)> = rungs
+                        .iter()
+                        .enumerate()
+                        .map(|(k, r)| {
+                            let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+                            let header = params_header(
+                                &format!(
+                                    "gma report --model {spec} (seed {}), step {k}: `{}`",
+                                    a.mf.seed, r.spec
+                                ),
+                                &a.mf,
+                                mean(&r.fit_nrmse),
+                                (!r.val_nrmse.is_empty()).then(|| mean(&r.val_nrmse)),
+                                r.diagnosis.time_limited,
+                                &[],
+                            );
+                            (r.spec, r.params, header)
+                        })
+                        .collect();
+                    write_params(&paths, &sets, &p.inputs)?;
+                    paths.iter().map(|p| Some(display(p))).collect()
+                }
+                None => vec![None; rungs.len()],
+            };
             write_atomic(&a.out, report::with_sections(html, &sections).as_bytes())?;
+            if let Some((_, folder)) = params_folder {
+                folder.keep();
+            }
             phase.finish();
             a.mf.warn_if_time_limited(time_limited);
             for (r, u) in rungs.iter().zip(&uncertainties) {
@@ -79,9 +181,10 @@ pub fn run(a: &ReportArgs) -> Result<()> {
                                 (Some(s), Some((lo, hi))) => {
                                     say!(
                                         j,
-                                        "  {:28} = {:.6e} ± {s:.2e}  [{lo:.4e}, {hi:.4e}]",
+                                        "  {:28} = {:.6e} ± {s:.2e}  [{lo:.4e}, {hi:.4e}]{}",
                                         p.bound.name,
-                                        p.value
+                                        p.value,
+                                        p.clipped_note()
                                     )
                                 }
                                 _ => {
@@ -94,12 +197,16 @@ pub fn run(a: &ReportArgs) -> Result<()> {
                 }
             }
             say!(j, "report written to {}", display(&a.out));
+            for f in params_files.iter().flatten() {
+                say!(j, "parameters written to {f}");
+            }
             if j {
                 let ladder: Vec<_> = rungs
                     .iter()
                     .zip(&uncertainties)
-                    .map(|(r, u)| {
-                        let rung = json!({"model": r.spec.to_string(), "nrmse_fit": r.fit_nrmse, "nrmse_val": r.val_nrmse, "verdict": r.diagnosis.verdict, "not_refitted": r.diagnosis.not_refitted, "cut_short": r.diagnosis.cut_short});
+                    .zip(&params_files)
+                    .map(|((r, u), params_file)| {
+                        let rung = json!({"model": r.spec.to_string(), "nrmse_fit": r.fit_nrmse, "nrmse_val": r.val_nrmse, "verdict": r.diagnosis.verdict, "not_refitted": r.diagnosis.not_refitted, "cut_short": r.diagnosis.cut_short, "params_file": params_file});
                         match u {
                             Ok(u) => super::merged_json(&rung, &UncertaintyFields::from(u)),
                             Err(e) => super::merged_json(&rung, &json!({"uncertainty_error": e})),
