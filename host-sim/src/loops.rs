@@ -82,33 +82,44 @@ impl LoopFile {
     }
 }
 
-/// Unit factor to SI for a header such as `H(Oe)`, `H [kA/m]`, `B(mT)`, `M(A/m)`.
-fn unit_factor(header: &str) -> Option<(char, f64)> {
+/// Unit factor to SI for a header such as `H(Oe)`, `H [kA/m]`, `B(mT)`, `M(A/m)`, or the unit
+/// after a `/`, `_` or space (`H/Oe`, `B_T`, `H Oe`): a unit written outside brackets is read
+/// too, never passed over as A/m. Err: why the header cannot be read, its unit named.
+fn unit_factor(header: &str) -> std::result::Result<(char, f64), String> {
     let h = header.trim();
-    let quantity = h.chars().next()?.to_ascii_uppercase();
-    let unit = h
-        .find(['(', '['])
-        .map(|i| h[i + 1..].trim_end_matches([')', ']']).trim().to_string())
-        .unwrap_or_default();
-    let f = match (quantity, unit.as_str()) {
-        ('H', "" | "A/m" | "A m^-1") => 1.0,
-        ('H', "kA/m") => 1e3,
+    let quantity = h.chars().next().ok_or("an empty header")?.to_ascii_uppercase();
+    let rest = &h[quantity.len_utf8().min(h.len())..];
+    let unit = match (h.find(['(', '[']), rest.find(['/', '_', ' '])) {
+        (Some(i), _) => h[i + 1..].trim_end_matches([')', ']']).trim(),
+        (None, Some(i)) => rest[i..].trim_start_matches(['/', '_', ' ']).trim(),
+        (None, None) => "",
+    };
+    let f = match (quantity, unit) {
+        ('H', "" | "A/m" | "A m^-1" | "A_per_m") => 1.0,
+        ('H', "kA/m" | "kA_per_m") => 1e3,
         ('H', "Oe") => 1e3 / (4.0 * std::f64::consts::PI),
         ('B', "" | "T") => 1.0,
         ('B', "mT") => 1e-3,
         ('B', "G" | "Gs") => 1e-4,
-        ('M', "" | "A/m") => 1.0,
-        ('M', "kA/m") => 1e3,
-        _ => return None,
+        ('M', "" | "A/m" | "A_per_m") => 1.0,
+        ('M', "kA/m" | "kA_per_m") => 1e3,
+        ('H' | 'B' | 'M', _) => {
+            let accepted = match quantity {
+                'H' => "A/m, kA/m, Oe",
+                'B' => "T, mT, G",
+                _ => "A/m, kA/m",
+            };
+            return Err(format!("unit `{}` of {quantity} is not one of {accepted}", echo(unit)));
+        }
+        _ => return Err(format!("`{quantity}` is not a loop quantity (H, B or M)")),
     };
-    Some((quantity, f))
+    Ok((quantity, f))
 }
 
 /// For a header that is not a recording's: a hint when its cells name loop quantities (H, B, M
 /// with units, or the loop columns) in a layout a loop file does not have.
 pub(crate) fn loop_header_hint(headers: &csv::StringRecord) -> Option<String> {
-    let loop_like =
-        headers.iter().filter(|c| unit_factor(c).is_some() || c.trim() == "field_A_per_m").count();
+    let loop_like = headers.iter().filter(|c| unit_factor(c).is_ok() || c.trim() == "field_A_per_m").count();
     (loop_like > 0).then(|| {
         ": if this is a magnetization loop, a loop file has two columns, H then B or M (e.g. \
          `H(A/m),B(T)`), or named columns `field_A_per_m` with `flux_density_T` or \
@@ -214,11 +225,15 @@ pub fn parse(name: &str, text: &str) -> Result<LoopFile> {
                 ),
             }
         } else if cells.len() == 2 {
-            let Some((q0, f0)) = unit_factor(cells[0]) else {
-                located!(name, Some(1), Some(1); "header `{}`: expected H with a unit (A/m, kA/m, Oe)", echo(cells[0]))
+            let (q0, f0) = match unit_factor(cells[0]) {
+                Ok(q) => q,
+                Err(why) => located!(name, Some(1), Some(1);
+                    "header `{}`: {why} (e.g. `H(Oe)`; H first)", echo(cells[0])),
             };
-            let Some((q1, f1)) = unit_factor(cells[1]) else {
-                located!(name, Some(1), Some(2); "header `{}`: expected B (T, mT, G) or M (A/m, kA/m)", echo(cells[1]))
+            let (q1, f1) = match unit_factor(cells[1]) {
+                Ok(q) => q,
+                Err(why) => located!(name, Some(1), Some(2);
+                    "header `{}`: {why} (e.g. `B(T)` or `M(kA/m)`)", echo(cells[1])),
             };
             if q0 != 'H' || !(q1 == 'B' || q1 == 'M') {
                 located!(name, Some(1), None; "header `{}`: expected H then B or M", echo(first));
@@ -279,6 +294,27 @@ fn check_content(f: &LoopFile, kept: &str) -> Result<()> {
              (or H) in the file");
     }
     Ok(())
+}
+
+/// A loop traversed clockwise in the H–M plane: a ferromagnet's loop runs counterclockwise (the
+/// rising branch below the falling one), ∮ M dH < 0, so a positive area over 1 % of the loop's
+/// bounding box says the rows are in reverse time order. Only for files that run (nearly) a
+/// whole loop: the H path's total variation at least 1.8 × its range.
+fn clockwise(f: &LoopFile) -> Option<Warning> {
+    let m = f.magnetization();
+    let span = |v: &[f64]| {
+        v.iter().fold(f64::INFINITY, |a, &x| a.min(x))..v.iter().fold(f64::NEG_INFINITY, |a, &x| a.max(x))
+    };
+    let (h_span, m_span) = (span(&f.h), span(&m));
+    let travel: f64 = f.h.windows(2).map(|w| (w[1] - w[0]).abs()).sum();
+    if travel < 1.8 * (h_span.end - h_span.start) {
+        return None;
+    }
+    // ∮ M dH by trapezoids, closed from the last point back to the first.
+    let n = f.h.len();
+    let area: f64 = (0..n).map(|k| 0.5 * (m[k] + m[(k + 1) % n]) * (f.h[(k + 1) % n] - f.h[k])).sum();
+    let share = area / ((h_span.end - h_span.start) * (m_span.end - m_span.start));
+    (share > 0.01).then(|| Warning::LoopClockwise { file: f.name.clone(), share })
 }
 
 /// A loop driven symmetrically (H from −H_max to H_max within 5 %) whose magnetization is not
@@ -395,6 +431,23 @@ pub enum LoopModel {
     Preisach,
 }
 
+/// The coercivity's label: the field where M crosses zero (intrinsic, H_cJ), not where B does.
+pub const COERCIVITY_LABEL: &str = "coercivity H_cJ (M = 0) [A/m]";
+/// The remanence's label: M where H crosses zero (B_r = μ0 M_r).
+pub const REMANENCE_LABEL: &str = "remanence M_r (H = 0) [A/m]";
+
+/// A loop feature as text: `—` where the loop has none (no crossing: NaN, null in JSON).
+pub fn feature_text(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.4e}")
+    } else {
+        "—".into()
+    }
+}
+
+/// |α| from which a J–A loop fit is said to be at the model's limit |α| < 1.
+const ALPHA_LIMIT_WARNING: f64 = 0.999;
+
 /// Largest saturation magnetization of any bulk material [A/m]: Fe–Co alloys, μ0 M_s ≈ 2.45 T.
 /// The loop fit's M_s range ends here (or at 1.5× the file's largest |M| if a file exceeds it).
 pub const MAX_SATURATION_A_PER_M: f64 = 1.95e6;
@@ -454,7 +507,14 @@ impl LoopModel {
     /// [`MEAN_FIELD_RATIO`] instead of α, so no point of its box is multivalued. The field
     /// scales (a, k, the Preisach fields) span the data's range and the model's own limits.
     fn bounds(self, h_max: f64, m_max: f64) -> Vec<Bound> {
-        let ms = Bound::log("ms_a_per_m", 0.9 * m_max, MAX_SATURATION_A_PER_M.max(1.5 * m_max));
+        // Within what the models accept (a weak sample's M_s below theirs is held at their floor,
+        // a loop far from saturation, and said as a parameter at its range's end).
+        let (ms_min, ms_max) = (f64::from(model_core::error::MS_MIN), f64::from(model_core::error::MS_MAX));
+        let ms = Bound::log(
+            "ms_a_per_m",
+            (0.9 * m_max).clamp(ms_min, 0.5 * ms_max),
+            MAX_SATURATION_A_PER_M.max(1.5 * m_max).min(ms_max),
+        );
         let field = |name, lo: f64, hi: f64| Bound::log(name, lo.max(1.0), hi.max(10.0));
         match self {
             LoopModel::Linear => {
@@ -827,12 +887,24 @@ pub fn fit_shown(
                 }
             }
         }
+        // J–A's α is not searched (its ratio is), but the model holds it in (−1, 1): a fit
+        // pressed against that limit is held by it, not by the loop.
+        if let (LoopModel::JilesAtherton(_), Some(&alpha)) = (model, best.get(2)) {
+            if alpha.abs() >= ALPHA_LIMIT_WARNING {
+                warnings.push(Warning::AtEdge { param: "alpha", value: alpha, lo: -1.0, hi: 1.0 });
+            }
+        }
+    }
+    // A loop whose largest |M| is below the smallest M_s the models hold.
+    let ms_floor = f64::from(model_core::error::MS_MIN);
+    if m_max < ms_floor && !matches!(model, LoopModel::Linear) {
+        warnings.push(Warning::WeakLoop { max_magnetization_a_per_m: m_max, ms_floor_a_per_m: ms_floor });
     }
     if let Some(ratio) = multivalued(model, &best) {
         warnings.push(Warning::Multivalued { ratio });
     }
     // First: an offset explains the edge and squareness warnings it causes.
-    warnings.splice(0..0, files.iter().filter_map(off_centre));
+    warnings.splice(0..0, files.iter().filter_map(off_centre).chain(files.iter().filter_map(clockwise)));
     let start = match start_score {
         Ok(e) => StartScore { nrmse: Some(mean(&e)), kept, refused: None, seen_mode: None },
         Err(why) => StartScore { nrmse: None, kept: false, refused: Some(why), seen_mode: None },
@@ -923,18 +995,18 @@ pub fn html(
         let _ = write!(
             h,
             "<h2>{} ({role})</h2><p>NRMSE {:.3} % ({})</p><table><tr><th></th><th>measured</th><th>model</th></tr>\
-             <tr><td class=l>coercivity H_c [A/m]</td><td>{:.4e}</td><td>{:.4e}</td></tr>\
-             <tr><td class=l>remanence M_r [A/m]</td><td>{:.4e}</td><td>{:.4e}</td></tr>\
-             <tr><td class=l>largest |M| [A/m]</td><td>{:.4e}</td><td>{:.4e}</td></tr></table>{}",
+             <tr><td class=l>{COERCIVITY_LABEL}</td><td>{}</td><td>{}</td></tr>\
+             <tr><td class=l>{REMANENCE_LABEL}</td><td>{}</td><td>{}</td></tr>\
+             <tr><td class=l>largest |M| [A/m]</td><td>{}</td><td>{}</td></tr></table>{}",
             f.name.replace('<', "&lt;"),
             e * 100.0,
             f.channel.name(),
-            a.coercivity_a_per_m,
-            b.coercivity_a_per_m,
-            a.remanence_a_per_m,
-            b.remanence_a_per_m,
-            a.max_magnetization_a_per_m,
-            b.max_magnetization_a_per_m,
+            feature_text(a.coercivity_a_per_m),
+            feature_text(b.coercivity_a_per_m),
+            feature_text(a.remanence_a_per_m),
+            feature_text(b.remanence_a_per_m),
+            feature_text(a.max_magnetization_a_per_m),
+            feature_text(b.max_magnetization_a_per_m),
             crate::plots::svg(&chart(f, &m, spec), (900, 520))?
         );
     }

@@ -71,7 +71,20 @@ pub enum XScale {
     Log,
 }
 
-fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, c: &Chart, scale: XScale) -> Result<()>
+/// How the curves are stroked: the measured one wider than the rest (SVG, where the viewer
+/// joins lines), or every curve one pixel wide (bitmaps).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Lines {
+    WideMeasured,
+    Thin,
+}
+
+fn draw<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    c: &Chart,
+    scale: XScale,
+    lines: Lines,
+) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
@@ -104,7 +117,7 @@ where
             let x = (x0 - px)..(x1 + px);
             let (legend, y) = place_legend(area, c, &title, x.clone(), y, &shown)?;
             let y_format = linear_format(&y);
-            draw_on(area, c, &title, legend, x.clone(), &linear_format(&x), y, &y_format, shown)
+            draw_on(area, c, &title, legend, x.clone(), &linear_format(&x), y, &y_format, shown, lines)
         }
         XScale::Log => {
             let (lo, hi) = if x1 > x0 { (x0 / 1.1, x1 * 1.1) } else { (x0 / 2.0, x0 * 2.0) };
@@ -112,7 +125,7 @@ where
             let (legend, y) = place_legend(area, c, &title, (lo..hi).log_scale(), y, &shown)?;
             let y_format = linear_format(&y);
             let x = (lo..hi).log_scale().with_key_points(bold).with_light_points(light);
-            draw_on(area, c, &title, legend, x, &log_label, y, &y_format, shown)
+            draw_on(area, c, &title, legend, x, &log_label, y, &y_format, shown, lines)
         }
     }
 }
@@ -336,6 +349,7 @@ fn draw_on<DB: DrawingBackend, X>(
     y: std::ops::Range<f64>,
     y_format: &dyn Fn(&f64) -> String,
     shown: impl Fn(f64, f64) -> bool,
+    lines: Lines,
 ) -> Result<()>
 where
     DB::ErrorType: 'static,
@@ -367,7 +381,7 @@ where
         }
         // The measured trace is drawn wider, under the model's: where they agree it shows as
         // a dark edge on both sides of the model's line instead of vanishing beneath it.
-        let width = if s.color == 0 { 3 } else { 1 };
+        let width = if s.color == 0 && lines == Lines::WideMeasured { 3 } else { 1 };
         let drawn = chart
             .draw_series(LineSeries::new(points, color.stroke_width(width)))
             .map_err(|e| anyhow!("{e}"))?;
@@ -401,7 +415,7 @@ pub fn write_panels(path: &Path, charts: &[Chart], scale: XScale) -> Result<()> 
     let size = (800, 500 + 300 * charts.len().saturating_sub(1) as u32);
     match path.extension().and_then(|e| e.to_str()) {
         Some("svg") => {
-            let text = svg_text(size, |root| draw_panels(root, charts, scale))?;
+            let text = svg_text(size, |root| draw_panels(root, charts, scale, Lines::WideMeasured))?;
             crate::files::write_atomic(path, text.as_bytes())
         }
         Some("png") => {
@@ -410,7 +424,9 @@ pub fn write_panels(path: &Path, charts: &[Chart], scale: XScale) -> Result<()> 
             let tmp = crate::files::partial_file_with_suffix(crate::files::output_dir(path), ".partial.png")?;
             {
                 let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
-                draw_panels(&root, charts, scale)?;
+                // Thin: the bitmap backend joins wide polylines with unbounded miters, which
+                // draw spikes where a loop turns back on itself.
+                draw_panels(&root, charts, scale, Lines::Thin)?;
                 root.present().map_err(|e| anyhow!("{e}"))?;
             }
             crate::files::persist(tmp, path)
@@ -423,19 +439,20 @@ fn draw_panels<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     charts: &[Chart],
     scale: XScale,
+    lines: Lines,
 ) -> Result<()>
 where
     DB::ErrorType: 'static,
 {
     for (panel, chart) in area.split_evenly((charts.len().max(1), 1)).iter().zip(charts) {
-        draw(panel, chart, scale)?;
+        draw(panel, chart, scale, lines)?;
     }
     Ok(())
 }
 
 /// Stacked panels as SVG text (for inlining in HTML); `size` is the whole figure's.
 pub fn svg_panels(charts: &[Chart], size: (u32, u32), scale: XScale) -> Result<String> {
-    svg_text(size, |root| draw_panels(root, charts, scale))
+    svg_text(size, |root| draw_panels(root, charts, scale, Lines::WideMeasured))
 }
 
 /// One SVG document of `size` drawn by `draw` on its root area. The document is presented once,
@@ -549,7 +566,7 @@ pub fn bars_svg(bars: &Bars, size: (u32, u32)) -> Result<String> {
 
 /// The chart as SVG text (for inlining in HTML).
 pub fn svg(chart: &Chart, size: (u32, u32)) -> Result<String> {
-    svg_text(size, |root| draw(root, chart, XScale::Linear))
+    svg_text(size, |root| draw(root, chart, XScale::Linear, Lines::WideMeasured))
 }
 
 /// Every `step`-th point (plots need no more than a few thousand).

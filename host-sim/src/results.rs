@@ -110,6 +110,10 @@ impl FileScoreRow {
 pub struct FitSummary {
     /// Canonical model spec.
     pub model: String,
+    /// The Jiles–Atherton form the fit used (the parameter file's `[ja] variant`), for models
+    /// with the J–A law: J–A coefficients mean something only in their form.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ja_variant: Option<&'static str>,
     /// Identified parameters by name.
     pub params: BTreeMap<&'static str, f64>,
     /// Mean NRMSE over the fit files.
@@ -282,8 +286,9 @@ impl fmt::Display for FitSummary {
         let (what, width) = if self.text.loops { ("magnetization model", 20) } else { ("model", 40) };
         writeln!(
             f,
-            "{what} `{}` fitted to {fitted} {}: {} evaluations in {:.1} s (seed {})",
+            "{what} `{}`{} fitted to {fitted} {}: {} evaluations in {:.1} s (seed {})",
             self.model,
+            self.ja_variant.map(|v| format!(" (J–A form `{v}`)")).unwrap_or_default(),
             if self.text.loops { "loop file(s)" } else { "file(s)" },
             self.evaluations,
             self.text.seconds,
@@ -399,11 +404,12 @@ impl fmt::Display for CompareSummary {
             if let (Some(m), Some(y)) = (r.measured, r.model) {
                 writeln!(f, "  {:28} {:>14} {:>14}", "", "measured", "model")?;
                 for (name, x, y) in [
-                    ("coercivity H_c [A/m]", m.coercivity_a_per_m, y.coercivity_a_per_m),
-                    ("remanence M_r [A/m]", m.remanence_a_per_m, y.remanence_a_per_m),
+                    (crate::loops::COERCIVITY_LABEL, m.coercivity_a_per_m, y.coercivity_a_per_m),
+                    (crate::loops::REMANENCE_LABEL, m.remanence_a_per_m, y.remanence_a_per_m),
                     ("largest |M| [A/m]", m.max_magnetization_a_per_m, y.max_magnetization_a_per_m),
                 ] {
-                    writeln!(f, "  {name:28} {x:>14.4e} {y:>14.4e}")?;
+                    let (x, y) = (crate::loops::feature_text(x), crate::loops::feature_text(y));
+                    writeln!(f, "  {name:28} {x:>14} {y:>14}")?;
                 }
             }
         }

@@ -233,6 +233,20 @@ pub enum Warning {
         /// The count is after `--trim-start`.
         after_trim_start: bool,
     },
+    /// A loop whose largest |M| is below the smallest saturation magnetization the models hold.
+    WeakLoop {
+        /// The loop files' largest |M| [A/m].
+        max_magnetization_a_per_m: f64,
+        /// The models' smallest M_s [A/m].
+        ms_floor_a_per_m: f64,
+    },
+    /// A loop traversed clockwise in the H–M plane (a ferromagnet's runs counterclockwise).
+    LoopClockwise {
+        /// The loop file.
+        file: String,
+        /// ∮ M dH over the loop's bounding box (positive: clockwise).
+        share: f64,
+    },
     /// A loop driven symmetrically whose magnetization is not centred on zero.
     LoopOffCentre {
         /// The loop file.
@@ -272,7 +286,7 @@ impl fmt::Display for Warning {
                 f,
                 "the loop is squarer than Jiles–Atherton can follow: α·M_s/(3a) = {ratio:.2} is at its limit \
                  (at ≥ 1 the model is multivalued and refused); the Preisach law follows square loops: \
-                 fit with `--model preisach`"
+                 try `--model preisach` and compare the two fits"
             ),
             Warning::IntegrationFailed { file, why } => {
                 write!(f, "{file}: the model integration failed at the best parameters: {why}")
@@ -382,6 +396,21 @@ impl fmt::Display for Warning {
                 }?;
                 write!(f, "; raise --max-samples to use more")
             }
+            Warning::WeakLoop { max_magnetization_a_per_m, ms_floor_a_per_m } => write!(
+                f,
+                "the loop's largest |M| is {max_magnetization_a_per_m:.3e} A/m, below the smallest saturation \
+                 magnetization the models hold ({ms_floor_a_per_m:.0e} A/m, for the ferromagnets this tool is made \
+                 for): M_s is held there, and the fit follows the loop only as a loop far from saturation can; does \
+                 the header name the file's unit? (M in kA/m under an A/m header reads 1000× too small; `M(kA/m)` \
+                 converts)"
+            ),
+            Warning::LoopClockwise { file, share } => write!(
+                f,
+                "{file}: the loop runs clockwise in the H–M plane (∮ M dH = +{:.0} % of its bounding box): a \
+                 ferromagnet's loop runs counterclockwise, its rising branch below the falling one; are the rows in \
+                 reverse time order? (the fit follows the file's order)",
+                share * 100.0
+            ),
             Warning::LoopOffCentre { file, centre_a_per_m, share, flux_density } => {
                 let offset = if *flux_density {
                     format!("B offset by {:.4} T", centre_a_per_m * 4e-7 * std::f64::consts::PI)

@@ -899,7 +899,22 @@ fn malformed_loop_files_are_refused_with_their_line() {
     let dir = tempfile::tempdir().unwrap();
     for (name, text, expected) in [
         ("few.csv", "H [kA/m],B [T]\n1,0.1\n2,0.2\n", vec!["few.csv:", "at least 5"]),
-        ("units.csv", "H [furlong],B [T]\n1,0.1\n2,0.2\n", vec!["units.csv:1:", "expected H with a unit"]),
+        (
+            "units.csv",
+            "H [furlong],B [T]\n1,0.1\n2,0.2\n",
+            vec!["units.csv:1:1: header `H [furlong]`: unit `furlong` of H is not one of A/m, kA/m, Oe"],
+        ),
+        // A unit outside brackets is a unit: never passed over as A/m or T.
+        (
+            "slash_units.csv",
+            "H/kOe,B/T\n1,0.1\n2,0.2\n",
+            vec!["slash_units.csv:1:1: header `H/kOe`: unit `kOe` of H is not one of A/m, kA/m, Oe"],
+        ),
+        (
+            "named_b.csv",
+            "H(A/m),B_meas\n1,0.1\n2,0.2\n",
+            vec!["named_b.csv:1:2: header `B_meas`: unit `meas` of B is not one of T, mT, G"],
+        ),
         (
             "nan.csv",
             "H [kA/m],B [T]\n1,0.1\n2,nan\n3,0.3\n4,0.4\n5,0.5\n",

@@ -151,3 +151,91 @@ fn a_loop_fit_reports_the_values_it_writes() {
     let again = loops::run(model, &written, &f.h, m.h_max).unwrap();
     assert_eq!(fit.nrmse[0], host_sim::fit::nrmse(&f.value, &again), "the NRMSE of the written set");
 }
+
+/// A unit written after a `/`, `_` or space is read as in brackets: the same loop in Oe and T
+/// under each header form gives the same SI points (a header `H/Oe` read as A/m would shrink
+/// every field 79.6×).
+#[test]
+fn a_unit_outside_brackets_is_converted_as_in_brackets() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows: String =
+        (0..20).map(|k| format!("{},{}\n", 10.0 * k as f64 - 100.0, 0.05 * k as f64 - 0.4)).collect();
+    let read = |header: &str| {
+        let path = dir.path().join("loop.csv");
+        std::fs::write(&path, format!("{header}\n{rows}")).unwrap();
+        loops::read(&path).unwrap_or_else(|e| panic!("{header}: {e:#}"))
+    };
+    let brackets = read("H(Oe),B(T)");
+    assert!((brackets.h[0] + 100.0 * 1e3 / (4.0 * std::f64::consts::PI)).abs() < 1e-9, "{}", brackets.h[0]);
+    for header in ["H/Oe,B/T", "H_Oe,B_T", "H Oe,B T", "H / Oe,B / T", "h/Oe,b/T"] {
+        let other = read(header);
+        assert_eq!((&other.h, &other.value), (&brackets.h, &brackets.value), "{header}");
+    }
+}
+
+/// Rows `H,M` of a counterclockwise loop of a ferromagnet-like shape, ±2 kA/m, M up to `m_max`:
+/// the falling branch, then the rising one.
+fn tanh_loop_rows(m_max: f64) -> Vec<String> {
+    let branch = |sign: f64| {
+        (0..=100).map(move |k| {
+            let h = sign * (2000.0 - 40.0 * k as f64);
+            format!("{h},{}", m_max * ((h + sign * 300.0) / 500.0).tanh())
+        })
+    };
+    branch(1.0).chain(branch(-1.0)).collect()
+}
+
+/// `gma fit --model ja --json` of the loop file `path`, which must succeed: its JSON.
+fn fit_loop_json(path: &std::path::Path) -> serde_json::Value {
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_gma"))
+        .args(["fit", "--model", "ja", "--json", path.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+fn warnings(j: &serde_json::Value) -> Vec<String> {
+    j["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap().to_string()).collect()
+}
+
+/// A loop whose magnetization is far below the smallest M_s the models hold (a weak sample, or
+/// M in kA/m under an A/m header) is fitted within the models' range and said to be, not
+/// answered with the start values at an NRMSE of thousands of per cent; the fit names its J–A
+/// form.
+#[test]
+fn a_weak_loop_is_fitted_within_the_models_range_and_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("weak.csv");
+    std::fs::write(&path, format!("H,M\n{}\n", tanh_loop_rows(1.5).join("\n"))).unwrap();
+    let j = fit_loop_json(&path);
+    assert_eq!(j["ja_variant"], "bulk", "{j:#}");
+    assert_eq!(j["start"]["kept"], false, "{j:#}");
+    assert!(j["nrmse_fit"].as_f64().unwrap() < 1.0, "{j:#}");
+    let w = warnings(&j);
+    assert!(
+        w.iter()
+            .any(|w| w.starts_with("the loop's largest |M| is 1.500e0 A/m, below the smallest saturation")),
+        "{w:?}"
+    );
+    assert!(w.iter().any(|w| w.starts_with("`ms_a_per_m` = 1.0000e3 ended at the edge")), "{w:?}");
+}
+
+/// A loop file whose rows run backwards in time traverses its loop clockwise, which no
+/// ferromagnet does: said, with the file; in time order nothing is said.
+#[test]
+fn a_loop_traversed_clockwise_is_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("loop.csv");
+    let said = |rows: &[String]| -> Vec<String> {
+        std::fs::write(&path, format!("H(A/m),M(A/m)\n{}\n", rows.join("\n"))).unwrap();
+        warnings(&fit_loop_json(&path))
+    };
+    let rows = tanh_loop_rows(8e5);
+    let reversed: Vec<String> = rows.iter().rev().cloned().collect();
+    let clockwise = |w: &[String]| w.iter().any(|w| w.contains("the loop runs clockwise in the H–M plane"));
+    assert!(!clockwise(&said(&rows)), "{:?}", said(&rows));
+    let backwards = said(&reversed);
+    let named = format!("{}: the loop runs clockwise", path.display());
+    assert!(clockwise(&backwards) && backwards.iter().any(|w| w.starts_with(&named)), "{backwards:?}");
+}

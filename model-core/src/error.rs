@@ -56,9 +56,9 @@ pub(crate) fn positive(name: &'static str, value: f32) -> Result<f32, ParamError
 }
 
 /// Largest saturation magnetization accepted [A/m] (iron: 1.7e6; Terfenol-D: about 7.6e5).
-pub(crate) const MS_MAX: f32 = 1.0e7;
+pub const MS_MAX: f32 = 1.0e7;
 /// Smallest saturation magnetization accepted [A/m]: M/M_s must stay representable.
-pub(crate) const MS_MIN: f32 = 1.0e3;
+pub const MS_MIN: f32 = 1.0e3;
 
 /// A saturation magnetization within [[`MS_MIN`], [`MS_MAX`]].
 pub(crate) fn saturation(name: &'static str, value: f32) -> Result<f32, ParamError> {

@@ -37,7 +37,11 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
     })?;
     p.warn_about_inputs();
     let Data::Recordings(fit_files, val_files) = &p.data else {
-        bail!("diagnose works on displacement recordings; for magnetization loops use `gma fit`, `gma compare` or `gma report`");
+        bail!(
+            "diagnose works on displacement recordings; for magnetization loops use `gma fit`, `gma compare` or \
+             `gma report` (to compare J–A forms or laws on a loop, fit each: `--model ja` with `[ja] variant` set \
+             in `--params`, or `--model preisach`, and compare their NRMSE)"
+        );
     };
     if a.ja_variants {
         check_ja_variants(p.spec)?;

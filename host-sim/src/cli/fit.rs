@@ -57,6 +57,11 @@ fn replaces_only_a_parameter_file(out: &std::path::Path) -> Result<()> {
 }
 
 /// Runs `gma fit`.
+/// The J–A form a model with the J–A law runs (`[ja] variant`); None for other laws.
+fn ja_variant(spec: model_core::ModelSpec, p: &model_core::ActuatorParams) -> Option<&'static str> {
+    (spec.law() == model_core::MagnetizationLaw::JilesAtherton).then(|| p.ja.variant.name())
+}
+
 /// The header of a fitted parameter file: what made it, its fit (and validation) NRMSE, the
 /// parameters held fixed (`# fixed: NAME`, which readers ignore), and where it came from: version,
 /// date and every input's digest.
@@ -196,6 +201,7 @@ pub(crate) fn fit_recordings(
     }
     let summary = FitSummary {
         model: p.spec.to_string(),
+        ja_variant: ja_variant(p.spec, &res.params),
         params: res.identified.iter().copied().collect(),
         nrmse_fit: res.fit.mean_nrmse(),
         nrmse_val,
@@ -262,6 +268,7 @@ pub(crate) fn fit_loops(
     }
     let summary = FitSummary {
         model: spec.to_string(),
+        ja_variant: ja_variant(spec, &p.init),
         params: res.params.iter().copied().collect(),
         nrmse_fit: res.nrmse.iter().sum::<f64>() / res.nrmse.len() as f64,
         nrmse_val: (!val_nrmse.is_empty()).then(|| val_nrmse.iter().sum::<f64>() / val_nrmse.len() as f64),

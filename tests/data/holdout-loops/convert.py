@@ -7,7 +7,8 @@ Each source is a Princeton MicroMag VSM file: field mu0*H [T] and moment [A m^2]
 "adjusted" by the instrument software (slope correction given in the header). The adjusted pair
 (the last two columns of each data row) is kept. H = field / mu0 [A/m]. The sample volume is not
 recorded ("Volume N/A"), so each loop's moment is scaled so that its largest |M| is M_NORMALISED:
-M [A/m] is known up to that one factor, to which a loop fit's NRMSE is invariant (README.md).
+M [A/m] is known up to that one factor, to which the J-A equations are invariant but the fit
+not quite (the models' limit |alpha| < 1 and the search's M_s range: README.md).
 """
 import math
 import sys
