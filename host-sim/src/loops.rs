@@ -117,8 +117,16 @@ fn unit_factor(header: &str) -> std::result::Result<(char, f64), String> {
 }
 
 /// For a header that is not a recording's: a hint when its cells name loop quantities (H, B, M
-/// with units, or the loop columns) in a layout a loop file does not have.
+/// with units, or the loop columns) in a layout a loop file does not have, or are a headerless
+/// loop file's two numbers (read where only a recording can go, e.g. `simulate --drive`).
 pub(crate) fn loop_header_hint(headers: &csv::StringRecord) -> Option<String> {
+    if headers.len() == 2 && headers.iter().all(|c| c.trim().parse::<f64>().is_ok()) {
+        return Some(
+            ": the first line is two numbers, as in a magnetization-loop file without a header (H [A/m], B \
+             [T]); this command reads a recording with a `time_s` column (docs/formats.md)"
+                .to_string(),
+        );
+    }
     let loop_like = headers.iter().filter(|c| unit_factor(c).is_ok() || c.trim() == "field_A_per_m").count();
     (loop_like > 0).then(|| {
         ": if this is a magnetization loop, a loop file has two columns, H then B or M (e.g. \

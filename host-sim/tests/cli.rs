@@ -1228,3 +1228,16 @@ fn report_writes_each_models_parameters_that_compare_reproduces() {
     assert!(!e.contains("diagnos"), "refused before the ladder: {e}");
     assert_eq!(std::fs::read(first).unwrap(), before);
 }
+
+/// A mass–spring–damper outside what a model's `mech` holds at the sample rate is refused with
+/// its f_n and ζ, not printed as rounding (1e-30 kg stepped to 1e-29 µm where its lag reaches
+/// 2.8 µm; 1e30 kg went negative under a positive force).
+#[test]
+fn mechanics_outside_what_the_model_holds_is_refused_with_its_mode() {
+    for (mass, said) in [("1e-30", "f_n = 5.0077e17 Hz, ζ = 4.7673e14"), ("1e30", "f_n = 5.0077e-13 Hz")] {
+        let o = gma(&["mechanics", "--mass-kg", mass]);
+        common::refused(&o, &[&format!("--mass-kg {mass}"), said, "mech.natural_frequency_hz"], mass);
+    }
+    let o = gma(&["mechanics", "--damping-n-s-per-m", "0"]);
+    common::refused(&o, &["ζ = 0.0000e0", "mech.damping_ratio", ">= 1e-3"], "undamped");
+}

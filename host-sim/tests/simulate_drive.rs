@@ -207,6 +207,14 @@ fn the_initial_state_compare_estimated_gives_the_run_compare_scored() {
         &["--initial-excursion"],
         "a NaN state",
     );
+    // A headerless loop file given as the drive is said to be one, not only `no time_s column`.
+    let headerless = dir.path().join("loop.csv");
+    std::fs::write(&headerless, "-40000,-0.95\n0,0.3\n40000,0.95\n0,-0.3\n-40000,-0.95\n").unwrap();
+    refused(
+        &gma(&["simulate", "--model", "ja", "--drive", headerless.to_str().unwrap(), "--out", "x.csv"]),
+        &["loop.csv:1: no `time_s` column", "as in a magnetization-loop file without a header"],
+        "a headerless loop file as the drive",
+    );
 }
 
 #[test]

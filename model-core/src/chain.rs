@@ -55,6 +55,12 @@ impl ModalMechanics {
     /// displacement the other bounds allow, so finite.
     pub const MIN_DAMPING_RATIO: f32 = 1e-3;
 
+    /// Largest damping ratio accepted: beyond it the mode is a first-order lag of τ = 2ζ/ω_n
+    /// (a real actuator's modes: ζ below 10), and far beyond (ζ ≳ 1e8) the overdamped step's
+    /// slow pole ω_n (ζ − √(ζ² − 1)) cancels to 0 even in f64 (a 1e-30 kg mass stepped to 1e-29 µm
+    /// where a lag reaches 2.8 µm).
+    pub const MAX_DAMPING_RATIO: f32 = 1e3;
+
     /// Largest natural frequency accepted [Hz]: far above any rod's first mode and any sample
     /// rate, and low enough that ω_n² stays finite in f32 (at 1e30 Hz the unit mass 1/ω_n² was 0
     /// and the set was refused as `mech.mass_kg`, a name the parameter file does not have).
@@ -76,6 +82,12 @@ impl ModalMechanics {
         )?;
         let zeta =
             check("mech.damping_ratio", self.damping_ratio, |z| z >= Self::MIN_DAMPING_RATIO, ">= 1e-3")?;
+        let zeta = check(
+            "mech.damping_ratio",
+            zeta,
+            |z| z <= Self::MAX_DAMPING_RATIO,
+            "<= 1e3 (more damped, the mode is a first-order lag of 2 damping_ratio / (2 pi f_n))",
+        )?;
         let w = 2.0 * core::f32::consts::PI * fn_hz;
         Ok(MassSpringDamper {
             mass_kg: 1.0 / (w * w),

@@ -78,3 +78,23 @@ fn a_natural_frequency_beyond_f32_is_refused_by_its_own_name() {
     let msd = low.unit_gain().unwrap();
     assert!(msd.mass_kg.is_finite() && msd.damping_n_s_per_m.is_finite(), "{msd:?}");
 }
+
+/// At the largest damping ratio accepted the step still follows the first-order lag it tends to
+/// (τ = 2ζ/ω_n); beyond it the mode is refused by name: far beyond, the overdamped step's slow
+/// pole cancelled to 0.
+#[test]
+fn an_overdamped_mode_follows_its_lag_up_to_the_largest_damping_ratio() {
+    let dt = 1e-4f32;
+    let at_limit =
+        ModalMechanics { natural_frequency_hz: 1584.0, damping_ratio: ModalMechanics::MAX_DAMPING_RATIO };
+    let zoh = at_limit.discretised(dt).unwrap();
+    let tau = 2.0 * f64::from(at_limit.damping_ratio) / (2.0 * std::f64::consts::PI * 1584.0);
+    let mut s = MechState::default();
+    for n in 1..=20 {
+        let y = f64::from(zoh.step(&mut s, 1.0));
+        let lag = 1.0 - (-(n as f64) * f64::from(dt) / tau).exp();
+        assert!((y - lag).abs() < 1e-3 * lag, "sample {n}: {y} against the lag's {lag}");
+    }
+    let beyond = ModalMechanics { damping_ratio: 1.01 * ModalMechanics::MAX_DAMPING_RATIO, ..at_limit };
+    assert_eq!(beyond.discretised(dt).err().map(|e| e.name()), Some("mech.damping_ratio"));
+}

@@ -64,6 +64,24 @@ pub fn run(a: &MechanicsArgs) -> Result<()> {
         stiffness_n_per_m: a.stiffness_n_per_m,
     };
     let zoh = SecondOrderZoh::new(p, 1.0 / a.sample_rate_hz).context("mechanics parameters")?;
+    // Within what a model's `mech` accepts at this sample rate (f_n, ζ and a step that decays in
+    // f32): outside it the printed response would be rounding, not mechanics.
+    let modal = model_core::chain::ModalMechanics {
+        natural_frequency_hz: p.natural_frequency_hz() as f32,
+        damping_ratio: p.damping_ratio() as f32,
+    };
+    if let Err(e) = modal.discretised(1.0 / a.sample_rate_hz) {
+        bail!(
+            "--mass-kg {:?}, --damping-n-s-per-m {:?}, --stiffness-n-per-m {:?} give f_n = {:.4e} Hz, ζ = {:.4e}, which the \
+             discretised mechanics at {:?} Hz does not hold: {e}",
+            a.mass_kg,
+            a.damping_n_s_per_m,
+            a.stiffness_n_per_m,
+            modal.natural_frequency_hz,
+            modal.damping_ratio,
+            a.sample_rate_hz
+        );
+    }
     let j = a.json;
     let compliance_m_per_n = 1.0 / f64::from(a.stiffness_n_per_m);
     say!(j, "natural frequency f_n = {:.1} Hz", p.natural_frequency_hz());
