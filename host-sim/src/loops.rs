@@ -307,20 +307,28 @@ fn check_content(f: &LoopFile, kept: &str) -> Result<()> {
 /// A loop traversed clockwise in the H–M plane: a ferromagnet's loop runs counterclockwise (the
 /// rising branch below the falling one), ∮ M dH < 0, so a positive area over 1 % of the loop's
 /// bounding box says the rows are in reverse time order. Only for files that run (nearly) a
-/// whole loop: the H path's total variation at least 1.8 × its range.
+/// whole loop from an end of the field's range: the H path's total variation from there at
+/// least 1.8 × its range.
 fn clockwise(f: &LoopFile) -> Option<Warning> {
-    let m = f.magnetization();
     let span = |v: &[f64]| {
         v.iter().fold(f64::INFINITY, |a, &x| a.min(x))..v.iter().fold(f64::NEG_INFINITY, |a, &x| a.max(x))
     };
-    let (h_span, m_span) = (span(&f.h), span(&m));
-    let travel: f64 = f.h.windows(2).map(|w| (w[1] - w[0]).abs()).sum();
+    let h_span = span(&f.h);
+    // From the first point at an end of the field's range: an initial magnetization curve before
+    // it (from the demagnetized state) is not part of the loop, and closing it back to its start
+    // would add its own area.
+    let near_end = |h: f64| (h - h_span.start).min(h_span.end - h) <= 0.02 * (h_span.end - h_span.start);
+    let first = f.h.iter().position(|&h| near_end(h))?;
+    let all_m = f.magnetization();
+    let (h, m) = (&f.h[first..], &all_m[first..]);
+    let m_span = span(m);
+    let travel: f64 = h.windows(2).map(|w| (w[1] - w[0]).abs()).sum();
     if travel < 1.8 * (h_span.end - h_span.start) {
         return None;
     }
     // ∮ M dH by trapezoids, closed from the last point back to the first.
-    let n = f.h.len();
-    let area: f64 = (0..n).map(|k| 0.5 * (m[k] + m[(k + 1) % n]) * (f.h[(k + 1) % n] - f.h[k])).sum();
+    let n = h.len();
+    let area: f64 = (0..n).map(|k| 0.5 * (m[k] + m[(k + 1) % n]) * (h[(k + 1) % n] - h[k])).sum();
     let share = area / ((h_span.end - h_span.start) * (m_span.end - m_span.start));
     (share > 0.01).then(|| Warning::LoopClockwise { file: f.name.clone(), share })
 }
@@ -899,7 +907,7 @@ pub fn fit_shown(
         // pressed against that limit is held by it, not by the loop.
         if let (LoopModel::JilesAtherton(_), Some(&alpha)) = (model, best.get(2)) {
             if alpha.abs() >= ALPHA_LIMIT_WARNING {
-                warnings.push(Warning::AtEdge { param: "alpha", value: alpha, lo: -1.0, hi: 1.0 });
+                warnings.push(Warning::AlphaAtLimit { alpha });
             }
         }
     }

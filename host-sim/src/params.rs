@@ -477,7 +477,10 @@ pub fn to_toml(p: &ActuatorParams, header: &str) -> Result<String> {
 /// fitted (a file is kept whole, so that it loads into any model).
 pub fn to_toml_for(p: &ActuatorParams, header: &str, spec: ModelSpec) -> Result<String> {
     let used = tables_used(spec);
-    let unused = |t: &str| parameter_tables().any(|u| u == t) && !used.contains(&t);
+    // `[amp]`'s gain drives every model from `command_V` when a file has no `current_A` (and is
+    // fitted then), with `amp` in the spec or not: never said to be unused.
+    let amp = table_of(AMPLIFIER_GAIN.key);
+    let unused = |t: &str| parameter_tables().any(|u| u == t) && !used.contains(&t) && t != amp;
     let note = format!("not used by model `{spec}`: the start values', not fitted");
     let mut out = String::new();
     let mut in_table = false;
@@ -652,7 +655,7 @@ mod tests {
         let p = ActuatorParams::TERFENOL_DEMO;
         let text = to_toml_for(&p, "gma fit --model ja+mech", spec("ja+mech")).unwrap();
         let note = "not used by model `ja+mech`: the start values', not fitted";
-        for unused in ["[amp]", "[preisach]", "[aftereffect]", "[thermal]", "[linear]", "[anhysteretic]"] {
+        for unused in ["[preisach]", "[aftereffect]", "[thermal]", "[linear]", "[anhysteretic]"] {
             assert_eq!(
                 text.matches(&format!("# {unused}: {note}\n{unused}\n")).count(),
                 1,
@@ -666,11 +669,12 @@ mod tests {
             );
         }
         // What the model uses, and the core every model uses, is not marked.
-        for used in ["[ja]", "[mech]", "[magnetostriction]", "[coil]"] {
+        // `[amp]`: its gain drives any model from `command_V`.
+        for used in ["[ja]", "[mech]", "[magnetostriction]", "[coil]", "[amp]"] {
             assert!(!text.contains(&format!("# {used}")), "{used}: {text}");
         }
         assert!(text.lines().any(|l| l == "rod_length_m = 0.08"), "{text}");
-        assert_eq!(text.matches("not used by model").count(), 8, "{text}");
+        assert_eq!(text.matches("not used by model").count(), 7, "{text}");
         assert_eq!(parse_file("p.toml", &text, spec("ja+mech")).unwrap().params, p);
     }
 

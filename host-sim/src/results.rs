@@ -402,14 +402,14 @@ impl fmt::Display for CompareSummary {
                 writeln!(f, "{a}")?;
             }
             if let (Some(m), Some(y)) = (r.measured, r.model) {
-                writeln!(f, "  {:28} {:>14} {:>14}", "", "measured", "model")?;
+                writeln!(f, "  {:30} {:>14} {:>14}", "", "measured", "model")?;
                 for (name, x, y) in [
                     (crate::loops::COERCIVITY_LABEL, m.coercivity_a_per_m, y.coercivity_a_per_m),
                     (crate::loops::REMANENCE_LABEL, m.remanence_a_per_m, y.remanence_a_per_m),
                     ("largest |M| [A/m]", m.max_magnetization_a_per_m, y.max_magnetization_a_per_m),
                 ] {
                     let (x, y) = (crate::loops::feature_text(x), crate::loops::feature_text(y));
-                    writeln!(f, "  {name:28} {x:>14} {y:>14}")?;
+                    writeln!(f, "  {name:30} {x:>14} {y:>14}")?;
                 }
             }
         }

@@ -240,6 +240,12 @@ pub enum Warning {
         /// The models' smallest M_s [A/m].
         ms_floor_a_per_m: f64,
     },
+    /// A J–A loop fit whose α ended at the model's limit |α| < 1 (α is not searched: its ratio
+    /// α·M_s/(3a) is).
+    AlphaAtLimit {
+        /// The fitted α.
+        alpha: f64,
+    },
     /// A loop traversed clockwise in the H–M plane (a ferromagnet's runs counterclockwise).
     LoopClockwise {
         /// The loop file.
@@ -403,6 +409,12 @@ impl fmt::Display for Warning {
                  for): M_s is held there, and the fit follows the loop only as a loop far from saturation can; does \
                  the header name the file's unit? (M in kA/m under an A/m header reads 1000× too small; `M(kA/m)` \
                  converts)"
+            ),
+            Warning::AlphaAtLimit { alpha } => write!(
+                f,
+                "J–A's α = {alpha:.4e} ended at the model's limit |α| < 1 (the search moves α·M_s/(3a), which \
+                 does not bound α when a is large against M_s): the model holds the fit there, not the loop; α \
+                 scales as 1/M, so for a file whose M is known only up to a factor the limit moves with it"
             ),
             Warning::LoopClockwise { file, share } => write!(
                 f,

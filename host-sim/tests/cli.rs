@@ -1208,8 +1208,9 @@ fn report_writes_each_models_parameters_that_compare_reproduces() {
             "{model}: report {reported}, compare {compared}"
         );
     }
-    // Its own first parameter file as the start: refused at once, nothing overwritten.
-    let first = ladder[0]["params_file"].as_str().unwrap();
+    // A later rung's file as the start (re-seeding from it): refused at once, before the ladder
+    // could name that file again, nothing overwritten.
+    let first = ladder[ladder.len() - 1]["params_file"].as_str().unwrap();
     let before = std::fs::read(first).unwrap();
     let o = gma(&[
         "report",

@@ -173,13 +173,13 @@ fn a_unit_outside_brackets_is_converted_as_in_brackets() {
     }
 }
 
-/// Rows `H,M` of a counterclockwise loop of a ferromagnet-like shape, ±2 kA/m, M up to `m_max`:
-/// the falling branch, then the rising one.
-fn tanh_loop_rows(m_max: f64) -> Vec<String> {
+/// Rows `H,M` of a counterclockwise loop of a ferromagnet-like shape, ±2 kA/m, M up to `m_max`,
+/// branches `coercive` [A/m] either side of H = 0: the falling branch, then the rising one.
+fn tanh_loop_rows(m_max: f64, coercive: f64) -> Vec<String> {
     let branch = |sign: f64| {
         (0..=100).map(move |k| {
             let h = sign * (2000.0 - 40.0 * k as f64);
-            format!("{h},{}", m_max * ((h + sign * 300.0) / 500.0).tanh())
+            format!("{h},{}", m_max * ((h + sign * coercive) / 500.0).tanh())
         })
     };
     branch(1.0).chain(branch(-1.0)).collect()
@@ -207,7 +207,7 @@ fn warnings(j: &serde_json::Value) -> Vec<String> {
 fn a_weak_loop_is_fitted_within_the_models_range_and_said() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("weak.csv");
-    std::fs::write(&path, format!("H,M\n{}\n", tanh_loop_rows(1.5).join("\n"))).unwrap();
+    std::fs::write(&path, format!("H,M\n{}\n", tanh_loop_rows(1.5, 300.0).join("\n"))).unwrap();
     let j = fit_loop_json(&path);
     assert_eq!(j["ja_variant"], "bulk", "{j:#}");
     assert_eq!(j["start"]["kept"], false, "{j:#}");
@@ -231,10 +231,18 @@ fn a_loop_traversed_clockwise_is_said() {
         std::fs::write(&path, format!("H(A/m),M(A/m)\n{}\n", rows.join("\n"))).unwrap();
         warnings(&fit_loop_json(&path))
     };
-    let rows = tanh_loop_rows(8e5);
+    let rows = tanh_loop_rows(8e5, 300.0);
     let reversed: Vec<String> = rows.iter().rev().cloned().collect();
     let clockwise = |w: &[String]| w.iter().any(|w| w.contains("the loop runs clockwise in the H–M plane"));
     assert!(!clockwise(&said(&rows)), "{:?}", said(&rows));
+    // The initial magnetization curve first (0 → +H_max from the demagnetized state), then a
+    // narrow loop: counterclockwise still (closed back to the curve's start it read +6 %).
+    let virgin: Vec<String> = (0..50)
+        .map(|k| 40.0 * k as f64)
+        .map(|h| format!("{h},{}", 8e5 * (h / 500.0).tanh()))
+        .chain(tanh_loop_rows(8e5, 50.0))
+        .collect();
+    assert!(!clockwise(&said(&virgin)), "{:?}", said(&virgin));
     let backwards = said(&reversed);
     let named = format!("{}: the loop runs clockwise", path.display());
     assert!(clockwise(&backwards) && backwards.iter().any(|w| w.starts_with(&named)), "{backwards:?}");

@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use model_core::{ActuatorParams, ModelSpec};
 use serde_json::json;
@@ -40,6 +40,22 @@ pub(crate) fn params_paths(dir: &Path, specs: &[ModelSpec]) -> Vec<PathBuf> {
         .collect()
 }
 
+/// The files in `dir` named as a ladder's parameter files (`params-K-….toml`).
+fn ladder_files_in(dir: &Path) -> Result<Vec<PathBuf>> {
+    let named = |n: &str| {
+        n.strip_prefix("params-").and_then(|r| r.split_once('-')).is_some_and(|(k, rest)| {
+            !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()) && rest.ends_with(".toml")
+        })
+    };
+    let entries =
+        std::fs::read_dir(dir).with_context(|| format!("cannot read the folder {}", display(dir)))?;
+    Ok(entries
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .filter(|p| p.file_name().and_then(|n| n.to_str()).is_some_and(named))
+        .collect())
+}
+
 /// Writes each model's parameter file (paths from [`params_paths`]), after checking them all.
 fn write_params(
     paths: &[PathBuf],
@@ -61,9 +77,14 @@ pub fn run(a: &ReportArgs) -> Result<()> {
         Some(dir) => Some((dir.as_path(), output_folder(dir)?)),
         None => None,
     };
-    // The given model's file is named before any work (the ladder's others only once found).
+    // Before any work: the given model's file, and every ladder file already in the folder (the
+    // ladder's other names are known only once found), against the inputs: re-seeding from an
+    // earlier rung's file is a natural next run, and would be overwritten after the ladder.
     if let Some((dir, _)) = params_folder {
         check_outputs(&[params_paths(dir, &[p.spec])[0].as_path()], &p.inputs)?;
+        for existing in ladder_files_in(dir)? {
+            check_outputs(&[existing.as_path()], &p.inputs)?;
+        }
     }
     p.warn_about_inputs();
     let j = a.mf.json;
@@ -82,13 +103,17 @@ pub fn run(a: &ReportArgs) -> Result<()> {
                 true,
             )?;
             let (page, nrmse_val) = loops::html(&spec.to_string(), &res, files, val_files)?;
+            // The page first: it shows a failed fit too.
+            write_atomic(&a.out, report::with_sections(page, &provenance_section).as_bytes())?;
             // As `gma fit` refuses to write an invalid loop model's parameters.
             let invalid: Vec<String> =
                 res.warnings.iter().filter(|w| w.invalidates()).map(|w| w.to_string()).collect();
             let params_file = match &params_folder {
                 Some(_) if !invalid.is_empty() => {
                     bail!(
-                        "the loop fit did not produce a valid model, no parameter file written: {}",
+                        "loop report written to {}, but the loop fit did not produce a valid model, so no parameter \
+                         file was written: {}",
+                        display(&a.out),
                         invalid.join("; ")
                     )
                 }
@@ -108,7 +133,6 @@ pub fn run(a: &ReportArgs) -> Result<()> {
                 }
                 None => None,
             };
-            write_atomic(&a.out, report::with_sections(page, &provenance_section).as_bytes())?;
             if let Some((_, folder)) = params_folder {
                 folder.keep();
             }
@@ -138,6 +162,8 @@ pub fn run(a: &ReportArgs) -> Result<()> {
                 Phase::start(p.opts.progress, "report: drawing the page (each model on each file)", 0);
             let html = report::html(&format!("gma report — {spec}"), &rungs, fit_files, val_files, "")?;
             let sections = report::uncertainty_html(&rungs, &uncertainties) + &provenance_section;
+            // The page first: the parameter files after it cannot cost the report.
+            write_atomic(&a.out, report::with_sections(html, &sections).as_bytes())?;
             let params_files = match &params_folder {
                 Some((dir, _)) => {
                     let specs: Vec<ModelSpec> = rungs.iter().map(|r| r.spec).collect();
@@ -166,7 +192,6 @@ pub fn run(a: &ReportArgs) -> Result<()> {
                 }
                 None => vec![None; rungs.len()],
             };
-            write_atomic(&a.out, report::with_sections(html, &sections).as_bytes())?;
             if let Some((_, folder)) = params_folder {
                 folder.keep();
             }
