@@ -304,32 +304,34 @@ fn check_content(f: &LoopFile, kept: &str) -> Result<()> {
     Ok(())
 }
 
+/// The smallest and largest of `v`.
+fn span(v: &[f64]) -> (f64, f64) {
+    v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), x| (l.min(*x), u.max(*x)))
+}
+
 /// A loop traversed clockwise in the H–M plane: a ferromagnet's loop runs counterclockwise (the
 /// rising branch below the falling one), ∮ M dH < 0, so a positive area over 1 % of the loop's
 /// bounding box says the rows are in reverse time order. Only for files that run (nearly) a
 /// whole loop from an end of the field's range: the H path's total variation from there at
 /// least 1.8 × its range.
 fn clockwise(f: &LoopFile) -> Option<Warning> {
-    let span = |v: &[f64]| {
-        v.iter().fold(f64::INFINITY, |a, &x| a.min(x))..v.iter().fold(f64::NEG_INFINITY, |a, &x| a.max(x))
-    };
-    let h_span = span(&f.h);
+    let (h_lo, h_hi) = span(&f.h);
     // From the first point at an end of the field's range: an initial magnetization curve before
     // it (from the demagnetized state) is not part of the loop, and closing it back to its start
     // would add its own area.
-    let near_end = |h: f64| (h - h_span.start).min(h_span.end - h) <= 0.02 * (h_span.end - h_span.start);
+    let near_end = |h: f64| (h - h_lo).min(h_hi - h) <= 0.02 * (h_hi - h_lo);
     let first = f.h.iter().position(|&h| near_end(h))?;
     let all_m = f.magnetization();
     let (h, m) = (&f.h[first..], &all_m[first..]);
-    let m_span = span(m);
+    let (m_lo, m_hi) = span(m);
     let travel: f64 = h.windows(2).map(|w| (w[1] - w[0]).abs()).sum();
-    if travel < 1.8 * (h_span.end - h_span.start) {
+    if travel < 1.8 * (h_hi - h_lo) {
         return None;
     }
     // ∮ M dH by trapezoids, closed from the last point back to the first.
     let n = h.len();
     let area: f64 = (0..n).map(|k| 0.5 * (m[k] + m[(k + 1) % n]) * (h[(k + 1) % n] - h[k])).sum();
-    let share = area / ((h_span.end - h_span.start) * (m_span.end - m_span.start));
+    let share = area / ((h_hi - h_lo) * (m_hi - m_lo));
     (share > 0.01).then(|| Warning::LoopClockwise { file: f.name.clone(), share })
 }
 
@@ -337,8 +339,6 @@ fn clockwise(f: &LoopFile) -> Option<Warning> {
 /// (its centre over 5 % of its half-swing off zero): a ferromagnet's symmetric loop is centred,
 /// so it is most often a search coil integrator's offset, which the loop fit does not remove.
 fn off_centre(f: &LoopFile) -> Option<Warning> {
-    let span =
-        |v: &[f64]| v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, u), x| (l.min(*x), u.max(*x)));
     let (h_lo, h_hi) = span(&f.h);
     let (m_lo, m_hi) = span(&f.magnetization());
     let symmetric_drive = (h_hi + h_lo).abs() <= 0.05 * (h_hi - h_lo);
