@@ -10,6 +10,10 @@
 //! ([`solver`]) with error control, f64, the drive evaluated at the stage times, the reversals
 //! of the field located as events, the sensor delay read from the dense output.
 
+// `!(x <= 1.0)` is meant: it is true for NaN too (a NaN error estimate rejects the step).
+// Index loops over several state vectors at once read like the solver's equations.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
 pub mod params;
 pub mod preisach;
 pub mod solver;
@@ -511,6 +515,8 @@ struct Layout {
 struct Disc {
     delta: f64,
     mem: Option<Memory>,
+    /// The field's running extreme in the direction `delta`.
+    h_ext: f64,
 }
 
 /// Everything observable at one instant.
@@ -744,7 +750,7 @@ impl Plant {
                 Memory::ac_demagnetised(ev, h0, PREISACH_DEMAG_REVERSALS)
             }
         });
-        let mut d = Disc { delta: 1.0, mem };
+        let mut d = Disc { delta: 1.0, mem, h_ext: h0 };
         let o = self.eval(sig, t, &y, None, &d);
         if o.field_rate < 0.0 {
             d.delta = -1.0;
@@ -777,7 +783,7 @@ fn run_segment(
     sig_t0: f64,
     t0: f64,
     t1: f64,
-    y: &mut Vec<f64>,
+    y: &mut [f64],
     disc: &mut Disc,
     queries: &[(f64, usize)],
     out: &mut dyn FnMut(usize, f64, &Obs),
@@ -800,7 +806,24 @@ fn run_segment(
     let mut bi = 0usize;
     let mut t = t0;
     let mut k1 = vec![0.0; n];
-    let g_eps = 1e-9 * plant.p.coil.turns_per_m;
+    let eps_h = (10.0 * opts.rtol).max(1e-13)
+        * (plant.p.coil.turns_per_m * plant.p.rig.current_limit_a + plant.p.coil.bias_a_per_m.abs());
+    // The rate of a field at rest is interpolation noise amplified by the fastest lag in
+    // front of the field; a reversed rate above this floor is a reversal at once.
+    let pp = &plant.p;
+    let mut tau_fast: f64 = 1e-3;
+    if plant.fx.amp {
+        tau_fast = tau_fast.min(pp.amp.tau_s);
+        if let Some(a2) = &pp.amp_second_order {
+            tau_fast = tau_fast.min(a2.b_s2.sqrt());
+        }
+    } else if pp.rig.current_loop_tau_s > 0.0 {
+        tau_fast = tau_fast.min(pp.rig.current_loop_tau_s);
+    }
+    if plant.fx.eddy {
+        tau_fast = tau_fast.min(pp.eddy_tau_s);
+    }
+    let g_noise = eps_h / tau_fast;
     let hyst = plant.hysteretic();
     let mut h = (t1 - t0).min(1e-6);
     let hmax = (t1 - t0).max(1e-12);
@@ -857,41 +880,55 @@ fn run_segment(
         let mut step = dp.dense(t, y, hs);
         let mut event = false;
         if hyst {
+            // A reversal: the field has retreated from its running extreme by more than
+            // eps_h (far above the dense output's error, so a field at rest, whose computed
+            // rate is only interpolation noise, never reverses), or its rate has turned above the
+            // noise floor g_noise. The reversal itself is then
+            // located as the zero of the field's rate and the step retaken to end there.
             let delta = disc.delta;
-            let mut rate_at = |tt: f64| {
+            let mut probe = |tt: f64| {
                 step.eval(tt, &mut dense_y);
                 rhs_count += 1;
-                plant.eval(sig, tt - sig_t0, &dense_y, None, disc).field_rate * delta
+                let o = plant.eval(sig, tt - sig_t0, &dense_y, None, disc);
+                (o.hrod, o.field_rate * delta)
             };
             let tm = t + 0.5 * hs;
-            let sm = rate_at(tm);
-            let se = rate_at(t + hs);
-            let bracket = if sm < -g_eps {
-                Some((t, tm))
-            } else if se < -g_eps {
-                Some((tm, t + hs))
+            let (hm_, sm) = probe(tm);
+            let (he_, se) = probe(t + hs);
+            let ext_m = if delta * (hm_ - disc.h_ext) > 0.0 { hm_ } else { disc.h_ext };
+            let bracket = if delta * (hm_ - disc.h_ext) < -eps_h || sm < -g_noise {
+                Some(tm)
+            } else if delta * (he_ - ext_m) < -eps_h || se < -g_noise {
+                Some(t + hs)
             } else {
                 None
             };
-            if let Some((mut lo, mut hi)) = bracket {
-                for _ in 0..200 {
-                    if hi - lo <= 1e-15 * hi.abs().max(1e-9) {
-                        break;
+            if let Some(tr) = bracket {
+                let (_, r0) = probe(t);
+                let te = if r0 <= 0.0 {
+                    t
+                } else {
+                    let (mut lo, mut hi) = (t, tr);
+                    for _ in 0..200 {
+                        if hi - lo <= 1e-15 * hi.abs().max(1e-9) {
+                            break;
+                        }
+                        let mid = 0.5 * (lo + hi);
+                        if probe(mid).1 < 0.0 {
+                            hi = mid;
+                        } else {
+                            lo = mid;
+                        }
                     }
-                    let mid = 0.5 * (lo + hi);
-                    if rate_at(mid) < 0.0 {
-                        hi = mid;
-                    } else {
-                        lo = mid;
-                    }
-                }
-                let te = hi;
+                    hi
+                };
                 let he = te - t;
                 if he <= 1e-14 * t.abs().max(1e-9) {
                     // The reversal is at t itself: switch and retry.
                     let o = plant.eval(sig, t - sig_t0, y, None, disc);
                     plant.commit(disc, o.hrod);
                     disc.delta = -disc.delta;
+                    disc.h_ext = o.hrod;
                     stats.events += 1;
                     need_k1 = true;
                     continue;
@@ -913,6 +950,8 @@ fn run_segment(
                 step = dp.dense(t, y, hs);
                 event = true;
                 landing = false;
+            } else {
+                disc.h_ext = if delta * (he_ - ext_m) > 0.0 { he_ } else { ext_m };
             }
         }
         // Accepted step [t, t + hs].
@@ -935,6 +974,7 @@ fn run_segment(
             plant.commit(disc, o.hrod);
             if event {
                 disc.delta = -disc.delta;
+                disc.h_ext = o.hrod;
                 stats.events += 1;
                 need_k1 = true;
             }
@@ -1152,6 +1192,7 @@ pub fn simulate_with(e: &Experiment, opts: &SolverOptions) -> Result<Recording, 
             if nd != d.delta {
                 plant.commit(&mut d, o.hrod);
                 d.delta = nd;
+                d.h_ext = o.hrod;
             }
             (y, d)
         }
