@@ -314,3 +314,103 @@ fn csv_has_the_documented_header_and_time_digits() {
     assert!(lines.next().unwrap().starts_with("0.0000000,"));
     assert_eq!(text.lines().count(), r.time_s.len() + 1);
 }
+
+#[test]
+fn second_order_amplifier_matches_its_frequency_response() {
+    let mut e = exp("amp", sine(500.0, 1.0, 0.0), 0.05);
+    let (k, a, b, c) = (1.0, 4.8e-4, 2.5e-8, 6.4e-4);
+    e.params.amp_second_order = Some(AmpSecondOrder { k_u: k, a_s: a, b_s2: b, c_s: c });
+    let r = simulate(&e).unwrap();
+    let w = 2.0 * PI * 500.0;
+    // G(jω) = k (1 + jωA)/(1 − Bω² + jCω).
+    let (nr, ni) = (k, k * w * a);
+    let (dr, di) = (1.0 - b * w * w, c * w);
+    let d2 = dr * dr + di * di;
+    let (gr, gi) = ((nr * dr + ni * di) / d2, (ni * dr - nr * di) / d2);
+    let mag = (gr * gr + gi * gi).sqrt();
+    assert!((mag - 0.84).abs() < 0.01, "|G(500 Hz)| = {mag}");
+    let mut worst: f64 = 0.0;
+    for (t, i) in r.time_s.iter().zip(&r.truth.current_a) {
+        if *t < 0.02 {
+            continue;
+        }
+        let ia = gr * (w * t).sin() + gi * (w * t).cos();
+        worst = worst.max((i - ia).abs());
+    }
+    eprintln!("second-order amp: |G| = {mag:.4}, worst {worst:e} A");
+    assert!(worst <= 1e-7, "worst {worst:e}");
+}
+
+#[test]
+fn aftereffect_step_is_the_documented_creep() {
+    let drive = Drive {
+        waveform: Waveform::Steps { levels: vec![0.0, 1.0], hold_s: 0.1 },
+        amplitude: 0.5,
+        offset: 0.0,
+    };
+    let mut e = exp("linear+aftereffect", drive, 0.2);
+    e.params.rig.current_loop_tau_s = 0.0;
+    let r = simulate(&e).unwrap();
+    let p = &e.params;
+    let m0 = p.linear.offset_a_per_m + p.linear.susceptibility * p.coil.bias_a_per_m;
+    let dm = p.linear.susceptibility * p.coil.turns_per_m * 0.5;
+    let (wf, tau) = (p.aftereffect.fraction, p.aftereffect.tau_s);
+    let mut worst: f64 = 0.0;
+    for (t, m) in r.time_s.iter().zip(&r.truth.magnetization_a_per_m) {
+        let s = t - 0.1;
+        let ma = if s < 0.0 { m0 } else { m0 + dm * ((1.0 - wf) + wf * (1.0 - (-s / tau).exp())) };
+        worst = worst.max((m - ma).abs());
+    }
+    eprintln!("aftereffect step: worst {:e} of the step", worst / dm);
+    assert!(worst <= 1e-8 * dm, "worst {worst:e}");
+}
+
+#[test]
+fn thermal_heating_and_rod_lag_closed_form() {
+    let drive =
+        Drive { waveform: Waveform::Steps { levels: vec![1.0], hold_s: 100.0 }, amplitude: 1.5, offset: 0.0 };
+    let mut e = exp("linear+thermal", drive.clone(), 20.0);
+    e.rate_hz = 100.0;
+    e.params.rig.current_loop_tau_s = 0.0;
+    let r = simulate(&e).unwrap();
+    let mut cold = exp("linear", drive, 20.0);
+    cold.rate_hz = 100.0;
+    cold.params.rig.current_loop_tau_s = 0.0;
+    let rc = simulate(&cold).unwrap();
+    let th = &e.params.thermal;
+    let rise = th.thermal_resistance_c_per_w * th.coil_resistance_ohm * 1.5 * 1.5;
+    let (tc, tr) = (th.tau_s, th.rod_tau_s);
+    let mut worst_t: f64 = 0.0;
+    let mut worst_y: f64 = 0.0;
+    for k in 0..r.time_s.len() {
+        let t = r.time_s[k];
+        let coil = rise * (1.0 - (-t / tc).exp());
+        let rod = rise * (1.0 - (tc * (-t / tc).exp() - tr * (-t / tr).exp()) / (tc - tr));
+        worst_t = worst_t.max((r.truth.temperature_c[k] - e.params.rig.ambient_c - coil).abs());
+        let dy = 1e6 * th.expansion_per_c * th.rod_length_m * rod;
+        worst_y = worst_y.max((r.truth.displacement_um[k] - rc.truth.displacement_um[k] - dy).abs());
+    }
+    eprintln!("thermal: worst {:e} °C, {:e} µm (rise {rise} °C)", worst_t, worst_y);
+    assert!(worst_t <= 1e-8 * rise);
+    assert!(worst_y <= 1e-8 * 1e6 * th.expansion_per_c * th.rod_length_m * rise);
+}
+
+#[test]
+fn a_history_start_continues_the_pre_drive() {
+    let d = sine(5.0, 1.2, 0.1);
+    let long = simulate(&exp("ja+mech+delay", d.clone(), 0.6)).unwrap();
+    let mut e = exp("ja+mech+delay", d.clone(), 0.2);
+    e.start = Start::History { drive: d, duration_s: 0.4 };
+    let r = simulate(&e).unwrap();
+    let span = range(&long.truth.displacement_um);
+    let mut worst: f64 = 0.0;
+    for k in 0..r.time_s.len() {
+        worst = worst.max((r.truth.displacement_um[k] - long.truth.displacement_um[4000 + k]).abs());
+        worst = worst.max(
+            (r.truth.magnetization_a_per_m[k] - long.truth.magnetization_a_per_m[4000 + k]).abs() / 7.65e5
+                * span,
+        );
+    }
+    eprintln!("history start vs one long run: {:e} of the span", worst / span);
+    assert!(worst / span <= 1e-6, "relative {:e}", worst / span);
+}
