@@ -414,3 +414,70 @@ fn a_history_start_continues_the_pre_drive() {
     eprintln!("history start vs one long run: {:e} of the span", worst / span);
     assert!(worst / span <= 1e-6, "relative {:e}", worst / span);
 }
+
+/// Brute-force 2-D Gauss–Legendre (composite) measure of {b ≤ β ≤ α ≤ a} for the interaction
+/// density, in (α, β) directly: an independent check of the closed-form/adaptive Everett.
+fn brute_everett(p: &PreisachParams, a: f64, b: f64) -> f64 {
+    let gl = [
+        (-0.906_179_845_938_664, 0.236_926_885_056_189_1),
+        (-0.538_469_310_105_683, 0.478_628_670_499_366_5),
+        (0.0, 0.568_888_888_888_888_9),
+        (0.538_469_310_105_683, 0.478_628_670_499_366_5),
+        (0.906_179_845_938_664, 0.236_926_885_056_189_1),
+    ];
+    let lor = |x: f64| 1.0 / (1.0 + x * x);
+    let su = p.interaction_spread_a_per_m.unwrap();
+    let dens = |al: f64, be: f64| {
+        let (h, u) = (0.5 * (al - be), 0.5 * (al + be));
+        lor((h - p.coercive_a_per_m) / p.spread_a_per_m) * lor(u / su)
+    };
+    let n = 400;
+    let da = (a - b) / n as f64;
+    let mut total = 0.0;
+    for i in 0..n {
+        for (xa, wa) in gl {
+            let al = b + da * (i as f64 + 0.5 + 0.5 * xa);
+            // β from b to α.
+            let m = 80;
+            let db = (al - b) / m as f64;
+            for j in 0..m {
+                for (xb, wb) in gl {
+                    let be = b + db * (j as f64 + 0.5 + 0.5 * xb);
+                    total += 0.25 * wa * wb * da * db * dens(al, be);
+                }
+            }
+        }
+    }
+    total
+}
+
+#[test]
+fn everett_function_matches_brute_force_and_memory_wipes_out() {
+    let p = Params::terfenol().preisach;
+    let ev = preisach::Everett::new(&p);
+    let hm = p.h_max_a_per_m;
+    assert!((ev.e(hm, -hm) - 1.0).abs() < 1e-14);
+    let tot = brute_everett(&p, hm, -hm);
+    for (a, b) in [(hm, -hm), (2.0e4, -5.0e3), (1.0e4, 2.0e3), (-3.0e3, -4.0e4)] {
+        let want = brute_everett(&p, a, b) / tot;
+        let got = ev.e(a, b);
+        eprintln!("E({a}, {b}) = {got:.12} (brute force {want:.12})");
+        assert!((got - want).abs() < 1e-9, "E({a}, {b}) = {got} vs {want}");
+    }
+    // Return-point memory: up to 2e4, down to −1e4, up to 2e4 again gives the first state back,
+    // and the minor loop is wiped out (an excursion beyond 2e4 ignores it).
+    let mut m = preisach::Memory::negative(&ev);
+    m.commit(&ev, 2.0e4, 1.0);
+    let first = m.up(&ev, 2.0e4, 1.0);
+    m.commit(&ev, -1.0e4, -1.0);
+    let low = m.up(&ev, -1.0e4, -1.0);
+    m.commit(&ev, 2.0e4, 1.0);
+    assert!((m.up(&ev, 2.0e4, 1.0) - first).abs() < 1e-15);
+    assert!(low < first);
+    let mut fresh = preisach::Memory::negative(&ev);
+    fresh.commit(&ev, 3.0e4, 1.0);
+    assert!((m.up(&ev, 3.0e4, 1.0) - fresh.up(&ev, 3.0e4, 1.0)).abs() < 1e-15);
+    // Saturation: all relays up at +H_max, all down at −H_max.
+    assert!((fresh.up(&ev, hm, 1.0) - 1.0).abs() < 1e-14);
+    assert!(fresh.up(&ev, -hm, -1.0).abs() < 1e-14);
+}
