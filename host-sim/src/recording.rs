@@ -214,7 +214,9 @@ impl Recording {
         max_samples: usize,
         opts: &ReadOptions,
     ) -> Result<ReadOutcome> {
-        let (delimiter, input) = separated(input).map_err(|e| crate::files::read_error(file, e))?;
+        let (delimiter, sep_line, input) = separated(input).map_err(|e| crate::files::read_error(file, e))?;
+        // The header's line: after a `sep=` line, the second.
+        let header_line = 1 + u64::from(sep_line);
         // Row lengths are checked row by row (a line of spaces is blank, not a row of one field).
         let mut rdr = csv::ReaderBuilder::new()
             .has_headers(true)
@@ -249,7 +251,7 @@ impl Recording {
             ));
         }
         let opts = &named;
-        let index = locate_columns(file, &headers, opts)?;
+        let index = locate_columns(file, header_line, &headers, opts)?;
         let maps: [Option<&ColumnMap>; COLUMNS.len()] = std::array::from_fn(|k| opts.map_of(k));
         if index[0].is_none() {
             let found: Vec<&str> = headers.iter().collect();
@@ -265,9 +267,9 @@ impl Recording {
                 })
                 .unwrap_or_default();
             if let Some(loop_hint) = crate::loops::loop_header_hint(&headers) {
-                located!(file, Some(1), None; "no `time_s` column (header has: {}){loop_hint}", echo(&joined));
+                located!(file, Some(header_line), None; "no `time_s` column (header has: {}){loop_hint}", echo(&joined));
             }
-            located!(file, Some(1), None;
+            located!(file, Some(header_line), None;
                 "no `time_s` column (header has: {}); recognised columns are {}{hint}; a time column of \
                  another name or unit can be mapped, e.g. `--column time_s=time_ms:ms`",
                 echo(&joined),
@@ -278,7 +280,7 @@ impl Recording {
             let hint = case_hint(&headers, "current_A")
                 .or_else(|| case_hint(&headers, "command_V"))
                 .unwrap_or_default();
-            located!(file, Some(1), None; "needs a drive column: `current_A` or `command_V` (or one mapped with `--column current_A=HEADER[:UNIT]`){hint}");
+            located!(file, Some(header_line), None; "needs a drive column: `current_A` or `command_V` (or one mapped with `--column current_A=HEADER[:UNIT]`){hint}");
         }
         let time_col = index[0].unwrap_or(0) + 1;
         let mut cols: [Vec<f64>; COLUMNS.len()] = Default::default();
@@ -469,10 +471,11 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// The column separator of a measurement file and the file to read: a spreadsheet's `sep=X`
-/// first line names it (the line is read as blank, so lines keep their numbers); otherwise a
+/// The column separator of a measurement file, whether a first line named it, and the file to
+/// read: a spreadsheet's `sep=X` first line names it (the line is read as blank, so rows keep
+/// their line numbers); otherwise a
 /// header without a comma but with `;` or tabs is separated by those, else by commas.
-fn separated<R: std::io::Read>(input: R) -> std::io::Result<(u8, impl std::io::Read)> {
+fn separated<R: std::io::Read>(input: R) -> std::io::Result<(u8, bool, impl std::io::Read)> {
     use std::io::BufRead;
     let mut buf = std::io::BufReader::with_capacity(1 << 16, input);
     let first_line = |bytes: &[u8]| -> String {
@@ -495,7 +498,7 @@ fn separated<R: std::io::Read>(input: R) -> std::io::Result<(u8, impl std::io::R
         None if !first.contains(',') && first.contains('\t') => (b'\t', b""),
         None => (b',', b""),
     };
-    Ok((delimiter, std::io::Read::chain(blank, buf)))
+    Ok((delimiter, named.is_some(), std::io::Read::chain(blank, buf)))
 }
 
 /// Largest plausible magnitude per column (same order as [`COLUMNS`]); a value beyond is a unit
@@ -670,9 +673,10 @@ fn looks_like_displacement(header: &str) -> bool {
 
 /// The column index of each canonical column: a mapped column by its header (which must be in
 /// the file), any other by its own name unless a mapping reads that header as something else. A
-/// column name found twice is refused.
+/// column name found twice is refused (on `header_line`).
 fn locate_columns(
     file: &str,
+    header_line: u64,
     headers: &csv::StringRecord,
     opts: &ReadOptions,
 ) -> Result<[Option<usize>; COLUMNS.len()]> {
@@ -687,11 +691,11 @@ fn locate_columns(
         let mut found = headers.iter().enumerate().filter(|(_, h)| h.trim() == wanted).map(|(c, _)| c);
         let first = found.next();
         if let (Some(a), Some(b)) = (first, found.next()) {
-            located!(file, Some(1), Some(b as u64 + 1);
+            located!(file, Some(header_line), Some(b as u64 + 1);
                 "column `{}` appears twice (columns {} and {})", echo(wanted), a + 1, b + 1);
         }
         if let (None, Some(m)) = (first, map) {
-            located!(file, Some(1), None;
+            located!(file, Some(header_line), None;
                 "--column `{}`: the file has no column `{}` (header has: {})",
                 echo(&m.option),
                 echo(wanted),

@@ -1338,3 +1338,27 @@ fn spreadsheet_exports_are_read_as_they_are() {
     let e = stderr(&o);
     assert!(e.contains("`current (mA)` read as `current_A`, mA → A"), "{e}");
 }
+
+/// After a `sep=` line the header is the second line, and a message about it says so.
+#[test]
+fn a_header_after_a_sep_line_is_on_line_two() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = [b"sep=;\n".to_vec(), csv("t_ms;I (A);displacement_um", &good_rows())].concat();
+    let f = write(dir.path(), "no_time.csv", &text);
+    refused(&gma(&["compare", "--model", "ja", &f]), &["no_time.csv:2: no `time_s` column"], "sep= line");
+}
+
+/// Header names that differ only in look-alike characters (µ U+00B5 and μ U+03BC, a zero-width
+/// space, a Cyrillic а) printed identical: "no column `x/µm` (header has … x/μm)". Messages
+/// write those characters as escapes.
+#[test]
+fn look_alike_characters_in_names_are_escaped() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = write(dir.path(), "greek.csv", &csv("time_s,current_A,x/\u{3bc}m", &good_rows()));
+    let o = gma(&["compare", "--model", "ja", "--column", "displacement_um=x/µm", &f]);
+    refused(&o, &["no column `x/µm`", "x/\\u{3bc}m"], "Greek mu");
+    let f = write(dir.path(), "zws.csv", &csv("time_s\u{200b},current_A,displacement_um", &good_rows()));
+    refused(&gma(&["compare", "--model", "ja", &f]), &["time_s\\u{200b}"], "zero-width space");
+    let f = write(dir.path(), "cyrillic.csv", &csv("time_s,current_A,displ\u{430}cement_um", &good_rows()));
+    refused(&gma(&["compare", "--model", "ja", &f]), &["displ\\u{430}cement_um"], "Cyrillic a");
+}
