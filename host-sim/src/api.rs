@@ -350,9 +350,7 @@ fn prepare(
     let (init, params_source) = params.load(spec)?;
     let (data, input_warnings) = read_sources(fit_src, val_src, read)?;
     if let Data::Recordings(fit_files, val_files) = &data {
-        for r in fit_files.iter().chain(val_files) {
-            fit::drive_for(spec, r)?;
-        }
+        fit::check_files(spec, &init, fit_files.iter().chain(val_files))?;
     }
     let deadline = time_limit.map(|t| Instant::now() + t);
     Ok(Prepared {
@@ -490,9 +488,7 @@ pub fn compare(
     let mut warnings: Vec<String> = read_warnings.iter().map(ToString::to_string).collect();
     match data {
         Data::Recordings(recs, _) => {
-            for r in &recs {
-                fit::drive_for(spec, r)?;
-            }
+            fit::check_files(spec, &p, &recs)?;
             warnings.extend(fit::unresolved_mode(spec, &p, &recs).map(|w| w.to_string()));
             for rec in &recs {
                 let mut sim = fit::simulate(spec, &p, rec)?;

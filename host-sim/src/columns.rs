@@ -29,7 +29,7 @@ const fn unit(name: &'static str, pow10: i32) -> Unit {
 pub const UNITS: [&[Unit]; COLUMNS.len()] = [
     &[unit("s", 0), unit("ms", -3), unit("us", -6), unit("µs", -6)],
     &[unit("V", 0), unit("mV", -3)],
-    &[unit("A", 0), unit("mA", -3)],
+    &[unit("A", 0), unit("mA", -3), unit("uA", -6), unit("µA", -6)],
     &[unit("um", 0), unit("µm", 0), unit("m", 6), unit("mm", 3), unit("nm", -3)],
     &[unit("N", 0), unit("kN", 3)],
     &[unit("°C", 0), unit("C", 0), Unit { name: "K", pow10: 0, offset: -273.15 }],
@@ -63,8 +63,9 @@ impl Unit {
     }
 }
 
-/// One `--column CANONICAL=HEADER[:UNIT]`: the file's column `header`, read as canonical column
-/// `canonical` (index into [`COLUMNS`]) after converting from `unit`.
+/// One `--column CANONICAL=[-]HEADER[:UNIT]`: the file's column `header`, read as canonical
+/// column `canonical` (index into [`COLUMNS`]) after converting from `unit`, and negated after a
+/// `-` (a probe wired the other way round).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ColumnMap {
     /// Index of the canonical column in [`COLUMNS`].
@@ -73,6 +74,8 @@ pub struct ColumnMap {
     pub header: String,
     /// The unit of the file's column.
     pub unit: Unit,
+    /// `-HEADER`: the values are read with their sign changed.
+    pub negated: bool,
     /// The option as given, for messages.
     pub option: String,
 }
@@ -98,6 +101,10 @@ impl ColumnMap {
         let (header, unit) = match rest.rsplit_once(':') {
             Some((h, u)) => (h.trim(), Some(u.trim())),
             None => (rest.trim(), None),
+        };
+        let (negated, header) = match header.strip_prefix('-') {
+            Some(h) => (true, h.trim()),
+            None => (false, header),
         };
         if header.is_empty() {
             bail!("--column `{shown}`: no HEADER after `=` (expected CANONICAL=HEADER[:UNIT])");
@@ -125,17 +132,41 @@ impl ColumnMap {
                 ),
             },
         };
-        Ok(Self { canonical: k, header: header.to_string(), unit, option: option.to_string() })
+        Ok(Self { canonical: k, header: header.to_string(), unit, negated, option: option.to_string() })
+    }
+
+    /// Whether a cell is read as it is (canonical unit, not negated).
+    pub fn is_identity(&self) -> bool {
+        self.unit.is_identity() && !self.negated
+    }
+
+    /// A cell converted to the canonical unit (and negated), as [`Unit::convert`].
+    pub fn convert(&self, raw: &str, v: f64) -> f64 {
+        let v = self.unit.convert(raw, v);
+        if self.negated {
+            -v
+        } else {
+            v
+        }
+    }
+
+    /// The canonical column's unit, as messages print it.
+    pub fn unit_canonical(&self) -> &'static str {
+        CANONICAL_UNIT[self.canonical]
     }
 
     /// How messages name the column: `` `x_mm` (read as `displacement_um`, mm → µm) ``.
     pub fn label(&self) -> String {
         let name = COLUMNS[self.canonical];
         let header = crate::files::echo(&self.header);
+        let negated = if self.negated { ", negated" } else { "" };
         if self.unit.is_identity() {
-            format!("`{header}` (read as `{name}`)")
+            format!("`{header}` (read as `{name}`{negated})")
         } else {
-            format!("`{header}` (read as `{name}`, {} → {})", self.unit.name, CANONICAL_UNIT[self.canonical])
+            format!(
+                "`{header}` (read as `{name}`, {} → {}{negated})",
+                self.unit.name, CANONICAL_UNIT[self.canonical]
+            )
         }
     }
 }
@@ -230,6 +261,35 @@ impl ReadOptions {
         self.columns.is_empty() && self.resample.is_none() && self.trim_start_s.is_none()
     }
 
+    /// These options with each canonical column a file's `headers` lack by name, and no option
+    /// maps, read from the one header that names its quantity and unit ([`named_quantity`]), and
+    /// what was mapped (the mappings, to be said).
+    pub fn with_named_units(&self, headers: &[&str]) -> (ReadOptions, Vec<ColumnMap>) {
+        let mut opts = self.clone();
+        let mut mapped = Vec::new();
+        for (k, name) in COLUMNS.iter().enumerate() {
+            if self.map_of(k).is_some() || headers.iter().any(|h| h.trim() == *name) {
+                continue;
+            }
+            let mut named = headers
+                .iter()
+                .filter(|h| !self.claims(h.trim()))
+                .filter_map(|h| named_quantity(h).filter(|(c, _)| *c == k).map(|(_, u)| (h.trim(), u)));
+            if let (Some((header, unit)), None) = (named.next(), named.next()) {
+                let m = ColumnMap {
+                    canonical: k,
+                    header: header.to_string(),
+                    unit,
+                    negated: false,
+                    option: format!("{name}={header}:{}", unit.name),
+                };
+                opts.columns.push(m.clone());
+                mapped.push(m);
+            }
+        }
+        (opts, mapped)
+    }
+
     /// The mapping of canonical column `k`, if any.
     pub fn map_of(&self, k: usize) -> Option<&ColumnMap> {
         self.columns.iter().find(|m| m.canonical == k)
@@ -239,6 +299,34 @@ impl ReadOptions {
     pub fn claims(&self, header: &str) -> bool {
         self.columns.iter().any(|m| m.header == header)
     }
+}
+
+/// Words a header may name each canonical column by (ignoring case, same order as
+/// [`COLUMNS`]) before its unit in brackets or parentheses: `Time [s]`, `I (mA)`.
+const QUANTITIES: [&[&str]; COLUMNS.len()] = [
+    &["time", "t"],
+    &["command", "voltage", "u", "v"],
+    &["current", "i"],
+    // Not `x`: a coordinate as often as the probe's reading (its header gets the `--column` hint).
+    &["displacement", "disp"],
+    &["force", "f"],
+    &["temperature", "temp"],
+    &["flux density", "flux_density", "b"],
+];
+
+/// The canonical column and unit a header names as `QUANTITY [UNIT]` or `QUANTITY (UNIT)`, when
+/// both are clear: a word of [`QUANTITIES`] and a unit that column accepts.
+fn named_quantity(header: &str) -> Option<(usize, Unit)> {
+    let h = header.trim();
+    let open = match h.chars().last()? {
+        ']' => '[',
+        ')' => '(',
+        _ => return None,
+    };
+    let (quantity, unit) = h[..h.len() - 1].rsplit_once(open)?;
+    let quantity = quantity.trim().to_lowercase();
+    let k = QUANTITIES.iter().position(|words| words.contains(&quantity.as_str()))?;
+    UNITS[k].iter().find(|u| u.name == unit.trim()).map(|u| (k, *u))
 }
 
 #[cfg(test)]

@@ -254,10 +254,25 @@ pub fn escape_control(s: &str) -> String {
     out
 }
 
-/// A cell from an input as a message quotes it: control characters escaped, cut to
-/// [`MAX_ECHO_CHARS`].
+/// Characters a quoted cell writes as escapes though a terminal prints them: invisible ones
+/// (zero-width space, a byte-order mark, a soft hyphen) and Greek and Cyrillic letters, which look
+/// like Latin ones or the micro sign µ: two names that differ only in them must not print alike
+/// (`x/µm` and `x/\u{3bc}m`, Greek mu).
+fn looks_like_another(c: char) -> bool {
+    matches!(c, '\u{ad}' | '\u{200b}'..='\u{200f}' | '\u{2060}'..='\u{2064}' | '\u{feff}' | '\u{370}'..='\u{4ff}')
+}
+
+/// A cell from an input as a message quotes it: control characters and look-alikes escaped, cut
+/// to [`MAX_ECHO_CHARS`].
 pub fn echo(cell: &str) -> String {
-    let mut s: String = cell.chars().take(MAX_ECHO_CHARS).collect();
+    let mut s: String = cell
+        .chars()
+        .take(MAX_ECHO_CHARS)
+        .flat_map(|c| {
+            let escaped = looks_like_another(c).then(|| c.escape_unicode().to_string());
+            escaped.unwrap_or_else(|| c.to_string()).chars().collect::<Vec<_>>()
+        })
+        .collect();
     if cell.chars().nth(MAX_ECHO_CHARS).is_some() {
         s.push('…');
     }

@@ -152,10 +152,14 @@ fn separator(first: &str) -> char {
 /// or none; separated by a semicolon too, so that such a file is told what is wrong with it).
 pub fn looks_like_loop(text: &str) -> bool {
     let first = text.lines().next().unwrap_or("").to_ascii_lowercase();
+    // A recording may log the field too: its displacement makes it a recording.
+    if first.contains("displacement_um") {
+        return false;
+    }
     if first.contains("field_a_per_m") {
         return true;
     }
-    if first.contains("time_s") || first.contains("displacement_um") {
+    if first.contains("time_s") {
         return false;
     }
     let sep = separator(&first);

@@ -112,14 +112,14 @@ pub fn load(path: Option<&Path>, spec: ModelSpec) -> Result<ActuatorParams> {
     Ok(load_input(path.map(Input::open).transpose()?, spec, "the parameter set")?.0)
 }
 
-/// As [`load`] from a file (or `-`), also giving the name messages call it by and its text, for
-/// a caller that checks more and points into it ([`located_parameter`]).
-pub fn load_with_text(path: &Path, spec: ModelSpec) -> Result<(ActuatorParams, String, String)> {
+/// As [`load`] from a file (or `-`), also giving where they came from, the name messages call
+/// it by and its text, for a caller that checks more and points into it ([`located_parameter`]).
+pub fn load_with_text(path: &Path, spec: ModelSpec) -> Result<(ActuatorParams, ParamSource, String)> {
     let input = Input::open(path)?;
     let name = input.name.clone();
     let text = input.into_text(MAX_PARAM_FILE_BYTES)?;
-    let (params, _) = load_text(&name, &text, spec, None)?;
-    Ok((params, name, text))
+    let (params, source) = load_text(&name, &text, spec, None)?;
+    Ok((params, source, text))
 }
 
 /// Where a command's parameters came from, so no default is silent: said on stderr when loaded
@@ -243,7 +243,11 @@ pub fn parse_file(file: &str, text: &str, spec: ModelSpec) -> Result<ParamFile> 
         Some(v) => {
             let line = line_of(text, "format_version").map(|(line, _)| line);
             // Only a whole number can be a format a newer gma wrote.
-            let why = if v.is_integer() { "a newer gma wrote it?" } else { "it is not an integer" };
+            let why = match v.as_integer() {
+                Some(n) if n > FORMAT_VERSION => "a newer gma wrote it?",
+                Some(_) => "formats count from 1",
+                None => "it is not an integer",
+            };
             located!(file, line, None; "format_version = {v}: this gma reads formats 1 to {FORMAT_VERSION} ({why})")
         }
     };

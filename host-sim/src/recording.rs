@@ -214,8 +214,18 @@ impl Recording {
         max_samples: usize,
         opts: &ReadOptions,
     ) -> Result<ReadOutcome> {
-        let mut rdr = csv::ReaderBuilder::new().has_headers(true).flexible(false).from_reader(input);
+        let (delimiter, sep_line, input) = separated(input).map_err(|e| crate::files::read_error(file, e))?;
+        // The header's line: after a `sep=` line, the second.
+        let header_line = 1 + u64::from(sep_line);
+        // Row lengths are checked row by row (a line of spaces is blank, not a row of one field).
+        let mut rdr = csv::ReaderBuilder::new()
+            .has_headers(true)
+            .flexible(true)
+            .delimiter(delimiter)
+            .from_reader(input);
         let headers = rdr.headers().map_err(|e| csv_error(file, e))?.clone();
+        // Cells of a `;` or tab export may have decimal commas (a European spreadsheet's).
+        let decimal_comma = delimiter != b',';
         if headers.iter().all(|h| h.trim().is_empty()) {
             // The header is the line before the reader's position (blank lines before it skipped).
             let line = rdr.position().line().saturating_sub(1).max(1);
@@ -227,17 +237,27 @@ impl Recording {
             }
             located!(file, Some(1), None; "empty file (no header line); expected a header such as `time_s,current_A,displacement_um`");
         }
-        let index = locate_columns(file, &headers, opts)?;
+        let (named, mapped) = opts.with_named_units(&headers.iter().collect::<Vec<_>>());
+        for m in &mapped {
+            let unit = if m.unit.is_identity() {
+                String::new()
+            } else {
+                format!(", {} → {}", m.unit.name, m.unit_canonical())
+            };
+            crate::warning::note(format_args!(
+                "{file}: `{}` read as `{}`{unit} (the quantity and unit its name gives; `--column` maps it otherwise)",
+                echo(&m.header),
+                COLUMNS[m.canonical]
+            ));
+        }
+        let opts = &named;
+        let index = locate_columns(file, header_line, &headers, opts)?;
         let maps: [Option<&ColumnMap>; COLUMNS.len()] = std::array::from_fn(|k| opts.map_of(k));
         if index[0].is_none() {
             let found: Vec<&str> = headers.iter().collect();
             let joined = found.join(", ");
             let comment = headers.get(0).is_some_and(|h| h.trim_start().starts_with('#'));
-            let hint = [(';', "`;`"), ('\t', "tabs")]
-                .iter()
-                .find(|(c, _)| joined.contains(*c) && joined.contains("time_s"))
-                .map(|(_, name)| format!(" — the file seems to separate columns with {name}; measurement files are comma-separated"))
-                .or_else(|| case_hint(&headers, "time_s"))
+            let hint = case_hint(&headers, "time_s")
                 .or_else(|| {
                     comment.then(|| {
                         " — the first line starts with `#`: measurement files have no comment lines; the header \
@@ -247,9 +267,9 @@ impl Recording {
                 })
                 .unwrap_or_default();
             if let Some(loop_hint) = crate::loops::loop_header_hint(&headers) {
-                located!(file, Some(1), None; "no `time_s` column (header has: {}){loop_hint}", echo(&joined));
+                located!(file, Some(header_line), None; "no `time_s` column (header has: {}){loop_hint}", echo(&joined));
             }
-            located!(file, Some(1), None;
+            located!(file, Some(header_line), None;
                 "no `time_s` column (header has: {}); recognised columns are {}{hint}; a time column of \
                  another name or unit can be mapped, e.g. `--column time_s=time_ms:ms`",
                 echo(&joined),
@@ -260,7 +280,7 @@ impl Recording {
             let hint = case_hint(&headers, "current_A")
                 .or_else(|| case_hint(&headers, "command_V"))
                 .unwrap_or_default();
-            located!(file, Some(1), None; "needs a drive column: `current_A` or `command_V` (or one mapped with `--column current_A=HEADER[:UNIT]`){hint}");
+            located!(file, Some(header_line), None; "needs a drive column: `current_A` or `command_V` (or one mapped with `--column current_A=HEADER[:UNIT]`){hint}");
         }
         let time_col = index[0].unwrap_or(0) + 1;
         let mut cols: [Vec<f64>; COLUMNS.len()] = Default::default();
@@ -272,10 +292,22 @@ impl Recording {
         let mut values = [0.0; COLUMNS.len()];
         while rdr.read_record(&mut rec).map_err(|e| csv_error(file, e))? {
             let line = rec.position().map(|p| p.line()).unwrap_or(rows + 2);
+            if rec.len() != headers.len() {
+                // A line of spaces or tabs is blank, as an empty one (which the reader skips).
+                if rec.len() == 1 && rec[0].trim().is_empty() {
+                    continue;
+                }
+                located!(file, Some(line), None;
+                    "{} fields, but the header has {} (a missing or extra comma?)", rec.len(), headers.len());
+            }
             for (k, idx) in index.iter().enumerate() {
                 let Some(c) = *idx else { continue };
                 let raw = rec.get(c).unwrap_or("").trim();
-                values[k] = cell(file, line, c + 1, k, raw, maps[k])?;
+                let raw = match decimal_comma && raw.contains(',') {
+                    true => std::borrow::Cow::Owned(raw.replace(',', ".")),
+                    false => std::borrow::Cow::Borrowed(raw),
+                };
+                values[k] = cell(file, line, c + 1, k, &raw, maps[k])?;
             }
             time.push(file, line, time_col, values[0])?;
             let start = *t0.get_or_insert(values[0]);
@@ -439,6 +471,36 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
+/// The column separator of a measurement file, whether a first line named it, and the file to
+/// read: a spreadsheet's `sep=X` first line names it (the line is read as blank, so rows keep
+/// their line numbers); otherwise a
+/// header without a comma but with `;` or tabs is separated by those, else by commas.
+fn separated<R: std::io::Read>(input: R) -> std::io::Result<(u8, bool, impl std::io::Read)> {
+    use std::io::BufRead;
+    let mut buf = std::io::BufReader::with_capacity(1 << 16, input);
+    let first_line = |bytes: &[u8]| -> String {
+        let end = bytes.iter().position(|b| *b == b'\n').unwrap_or(bytes.len());
+        String::from_utf8_lossy(&bytes[..end]).trim_start_matches('\u{feff}').trim().to_string()
+    };
+    let first = first_line(buf.fill_buf()?);
+    let named = first.strip_prefix("sep=").and_then(|c| match c.as_bytes() {
+        [c] => Some(*c),
+        b"\\t" => Some(b'\t'),
+        _ => None,
+    });
+    let (delimiter, blank): (u8, &[u8]) = match named {
+        Some(c) => {
+            let n = buf.fill_buf()?.iter().position(|b| *b == b'\n').map_or(buf.buffer().len(), |k| k + 1);
+            buf.consume(n);
+            (c, b"\n")
+        }
+        None if !first.contains(',') && first.contains(';') => (b';', b""),
+        None if !first.contains(',') && first.contains('\t') => (b'\t', b""),
+        None => (b',', b""),
+    };
+    Ok((delimiter, named.is_some(), std::io::Read::chain(blank, buf)))
+}
+
 /// Largest plausible magnitude per column (same order as [`COLUMNS`]); a value beyond is a unit
 /// or export mistake, not a measurement. Time allows Unix-epoch seconds.
 const PLAUSIBLE: [(f64, &str); COLUMNS.len()] =
@@ -461,13 +523,13 @@ fn cell(file: &str, line: u64, col: usize, k: usize, raw: &str, map: Option<&Col
     if !v.is_finite() {
         located!(file, at.0, at.1; "column {name}: `{}` is not a finite number", echo(raw));
     }
-    let Some(m) = map.filter(|m| !m.unit.is_identity()) else {
+    let Some(m) = map.filter(|m| !m.is_identity()) else {
         if let Err(why) = plausible(k, v) {
             located!(file, at.0, at.1; "column {name}: {} {why}", echo(raw));
         }
         return Ok(v);
     };
-    let converted = m.unit.convert(raw, v);
+    let converted = m.convert(raw, v);
     if let Err(why) = plausible(k, converted) {
         located!(file, at.0, at.1; "column {name}: {} {} = {converted:e} {why}", echo(raw), m.unit.name);
     }
@@ -488,13 +550,6 @@ pub fn plausible(k: usize, v: f64) -> std::result::Result<(), String> {
 fn csv_error(file: &str, e: csv::Error) -> anyhow::Error {
     let line = e.position().map(|p| p.line()).unwrap_or(1);
     match e.into_kind() {
-        csv::ErrorKind::UnequalLengths { expected_len, len, .. } => Located::at(
-            file,
-            line,
-            None,
-            format!("{len} fields, but the header has {expected_len} (a missing or extra comma?)"),
-        )
-        .into(),
         csv::ErrorKind::Utf8 { err, .. } => Located::at(
             file,
             line,
@@ -570,7 +625,9 @@ impl TimeCheck {
 /// most [`MAX_GAP_STEPS`] steps.
 fn jitter(file: &str, line: u64, col: usize, step: f64, dt: f64, resample: bool) -> Result<()> {
     if resample {
-        if step > MAX_GAP_STEPS * dt {
+        // A gap of exactly MAX_GAP_STEPS steps is bridged: the time stamps' rounding may add the
+        // jitter allowed without resampling.
+        if step > MAX_GAP_STEPS * dt * (1.0 + MAX_JITTER) {
             located!(file, Some(line), Some(col as u64);
                 "time step {step:.3e} s is more than {MAX_GAP_STEPS} median steps ({dt:.3e} s): a gap (lost \
                  samples), which --resample does not bridge; split the recording at the gap"
@@ -616,9 +673,10 @@ fn looks_like_displacement(header: &str) -> bool {
 
 /// The column index of each canonical column: a mapped column by its header (which must be in
 /// the file), any other by its own name unless a mapping reads that header as something else. A
-/// column name found twice is refused.
+/// column name found twice is refused (on `header_line`).
 fn locate_columns(
     file: &str,
+    header_line: u64,
     headers: &csv::StringRecord,
     opts: &ReadOptions,
 ) -> Result<[Option<usize>; COLUMNS.len()]> {
@@ -633,11 +691,11 @@ fn locate_columns(
         let mut found = headers.iter().enumerate().filter(|(_, h)| h.trim() == wanted).map(|(c, _)| c);
         let first = found.next();
         if let (Some(a), Some(b)) = (first, found.next()) {
-            located!(file, Some(1), Some(b as u64 + 1);
+            located!(file, Some(header_line), Some(b as u64 + 1);
                 "column `{}` appears twice (columns {} and {})", echo(wanted), a + 1, b + 1);
         }
         if let (None, Some(m)) = (first, map) {
-            located!(file, Some(1), None;
+            located!(file, Some(header_line), None;
                 "--column `{}`: the file has no column `{}` (header has: {})",
                 echo(&m.option),
                 echo(wanted),

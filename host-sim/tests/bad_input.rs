@@ -1124,25 +1124,27 @@ fn fit_on_data_no_model_can_follow_gives_finite_parameters_or_says_so() {
         .enumerate()
         .map(|(k, r)| format!("{},{}", r.rsplit_once(',').unwrap().0, ((k * 7919) % 101) as f64 * 0.01))
         .collect();
-    for (name, rows) in [("inverted.csv", inverted), ("noise.csv", noise)] {
-        let f = write(dir.path(), name, &csv(HEADER, &rows));
-        let out = dir.path().join("p.toml");
-        let o = gma(&["fit", "--model", "ja", "--json", "--params-out", out.to_str().unwrap(), &f]);
-        let err = stderr(&o);
-        assert!(!err.contains("panicked"), "{name}: {err}");
-        if o.status.success() {
-            let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-            let params = j["params"].as_object().expect("params");
-            assert!(params.values().all(|v| v.as_f64().is_some_and(f64::is_finite)), "{name}: {j}");
-            let spec = model_core::ModelSpec::parse("ja").unwrap();
-            let p = host_sim::params::parse("p.toml", &std::fs::read_to_string(&out).unwrap(), spec).unwrap();
-            model_core::Actuator::new(spec, &p).unwrap();
-        } else {
-            refused(&o, &["the fit"], name);
-            assert!(!out.exists());
-        }
-        println!("{name}: {}", if o.status.success() { "finite parameters".into() } else { err });
+    // The inverted file is refused before any fit, with the `--column` that negates it.
+    let o = gma(&["fit", "--model", "ja", &write(dir.path(), "inverted.csv", &csv(HEADER, &inverted))]);
+    refused(&o, &["inverted.csv: ", "displacement_um=-displacement_um"], "inverted.csv");
+    let name = "noise.csv";
+    let f = write(dir.path(), name, &csv(HEADER, &noise));
+    let out = dir.path().join("p.toml");
+    let o = gma(&["fit", "--model", "ja", "--json", "--params-out", out.to_str().unwrap(), &f]);
+    let err = stderr(&o);
+    assert!(!err.contains("panicked"), "{name}: {err}");
+    if o.status.success() {
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let params = j["params"].as_object().expect("params");
+        assert!(params.values().all(|v| v.as_f64().is_some_and(f64::is_finite)), "{name}: {j}");
+        let spec = model_core::ModelSpec::parse("ja").unwrap();
+        let p = host_sim::params::parse("p.toml", &std::fs::read_to_string(&out).unwrap(), spec).unwrap();
+        model_core::Actuator::new(spec, &p).unwrap();
+    } else {
+        refused(&o, &["the fit"], name);
+        assert!(!out.exists());
     }
+    println!("{name}: {}", if o.status.success() { "finite parameters".into() } else { err });
 }
 
 /// `diagnose --laws` refits the structure with the other hysteresis law from the same parameter
@@ -1179,4 +1181,184 @@ fn laws_checks_the_parameter_file_for_the_other_law_before_any_fit() {
     let o = gma(&["diagnose", "--model", "ja", "--json", "--params", &p, &good]);
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j["parameters_defaulted"], serde_json::json!([]), "{j:#}");
+}
+
+/// `good_rows()` with the current column scaled by `i_scale` and the displacement by `y_scale`.
+fn scaled_rows(i_scale: f64, y_scale: f64) -> Vec<String> {
+    good_rows()
+        .iter()
+        .map(|r| {
+            let v: Vec<f64> = r.split(',').map(|c| c.parse().unwrap()).collect();
+            format!("{:.4},{},{}", v[0], v[1] * i_scale, v[2] * y_scale)
+        })
+        .collect()
+}
+
+/// `compare --json`'s mean NRMSE on `args`, or the run's stderr.
+fn compare_nrmse(args: &[&str]) -> Result<f64, String> {
+    let mut all = vec!["compare", "--model", "ja", "--json"];
+    all.extend(args);
+    let o = gma(&all);
+    if !o.status.success() {
+        return Err(stderr(&o));
+    }
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    Ok(j["nrmse"].as_f64().unwrap_or_else(|| panic!("no nrmse: {j}")))
+}
+
+/// A displacement probe wired the other way round (the column negated) gave a fit of nothing
+/// and a diagnosis of a missing effect, exit 0. Terfenol-D elongates with the field's
+/// magnitude, so a displacement that falls where the model's strain rises is refused, with the
+/// `--column` that negates it; read with it, the file scores as its twin. Not on a file with a
+/// negative bias (where the strain rises as the current falls), nor on one the other commands
+/// would take.
+#[test]
+fn a_displacement_against_the_drive_is_refused_with_the_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(dir.path(), "good.csv", &csv(HEADER, &scaled_rows(1.0, 1.0)));
+    let negated = write(dir.path(), "negated.csv", &csv(HEADER, &scaled_rows(1.0, -1.0)));
+    let fix = "`--column displacement_um=-displacement_um`";
+    for cmd in [&["compare", "--model", "ja"][..], &["diagnose", "--model", "ja"], &["fit", "--model", "ja"]]
+    {
+        let mut args = cmd.to_vec();
+        args.push(&negated);
+        refused(&gma(&args), &["negated.csv: ", "falls where the model's strain rises", fix], cmd[0]);
+    }
+    let o = gma(&["compare", "--model", "ja", "--json", &negated]);
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(j["error"]["message"].as_str().unwrap().contains(fix), "{j}");
+    let twin = compare_nrmse(&[&good]).unwrap();
+    let fixed = compare_nrmse(&["--column", "displacement_um=-displacement_um", &negated]).unwrap();
+    assert_eq!(fixed, twin);
+    // A negative bias: the rod's field grows as the current goes negative, and so does the strain.
+    let mirrored = write(dir.path(), "mirrored.csv", &csv(HEADER, &scaled_rows(-1.0, 1.0)));
+    let p = params_with(dir.path(), "negative_bias.toml", |t| {
+        replace_line(t, "bias_a_per_m", "bias_a_per_m = -20000.0")
+    });
+    compare_nrmse(&["--params", &p, &mirrored]).unwrap();
+}
+
+/// A current logged in mA under `current_A` drove the model to ~1e7 A/m, every parameter ended
+/// at a range's end and the verdict was "nothing missing", exit 0. A field beyond any actuator
+/// coil's (2 M_s) is refused with the unit that brings it into range and the `--column` that
+/// reads it so; read with it, the file scores as its twin in A.
+#[test]
+fn a_current_in_milliamperes_under_current_a_is_refused_with_the_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    // 0 to 0.9 A: in mA, below the 1e3 A plausibility limit a cell must pass.
+    let good = write(dir.path(), "good.csv", &csv(HEADER, &scaled_rows(0.45, 1.0)));
+    let ma = write(dir.path(), "ma.csv", &csv(HEADER, &scaled_rows(450.0, 1.0)));
+    let fix = "`--column current_A=current_A:mA`";
+    for cmd in [&["compare", "--model", "ja"][..], &["diagnose", "--model", "ja"], &["fit", "--model", "ja"]]
+    {
+        let mut args = cmd.to_vec();
+        args.push(&ma);
+        refused(&gma(&args), &["ma.csv: ", "A/m", "coil.turns_per_m", fix], cmd[0]);
+    }
+    let twin = compare_nrmse(&[&good]).unwrap();
+    let fixed = compare_nrmse(&["--column", "current_A=current_A:mA", &ma]).unwrap();
+    assert_eq!(fixed, twin);
+    // In µA (a 0.9 mA coil current): the fix names µA.
+    let ua = write(dir.path(), "ua.csv", &csv(HEADER, &scaled_rows(450.0, 1.0)));
+    let p =
+        params_with(dir.path(), "many_turns.toml", |t| replace_line(t, "turns_per_m", "turns_per_m = 1e7"));
+    let o = gma(&["compare", "--model", "ja", "--params", &p, &ua]);
+    refused(&o, &["ua.csv: ", "`--column current_A=current_A:uA`"], "µA");
+}
+
+/// A gap of exactly 5 steps was refused as "more than 5 median steps" (the step's rounding in
+/// the time stamps' last digit); `--resample linear` bridges it, as the docs say.
+#[test]
+fn resample_bridges_a_gap_of_exactly_five_steps() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rows = good_rows();
+    rows.drain(101..105);
+    let f = write(dir.path(), "gap5.csv", &csv(HEADER, &rows));
+    compare_nrmse(&["--resample", "linear", &f]).unwrap();
+    // Six steps are still a gap.
+    rows.remove(101);
+    let f = write(dir.path(), "gap6.csv", &csv(HEADER, &rows));
+    let o = gma(&["compare", "--model", "ja", "--resample", "linear", &f]);
+    refused(&o, &["gap6.csv:103:1: ", "more than 5 median steps"], "a gap of 6 steps");
+}
+
+/// Blank lines are documented as skipped; a line of spaces (or a tab) is one, not a row of one
+/// field.
+#[test]
+fn a_line_of_whitespace_is_a_blank_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let twin = compare_nrmse(&[&write(dir.path(), "good.csv", &csv(HEADER, &good_rows()))]).unwrap();
+    for (name, blank) in [("spaces.csv", "   "), ("tab.csv", "\t"), ("crlf.csv", " \r")] {
+        let f =
+            write(dir.path(), name, &csv(HEADER, &with_row(200, &format!("{blank}\n{}", good_rows()[200]))));
+        assert_eq!(compare_nrmse(&[&f]), Ok(twin), "{name}");
+    }
+}
+
+/// A recording with an extra `field_A_per_m` column (a rig that logs its field too) was read as
+/// a magnetization loop: `fit` fitted a loop, `diagnose` refused it without naming the file. A
+/// header with `displacement_um` is a recording's.
+#[test]
+fn a_recording_with_a_field_column_is_a_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows: Vec<String> = good_rows()
+        .iter()
+        .map(|r| {
+            let i: f64 = r.split(',').nth(1).unwrap().parse().unwrap();
+            format!("{r},{}", 13_541.7 * i + 20_000.0)
+        })
+        .collect();
+    let f = write(dir.path(), "with_field.csv", &csv(&format!("{HEADER},field_A_per_m"), &rows));
+    let twin = compare_nrmse(&[&write(dir.path(), "good.csv", &csv(HEADER, &good_rows()))]).unwrap();
+    assert_eq!(compare_nrmse(&[&f]), Ok(twin));
+}
+
+/// A European spreadsheet export (`sep=;` first line, `;` between cells, decimal commas) and
+/// headers with their unit in brackets or parentheses (`Time [s]`, `I (A)`) were refused with
+/// no way to read them. Such a file is read as it is, each header mapped onto its canonical
+/// column with a note, and scores as its twin; a tab-separated export too.
+#[test]
+fn spreadsheet_exports_are_read_as_they_are() {
+    let dir = tempfile::tempdir().unwrap();
+    let twin = compare_nrmse(&[&write(dir.path(), "good.csv", &csv(HEADER, &good_rows()))]).unwrap();
+    let euro: Vec<String> = good_rows().iter().map(|r| r.replace(',', ";").replace('.', ",")).collect();
+    let text = [b"sep=;\n".to_vec(), csv("Time [s];I (A);Displacement (um)", &euro)].concat();
+    let f = write(dir.path(), "excel.csv", &text);
+    let o = gma(&["compare", "--model", "ja", "--json", &f]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["nrmse"].as_f64(), Some(twin), "{j}");
+    let e = stderr(&o);
+    assert!(e.contains("`Time [s]` read as `time_s`") && e.contains("`I (A)` read as `current_A`"), "{e}");
+    let tabs: Vec<String> = good_rows().iter().map(|r| r.replace(',', "\t")).collect();
+    let f = write(dir.path(), "tabs.tsv", &csv("time [s]\tcurrent (mA)\tdisplacement_um", &tabs));
+    let o = gma(&["compare", "--model", "ja", "--json", &f]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // The unit named is applied: mA is not read as A.
+    let e = stderr(&o);
+    assert!(e.contains("`current (mA)` read as `current_A`, mA → A"), "{e}");
+}
+
+/// After a `sep=` line the header is the second line, and a message about it says so.
+#[test]
+fn a_header_after_a_sep_line_is_on_line_two() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = [b"sep=;\n".to_vec(), csv("t_ms;I (A);displacement_um", &good_rows())].concat();
+    let f = write(dir.path(), "no_time.csv", &text);
+    refused(&gma(&["compare", "--model", "ja", &f]), &["no_time.csv:2: no `time_s` column"], "sep= line");
+}
+
+/// Header names that differ only in look-alike characters (µ U+00B5 and μ U+03BC, a zero-width
+/// space, a Cyrillic а) printed identical: "no column `x/µm` (header has … x/μm)". Messages
+/// write those characters as escapes.
+#[test]
+fn look_alike_characters_in_names_are_escaped() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = write(dir.path(), "greek.csv", &csv("time_s,current_A,x/\u{3bc}m", &good_rows()));
+    let o = gma(&["compare", "--model", "ja", "--column", "displacement_um=x/µm", &f]);
+    refused(&o, &["no column `x/µm`", "x/\\u{3bc}m"], "Greek mu");
+    let f = write(dir.path(), "zws.csv", &csv("time_s\u{200b},current_A,displacement_um", &good_rows()));
+    refused(&gma(&["compare", "--model", "ja", &f]), &["time_s\\u{200b}"], "zero-width space");
+    let f = write(dir.path(), "cyrillic.csv", &csv("time_s,current_A,displ\u{430}cement_um", &good_rows()));
+    refused(&gma(&["compare", "--model", "ja", &f]), &["displ\\u{430}cement_um"], "Cyrillic a");
 }

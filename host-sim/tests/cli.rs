@@ -1242,3 +1242,83 @@ fn mechanics_outside_what_the_model_holds_is_refused_with_its_mode() {
     let o = gma(&["mechanics", "--damping-n-s-per-m", "0"]);
     common::refused(&o, &["ζ = 0.0000e0", "mech.damping_ratio", ">= 1e-3"], "undamped");
 }
+
+/// `drive load` with a parameter file that lacks a table the model uses sent the demo set's
+/// values to the board's compensator, said only in a stderr note. It refuses such a set unless
+/// told (`--allow-defaulted`), naming the tables; told, its JSON lists them.
+#[test]
+fn drive_load_refuses_defaulted_tables_unless_told() {
+    let dir = tempfile::tempdir().unwrap();
+    let demo = toml::to_string(&model_core::ActuatorParams::TERFENOL_DEMO).unwrap();
+    let start = demo.find("[ja]").unwrap();
+    let end = demo[start + 1..].find("\n[").map_or(demo.len(), |k| start + 1 + k + 1);
+    let p = dir.path().join("no_ja.toml");
+    std::fs::write(&p, format!("{}{}", &demo[..start], &demo[end..])).unwrap();
+    let (p, out) = (p.to_str().unwrap(), dir.path().join("frames.bin"));
+    let out = out.to_str().unwrap();
+    let o = gma(&["drive", "load", "--params", p, "--model", "ja", "-o", out, "--json"]);
+    common::refused(&o, &["no_ja.toml", "`ja`", "--allow-defaulted"], "defaulted [ja]");
+    assert!(!std::path::Path::new(out).exists(), "a frame was written");
+    let o = gma(&["drive", "load", "--params", p, "--model", "ja", "-o", out, "--json", "--allow-defaulted"]);
+    assert!(o.status.success(), "{}", common::err(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["parameters_defaulted"], serde_json::json!(["ja"]), "{j}");
+    assert_eq!(j["parameters_source"], serde_json::json!(p), "{j}");
+    // A complete file needs no option, and says nothing is defaulted.
+    let full = dir.path().join("full.toml");
+    std::fs::write(&full, &demo).unwrap();
+    let o = gma(&["drive", "load", "--params", full.to_str().unwrap(), "--model", "ja", "-o", out, "--json"]);
+    assert!(o.status.success(), "{}", common::err(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["parameters_defaulted"], serde_json::json!([]), "{j}");
+}
+
+/// An option's value that cannot be read exited 2 when clap read it (`--format jpg`, `--seed
+/// -1`) and 1 when gma did (`--resample cubic`, `--time-limit -5`): one class, one status (1,
+/// an option refused; 2 stays for a command line that cannot be parsed).
+#[test]
+fn a_refused_option_value_exits_one_whoever_reads_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("x.csv");
+    std::fs::write(&f, "time_s,current_A,displacement_um\n0,0,0\n0.1,1,1\n0.2,0,0\n").unwrap();
+    let f = f.to_str().unwrap();
+    for args in [
+        &["compare", "--model", "ja", "--format", "jpg", f][..],
+        &["compare", "--model", "ja", "--resample", "cubic", f],
+        &["fit", "--model", "ja", "--seed", "-1", f],
+        &["fit", "--model", "ja", "--time-limit", "-5", f],
+    ] {
+        let o = gma(args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {}", common::err(&o));
+        let mut json = args.to_vec();
+        json.push("--json");
+        let o = gma(&json);
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(j["error"]["exit_code"], 1, "{args:?}: {j}");
+    }
+    // An unknown option is still a usage error.
+    assert_eq!(gma(&["fit", "--model", "ja", "--no-such-option", f]).status.code(), Some(2));
+}
+
+/// `--help --json` and `--version --json` printed text where every `--json` prints one object;
+/// `format_version = 0` was called a newer gma's.
+#[test]
+fn help_and_version_answer_json_and_format_zero_is_not_newer() {
+    let o = gma(&["--version", "--json"]);
+    assert!(o.status.success());
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    assert_eq!(j["version"], env!("CARGO_PKG_VERSION"), "{j}");
+    let o = gma(&["fit", "--help", "--json"]);
+    assert!(o.status.success());
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    assert!(j["help"].as_str().unwrap().contains("--model"), "{j}");
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("p.toml");
+    std::fs::write(&p, "format_version = 0\n").unwrap();
+    let f = dir.path().join("x.csv");
+    std::fs::write(&f, "time_s,current_A,displacement_um\n0,0,0\n0.1,1,1\n0.2,0,0\n").unwrap();
+    let o = gma(&["compare", "--model", "ja", "--params", p.to_str().unwrap(), f.to_str().unwrap()]);
+    let e = common::err(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(e.contains("format_version = 0") && !e.contains("newer"), "{e}");
+}

@@ -70,12 +70,13 @@ pub struct ReadArgs {
     pub max_samples: usize,
     /// Read the file's column HEADER as the recognised column CANONICAL, converting from UNIT,
     /// e.g. `--column time_s=time_ms:ms`, `--column displacement_um=x_mm:mm`, `--column
-    /// current_A=I:mA`. Units: time_s s|ms|us|µs; displacement_um m|mm|um|µm|nm; current_A A|mA;
-    /// command_V V|mV; force_N N|kN; temperature_C °C|C|K; flux_density_T T|mT|G (e.g.
-    /// `--column flux_density_T=B:mT`). No UNIT: the canonical unit (a rename). Repeat for
-    /// several columns. Nothing is guessed: unmapped columns are read by their exact names as
-    /// before.
-    #[arg(long = "column", value_name = "CANONICAL=HEADER[:UNIT]")]
+    /// current_A=I:mA`. Units: time_s s|ms|us|µs; displacement_um m|mm|um|µm|nm; current_A
+    /// A|mA|uA|µA; command_V V|mV; force_N N|kN; temperature_C °C|C|K; flux_density_T T|mT|G
+    /// (e.g. `--column flux_density_T=B:mT`). No UNIT: the canonical unit (a rename); `-HEADER`
+    /// negates the column (`--column displacement_um=-displacement_um`). Repeat for several
+    /// columns. Unmapped columns are read by their exact names, or from a header that names
+    /// quantity and unit (`Time [s]`, `I (mA)`), said in a note.
+    #[arg(long = "column", value_name = "CANONICAL=[-]HEADER[:UNIT]")]
     pub columns: Vec<String>,
     /// Put the recordings onto a uniform time grid: `linear` interpolates every channel linearly
     /// at the median time step, from the first sample to the last. Lets time stamps jitter by
@@ -235,9 +236,7 @@ impl ModelFiles {
         let (init, params_source) = params::load_input_also_for(params_input, spec, also, "start values")?;
         let (data, mut input_warnings) = read_inputs(fit_in, val_in, self.read.max_samples, &read_opts)?;
         if let Data::Recordings(fit_files, val_files) = &data {
-            for r in fit_files.iter().chain(val_files) {
-                fit::drive_for(spec, r)?;
-            }
+            fit::check_files(spec, &init, fit_files.iter().chain(val_files))?;
             input_warnings.extend(fit::preisach_plane_advice(spec, &init, fit_files));
             if let Some((other, _)) = also {
                 input_warnings.extend(fit::preisach_plane_advice(other, &init, fit_files));

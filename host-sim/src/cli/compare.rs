@@ -129,9 +129,7 @@ fn compare_recordings(
     recs: &[Recording],
     stems: &[String],
 ) -> Result<CompareSummary> {
-    for r in recs {
-        fit::drive_for(spec, r)?;
-    }
+    fit::check_files(spec, p, recs)?;
     let model = [(spec, *p)];
     let mut rows = Vec::new();
     let mut charts = Vec::new();

@@ -13,6 +13,7 @@ use gma_control::faults::FaultCode;
 use serde_json::json;
 
 use crate::files::display;
+use crate::params::ParamSource;
 
 /// Options of `gma drive`.
 #[derive(Args)]
@@ -102,6 +103,10 @@ pub struct LoadArgs {
     /// The model spec the parameters belong to (e.g. `ja+eddy+mech`).
     #[arg(long)]
     pub model: String,
+    /// Load a file that leaves out tables the model uses (the board then runs the built-in demo
+    /// set's values for them); without it such a file is refused.
+    #[arg(long)]
+    pub allow_defaulted: bool,
     #[command(flatten)]
     pub target: Target,
 }
@@ -131,13 +136,19 @@ impl DriveArgs {
 
 /// Runs `gma drive`.
 pub fn run(a: &DriveArgs) -> Result<()> {
+    // Only `load` has a parameter set, whose source its JSON names.
+    let mut source = None;
     let (cmd, target) = match &a.action {
         Action::Ping(t) => (Command::Ping, t),
         Action::Arm(t) => (Command::Arm, t),
         Action::Disarm(t) => (Command::Disarm, t),
         Action::Clear(t) => (Command::ClearFaults, t),
         Action::Reference(r) => (reference(r)?, &r.target),
-        Action::Load(l) => (load(l)?, &l.target),
+        Action::Load(l) => {
+            let (cmd, from) = load(l)?;
+            source = Some(from);
+            (cmd, &l.target)
+        }
         Action::Replies(r) => return replies(r),
     };
     if target.json && target.out == Path::new("-") {
@@ -148,10 +159,12 @@ pub fn run(a: &DriveArgs) -> Result<()> {
     send(&target.out, &frame[..n])?;
     if target.json {
         let hex: String = frame[..n].iter().map(|b| format!("{b:02x}")).collect();
-        out!(
-            "{}",
-            json!({"command": opcode_name(cmd.opcode()), "tag": target.tag, "bytes": n, "out": display(&target.out), "frame_hex": hex})
-        );
+        let mut j = json!({"command": opcode_name(cmd.opcode()), "tag": target.tag, "bytes": n, "out": display(&target.out), "frame_hex": hex});
+        if let (Some(o), Some(source)) = (j.as_object_mut(), source) {
+            o.insert("parameters_source".into(), source.parameters_source.into());
+            o.insert("parameters_defaulted".into(), source.parameters_defaulted.into());
+        }
+        out!("{j}");
     }
     Ok(())
 }
@@ -199,9 +212,24 @@ fn shape_name(s: WaveShape) -> &'static str {
     }
 }
 
-fn load(l: &LoadArgs) -> Result<Command> {
+fn load(l: &LoadArgs) -> Result<(Command, ParamSource)> {
     let spec = crate::params::parse_spec(&l.model)?;
-    let (params, file, text) = crate::params::load_with_text(&l.params, spec)?;
+    let (params, source, text) = crate::params::load_with_text(&l.params, spec)?;
+    let file = source.parameters_source.clone();
+    // The board must not run physics nobody gave it: the demo set is a simulated rod.
+    if !source.parameters_defaulted.is_empty() && !l.allow_defaulted {
+        let tables =
+            source.parameters_defaulted.iter().map(|t| format!("`{t}`")).collect::<Vec<_>>().join(", ");
+        return Err(crate::error::Located::file(
+            &file,
+            format!(
+                "has no {tables} for `{spec}`: the board would run the built-in demo set's values for them (a \
+                 simulated rod, not this actuator); give a parameter file with them (`gma fit --params-out` \
+                 writes every table), or pass --allow-defaulted to load the demo values anyway"
+            ),
+        )
+        .into());
+    }
     if let Some(warning) = crate::params::written_for_another_model(&file, &text, spec) {
         crate::warning::warn(warning);
     }
@@ -215,7 +243,7 @@ fn load(l: &LoadArgs) -> Result<Command> {
                 format!("the board would refuse this parameter set: {e}"),
             )
         })?;
-    Ok(Command::LoadParameters { spec, params })
+    Ok((Command::LoadParameters { spec, params }, source))
 }
 
 /// Writes one frame: appended to a file or written to a device, or to stdout.

@@ -135,16 +135,34 @@ pub fn main() -> ExitCode {
     let cli = match parsed {
         Ok(cli) => cli,
         Err(e) => {
-            // --help and --version are not errors.
+            // --help and --version are not errors; with --json they answer in one object too.
             if !e.use_stderr() {
-                let _ = e.print();
+                if json_asked {
+                    let j = match e.kind() {
+                        clap::error::ErrorKind::DisplayVersion => {
+                            json!({"version": env!("CARGO_PKG_VERSION")})
+                        }
+                        _ => json!({"help": e.render().to_string()}),
+                    };
+                    out!("{j}");
+                } else {
+                    let _ = e.print();
+                }
                 return ExitCode::SUCCESS;
             }
+            // A value an option refuses exits as gma's own refusals do (`--format jpg` as
+            // `--resample cubic`); a command line that cannot be parsed is a usage error.
+            let code = match e.kind() {
+                clap::error::ErrorKind::InvalidValue | clap::error::ErrorKind::ValueValidation => {
+                    EXIT_FAILURE
+                }
+                _ => EXIT_USAGE,
+            };
             if json_asked {
-                print_json_error(&usage_error_message(&e.to_string()), None, EXIT_USAGE);
+                print_json_error(&usage_error_message(&e.to_string()), None, code);
             }
             let _ = e.print();
-            return ExitCode::from(EXIT_USAGE);
+            return ExitCode::from(code);
         }
     };
     let json = cli.command.json();
