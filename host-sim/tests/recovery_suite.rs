@@ -19,7 +19,8 @@
 //! Run (reduced: 1 LSB, seed 1, every case):
 //!   cargo test --release -p host-sim --test recovery_suite -- --ignored --nocapture
 //! `GMA_RECOVERY_SUITE=full` (0, 1, 3 LSB; seeds 1 and 2), or a case's label to run that case
-//! alone (e.g. `GMA_RECOVERY_SUITE=ja+mech`). Recordings are cached under
+//! alone (e.g. `GMA_RECOVERY_SUITE=ja+mech`); `GMA_RECOVERY_LSB=0,3` picks the current noise
+//! levels. Recordings are cached under
 //! `target/recovery-suite/` keyed by everything that makes them.
 
 use std::collections::hash_map::DefaultHasher;
@@ -304,14 +305,20 @@ fn run(case: &Case, current_lsb: f64, seed: u64) -> Outcome {
 #[ignore = "minutes of CPU: run with --ignored (see the file's header)"]
 fn textbook_rig_parameter_recovery() {
     let choice = std::env::var("GMA_RECOVERY_SUITE").unwrap_or_default();
-    let (noises, seeds): (&[f64], &[u64]) =
-        if choice == "full" { (&[0.0, 1.0, 3.0], &[1, 2]) } else { (&[1.0], &[1]) };
+    let (mut noises, seeds): (Vec<f64>, &[u64]) =
+        if choice == "full" { (vec![0.0, 1.0, 3.0], &[1, 2]) } else { (vec![1.0], &[1]) };
+    if let Ok(list) = std::env::var("GMA_RECOVERY_LSB") {
+        noises = list
+            .split(',')
+            .map(|v| v.trim().parse().expect("GMA_RECOVERY_LSB: numbers, e.g. 0,1,3"))
+            .collect();
+    }
     let cases: Vec<Case> =
         cases().into_iter().filter(|c| choice.is_empty() || choice == "full" || c.label == choice).collect();
     assert!(!cases.is_empty(), "GMA_RECOVERY_SUITE={choice}: not `full` nor a case of the suite");
     let mut outcomes = Vec::new();
     for case in &cases {
-        for &n in noises {
+        for &n in &noises {
             for &s in seeds {
                 let o = run(case, n, s);
                 println!(
