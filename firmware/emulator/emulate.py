@@ -57,7 +57,7 @@ BUS_DIVIDER = (56.0 + 3.3) / 3.3
 COIL_R, COIL_L = 6.0, 6e-3
 
 # The comparator route to TIM1's break (issue 64 item 1) in the firmware under test.
-HW_TRIP = False
+HW_TRIP = True
 
 
 def code(v):
@@ -132,8 +132,13 @@ class Stop(Exception):
 class Board:
     """The STM32G474 around the core: registers, their side effects, and the analog plant."""
 
-    def __init__(self, elf_path, reset_flags):
+    def __init__(self, elf_path, reset_flags, fault=None):
         self.elf_path = elf_path
+        # An injected board fault: "dbgmcu" (a write of DBGMCU_APB2FZR lost), "edge" (the
+        # repetition counter one extreme off after the update event: triggers at the peaks),
+        # "no-pb1" (the board wire PA4 → PB1 missing).
+        self.fault = fault
+        self.pb1_wired = fault != "no-pb1"
         self.uc = Uc(UC_ARCH_ARM, UC_MODE_THUMB | UC_MODE_MCLASS)
         self.uc.ctl_set_cpu_model(A.UC_CPU_ARM_CORTEX_M4)
         self.uc.mem_map(0x08000000, 512 * 1024)
@@ -399,6 +404,9 @@ class Board:
             self.wr(a, v)
             if (v & 1) and not (old & 1):
                 self.dma_enable(ch)
+        elif COMP <= a < COMP + 0x1C:
+            if not (old & (1 << 31)):  # LOCK: read-only until reset
+                self.wr(a, v & ~(1 << 30))
         elif a == 0xE000ED0C and (v >> 16) == 0x05FA and (v & 4):
             raise Stop("SYSRESETREQ")
         elif 0xE000E100 <= a < 0xE000E120:
@@ -419,6 +427,8 @@ class Board:
             self.pending_irq.add(v & 0x1FF)
         elif a == 0xE0001004:
             pass
+        elif a == DBGMCU + 0x10 and self.fault == "dbgmcu":
+            pass
         else:
             self.wr(a, v)
 
@@ -427,6 +437,8 @@ class Board:
         self.tim1_start = self.cycles
         self.tim1_extreme_n = 0
         self.tim1_rep = self.tim1_rcr_active = self.rd(TIM1 + 0x30) & 0xFFFF
+        if self.fault == "edge" and self.tim1_rep:
+            self.tim1_rep -= 1
 
     def tim1_update_event(self):
         self.wr(TIM1 + 0x10, self.rd(TIM1 + 0x10) | 1)
@@ -521,33 +533,30 @@ class Board:
         return dhr / 4095 * VREF
 
     def comp_inputs(self, n):
+        """(INP, INM) voltages of COMPn for its CSR selection (RM0440 Tables 196, 197); None where
+        the selection is not modelled."""
         csr = self.rd(COMP + 4 * (n - 1))
         inm, inp = (csr >> 4) & 7, (csr >> 8) & 1
-        # INP: COMP1 PA1/PB1, COMP3 PA0/PC1 (RM0440 "COMP1..7 non-inverting inputs")
-        vp = None
+        vp = vm = None
         if n == 3 and inp == 0:
-            vp = self.channel_volts(1)
+            vp = self.channel_volts(1)  # PA0
         if n == 1 and inp == 1:
             vp = self.pb1_volts()
-        # INM: 100 DAC3_CH1 (COMP1, COMP3... as wired per comparator), 111 PA0 for COMP1
-        vm = None
         if n == 1 and inm == 0b111:
-            vm = self.channel_volts(1)
-        if n == 1 and inm == 0b100:
+            vm = self.channel_volts(1)  # PA0
+        if n in (1, 3) and inm == 0b100:
             vm = self.dac_volts(DAC3, 1)
-        if n == 3 and inm == 0b100:
-            vm = self.dac_volts(DAC3, 2)  # COMP3 INM 100 = DAC3_CH2
-        if n == 3 and inm == 0b101:
+        if n in (1, 3) and inm == 0b101:
             vm = self.dac_volts(DAC1, 1)
         return vp, vm
 
     def pb1_volts(self):
-        # The board route PA5 (DAC1 OUT2) → PB1 that firmware/README.md asks a board to add.
-        if not self.pb1_wired:
+        # The board wire PA4 (DAC1 OUT1) → PB1 that firmware/README.md asks a board to add; a
+        # board without it leaves PB1 at whatever it floats to (0 V here).
+        gpioa_moder = self.rd(0x48000000)
+        if not self.pb1_wired or (gpioa_moder >> 8) & 3 != 3:
             return 0.0
-        return self.dac_volts(DAC1, 2) or 0.0
-
-    pb1_wired = True
+        return self.dac_volts(DAC1, 1) or 0.0
 
     def comp_output(self, n):
         csr = self.rd(COMP + 4 * (n - 1))
@@ -564,10 +573,12 @@ class Board:
     def check_comparators(self):
         af1 = self.rd(TIM1 + 0x60)
         tripped = False
+        bkp = (self.rd(TIM1 + 0x44) >> 13) & 1
         for n in range(1, 8):
             if af1 & (1 << n):
                 pol = (af1 >> (9 + n)) & 1 if n <= 4 else 0
-                if self.comp_output(n) ^ pol:
+                # BKCMPxP inverts the comparator; the break is active at the level BKP names.
+                if (self.comp_output(n) ^ pol) == bkp:
                     tripped = True
         if tripped and "comparator" not in self.break_sources:
             self.comp_trip_at = self.cycles
@@ -704,6 +715,17 @@ class Board:
             self.adc_isr_entries += 1
             self.adc_isr_entry_cycles.append(self.cycles)
         uc.reg_write(A.UC_ARM_REG_PC, vec | 1)
+
+    def force_exception(self, irq, prio):
+        """Enters exception 16 + `irq` now, whatever NVIC and PRIMASK say (NMI: irq −14)."""
+        uc = self.uc
+        for _ in range(16):
+            xpsr = uc.reg_read(A.UC_ARM_REG_XPSR)
+            if not ((xpsr >> 10) & 0x3F or (xpsr >> 25) & 3):
+                break
+            uc.emu_start(uc.reg_read(A.UC_ARM_REG_PC) | 1, 0, count=1)
+        self.idle = False
+        self.enter(irq, prio, uc.reg_read(A.UC_ARM_REG_XPSR))
 
     def leave(self, exc_return):
         uc = self.uc
@@ -943,11 +965,15 @@ def names(f):
 # design gives them (firmware/README.md), the same table the firmware checks itself against
 # (firmware/src/board_check.rs). (name, address, mask, expected)
 def register_table():
+    """The register image gma-drive must leave at boot, from RM0440's field definitions and the
+    design values of firmware/README.md, written here independently of the firmware's own table
+    (firmware/src/board_check.rs). (name, address, mask, expected)"""
     # embassy's center-aligned PWM writes ARR = f_timer / (2 f) - 1 = 4249: the PWM runs at
     # 20.005 kHz and a tick lasts 4 × 4249 = 16 996 cycles (0.02 % short, inside the ±2 % check)
     arr = SYSCLK // (2 * 20_000) - 1
     dtg = -(-(10 + 25 + 2 * (39 + 35)) * SYSCLK // 1_000_000_000)
-    return [
+    pos, neg = hw_trip_codes()
+    t = [
         ("TIM1_CR1 CEN, CMS = center-aligned 3", TIM1 + 0x00, 0x61, 0x61),
         ("TIM1_ARR = 4249 (20 kHz center-aligned at 170 MHz)", TIM1 + 0x2C, 0xFFFF, arr),
         ("TIM1_RCR = 3 (one trigger per 4 half-periods)", TIM1 + 0x30, 0xFFFF, 3),
@@ -956,27 +982,46 @@ def register_table():
         ("TIM1_BDTR OSSI = OSSR = 1, BKE = 1, BKP = 0 (active low), AOE = 0, LOCK = 3",
          TIM1 + 0x44, (1 << 10) | (1 << 11) | (1 << 12) | (1 << 13) | (1 << 14) | (3 << 8),
          (1 << 10) | (1 << 11) | (1 << 12) | (3 << 8)),
-        ("TIM1_BDTR BKF = fCK_INT N = 8", TIM1 + 0x44, 0xF << 16, 0b0011 << 16),
+        ("TIM1_BDTR BKF = fCK_INT N = 8, BK2E = 0", TIM1 + 0x44, (0xF << 16) | (1 << 24), 0b0011 << 16),
         ("TIM1_BDTR MOE = 0 at boot (bridge off)", TIM1 + 0x44, 1 << 15, 0),
         ("TIM1_CCER CC1E CC1NE CC2E CC2NE on, polarities high", TIM1 + 0x20, 0xFF, 0x55),
-        ("TIM1_CCMR1 OC1M = OC2M = PWM mode 1, preload on", TIM1 + 0x18,
-         (0x1007 << 4) | (0x1007 << 12) | 0x0808, (0x6 << 4) | (0x6 << 12) | 0x0808),
-        ("TIM1_AF1 BKINE (PA6)%s; BKINP = 0, BKCMP1P = BKCMP3P = 0" % (", BKCMP1E, BKCMP3E" if HW_TRIP else ""),
-         TIM1 + 0x60, 0x0F | (1 << 9) | (1 << 10) | (1 << 12), 0x0B if HW_TRIP else 0x01),
+        ("TIM1_CCMR1 OC1M = OC2M = PWM mode 1, preload on, outputs", TIM1 + 0x18,
+         (0x1007 << 4) | (0x1007 << 12) | 0x0B0B, (0x6 << 4) | (0x6 << 12) | 0x0808),
+        ("TIM1_AF1 BKINE, BKCMP1E, BKCMP3E; BKINP = 0, BKCMP1P = BKCMP3P = 1 (inverted: BKP = 0)",
+         TIM1 + 0x60, 0x1FFF, 0x01 | 0x02 | 0x08 | (1 << 10) | (1 << 12)),
         ("ADC1_JSQR JL = 3 ranks, JSQ1..3 = IN1, IN2, IN6, JEXTSEL = TIM1_TRGO2, JEXTEN = rising",
          ADC1 + 0x4C, 0x03FFFFFF, 2 | (8 << 2) | (1 << 7) | (1 << 9) | (2 << 15) | (6 << 21)),
+        ("ADC1_SMPR1 IN1, IN2, IN6 at 24.5 cycles", ADC1 + 0x14, (7 << 3) | (7 << 6) | (7 << 18),
+         (3 << 3) | (3 << 6) | (3 << 18)),
         ("ADC1_IER JEOSIE", ADC1 + 0x04, 1 << 6, 1 << 6),
-        ("IWDG_PR / RLR: 2 ms", IWDG + 0x04, 7, 0),
+        ("ADC1_CR ADEN, JADSTART", ADC1 + 0x08, 0b1001, 0b1001),
+        ("IWDG_PR = /4", IWDG + 0x04, 7, 0),
         ("IWDG_RLR = 15 (16 × 4 / 32 kHz = 2 ms)", IWDG + 0x08, 0xFFF, 15),
         ("DBGMCU_APB2FZR DBG_TIM1_STOP", DBGMCU + 0x10, 1 << 11, 1 << 11),
         ("DBGMCU_APB1FZR1 DBG_IWDG_STOP", DBGMCU + 0x08, 1 << 12, 1 << 12),
         ("SYSCFG_CFGR2 CLL, SPL, ECCL", SYSCFG + 0x1C, 0b1011, 0b1011),
-    ] + ([
-        ("COMP3_CSR EN, INP = PA0, INM = DAC3_CH2, POL = 0, BLANKSEL = 0", COMP + 0x08,
-         1 | (7 << 4) | (1 << 8) | (1 << 15) | (0x1F << 19), 1 | (0b100 << 4)),
-        ("COMP1_CSR EN, INP = PB1, INM = PA0, POL = 0", COMP + 0x00,
-         1 | (7 << 4) | (1 << 8) | (1 << 15), 1 | (0b111 << 4) | (1 << 8)),
-    ] if HW_TRIP else [])
+        ("COMP3_CSR EN, INP = PA0, INM = DAC3_CH1, POL = 0, HYST = 30 mV, no blanking, LOCK", COMP + 0x08,
+         1 | (7 << 4) | (1 << 8) | (1 << 15) | (7 << 16) | (7 << 19) | (1 << 31),
+         1 | (0b100 << 4) | (0b011 << 16) | (1 << 31)),
+        ("COMP1_CSR EN, INP = PB1, INM = PA0, POL = 0, HYST = 30 mV, no blanking, LOCK", COMP + 0x00,
+         1 | (7 << 4) | (1 << 8) | (1 << 15) | (7 << 16) | (7 << 19) | (1 << 31),
+         1 | (0b111 << 4) | (1 << 8) | (0b011 << 16) | (1 << 31)),
+        ("DAC3_DHR12R1 = %d (+4.4 A)" % pos, DAC3 + 0x08, 0xFFF, pos),
+        ("DAC1_DHR12R1 = %d (-4.4 A)" % neg, DAC1 + 0x08, 0xFFF, neg),
+        ("DAC3 EN1, MODE1 = internal unbuffered", DAC3 + 0x00, 1, 1),
+        ("DAC3_MCR MODE1 = 011, HFSEL = 10", DAC3 + 0x3C, 7 | (3 << 14), 3 | (2 << 14)),
+        ("DAC1 EN1; DAC1_MCR MODE1 = 000 (PA4, buffered), HFSEL = 10", DAC1 + 0x3C, 7 | (3 << 14), 2 << 14),
+        ("GPIOA MODER0 = MODER4 = analog, GPIOB MODER1 = analog", 0x48000000, (3 << 0) | (3 << 8),
+         (3 << 0) | (3 << 8)),
+        ("GPIOB MODER1 = analog (COMP1 INP)", 0x48000400, 3 << 2, 3 << 2),
+    ]
+    return t
+
+
+def hw_trip_codes():
+    """DAC codes of ±1.1 × the 4 A software overcurrent limit around the 1.65 V current zero."""
+    trip = 4.0 * 1.1
+    return code(CURRENT_ZERO_V + CURRENT_V_PER_A * trip), code(CURRENT_ZERO_V - CURRENT_V_PER_A * trip)
 
 
 class Checks:
@@ -996,20 +1041,41 @@ def telemetry(b, since=0):
     return [f for k, f in b.frames()[since:] if k == "telemetry"]
 
 
+POWER_ON = (1 << 26) | (1 << 27)  # RCC_CSR PINRSTF | BORRSTF
+WATCHDOG = (1 << 26) | (1 << 29)  # PINRSTF | IWDGRSTF
+
+
+def stopped(c, b, e):
+    c.check("the run reached its end without a CPU fault, reset or watchdog expiry", False,
+            "%s at %.3f ms (pc 0x%08x %s)" % (e, b.cycles / SYSCLK * 1e3, b.uc.reg_read(A.UC_ARM_REG_PC),
+                                             b.symbol_at(b.uc.reg_read(A.UC_ARM_REG_PC))))
+
+
+def booted(elf, fault=None, reset_flags=POWER_ON):
+    """A board booted and through its 30.6 ms bridge-off calibration."""
+    b = Board(elf, reset_flags, fault)
+    b.boot()
+    b.run_until(b.cycles + 50 * 1000 * US)
+    return b, Host(b)
+
+
 def main():
     elf = sys.argv[1]
     force_fail = "force-fail" in sys.argv[2:]
     c = Checks(force_fail)
     print("gma-drive emulated: %s (Unicorn, Cortex-M4F, STM32G474 register models)" % elf)
-    b = Board(elf, reset_flags=(1 << 26) | (1 << 27))
+    b = Board(elf, reset_flags=POWER_ON)
     host = Host(b)
     spec, params = drive_params(elf)
     try:
         scenario(b, host, c, spec, params)
     except Stop as e:
-        c.check("the run reached its end without a CPU fault, reset or watchdog expiry", False,
-                "%s at %.3f ms (pc 0x%08x %s)" % (e, b.cycles / SYSCLK * 1e3, b.uc.reg_read(A.UC_ARM_REG_PC),
-                                                 b.symbol_at(b.uc.reg_read(A.UC_ARM_REG_PC))))
+        stopped(c, b, e)
+    for case in ((overcurrent_trips,) if HW_TRIP else ()) + (refused_on_mismatch, after_watchdog_reset):
+        try:
+            case(elf, c)
+        except Stop as e:
+            stopped(c, b, e)
     failed = [r for r in c.results if not r[1]]
     if failed:
         print("gma-drive emulated: FAIL (%d of %d checks failed)" % (len(failed), len(c.results)))
@@ -1124,30 +1190,122 @@ def scenario(b, host, c, spec, params):
     r = host.exchange(CLEAR)
     c.check("clear acknowledged once the break line is released", r is not None and r["status"] == 0, str(r))
     b.run_until(b.cycles + 40 * 1000 * US)
-    if HW_TRIP:
-        comparator_trip(b, host, c)
     # 10. The watchdog: fed while all check in.
     c.check("the watchdog runs and is fed", b.iwdg_running and b.iwdg_feeds > 1000, "%d feeds" % b.iwdg_feeds)
 
 
-def comparator_trip(b, host, c):
-    """Overcurrent through the comparator route: no code in the loop."""
+def overcurrent_trips(elf, c):
+    """Item 1: an overcurrent in either direction trips TIM1's break through its comparator, in
+    hardware: MOE falls at the instant the comparator's output changes, before any code has seen
+    the sample, and stays 0 (latched) after the current is back. Between the software and the
+    hardware limits only the firmware trips. A fresh board each (three unverifiable trips within
+    a minute would latch repeated_trips)."""
+    for amps, comp in ((5.5, "COMP3"), (-5.5, "COMP1"), (4.2, None)):
+        b, host = booted(elf)
+        r = host.exchange(ARM)
+        b.run_until(b.cycles + 2000 * US)
+        was_on = moe(b)
+        b.current_override = amps
+        b.run_until(b.cycles + 300 * US)
+        at = b.comp_trip_at
+        hw = at is not None and any(t == at and v == 0 for t, v in b.moe_history)
+        b.current_override = None
+        b.run_until(b.cycles + 2000 * US)
+        host.exchange(PING)
+        tel = telemetry(b)
+        faults = tel[-1]["faults"] if tel else 0
+        if comp:
+            c.check("%+.1f A trips TIM1's break through %s in hardware (MOE 0 at the comparator's edge, latched)"
+                    % (amps, comp), was_on == 1 and hw and moe(b) == 0 and faults & BRIDGE_BREAK,
+                    "armed MOE %d, comparator trip %s, MOE 0 at that instant %s, faults %s" % (
+                        was_on, at is not None, hw, names(faults)))
+        else:
+            c.check("%+.1f A (above the 4 A software limit, below the 4.4 A hardware one): the firmware trips, "
+                    "no comparator" % amps,
+                    was_on == 1 and at is None and moe(b) == 0 and faults & 1 and not faults & BRIDGE_BREAK,
+                    "armed MOE %d, comparator trip %s, faults %s" % (was_on, at is not None, names(faults)))
+
+
+def refused_on_mismatch(elf, c):
+    """Item 4: a register the firmware reads back wrong, a missing comparator wire and a
+    conversion at the wrong counter edge each refuse arming."""
+    for fault, what in (("dbgmcu", "a lost write of DBGMCU_APB2FZR.DBG_TIM1_STOP"),
+                        ("no-pb1", "no PA4 → PB1 wire (COMP1's threshold missing)"),
+                        ("edge", "conversions triggered at the counter's peak, not its trough")):
+        b, host = booted(elf, fault)
+        r = host.exchange(ARM)
+        b.run_until(b.cycles + 1000 * US)
+        c.check("%s refuses arming (parameters_invalid latched, MOE 0)" % what,
+                r is not None and r["status"] != 0 and r["faults"] & PARAMETERS_INVALID and moe(b) == 0,
+                str(r))
+
+
+def unexpected_exceptions(elf, c):
+    """Item 3: an NMI and an interrupt with no handler (DefaultHandler) while armed take the bridge
+    off at once and end in a watchdog reset."""
+    for irq, prio, what in ((-14, -2, "NMI"), (64, 0, "an interrupt with no handler (COMP1_2_3, DefaultHandler)")):
+        b, host = booted(elf)
+        r = host.exchange(ARM)
+        b.run_until(b.cycles + 2000 * US)
+        was_on = moe(b)
+        at = b.cycles
+        b.force_exception(irq, prio)
+        off_us = None
+        try:
+            b.run_until(b.cycles + 20 * 1000 * US)
+        except Stop as e:
+            if b.watchdog_reset_at is None:
+                raise
+        for t, v in b.moe_history:
+            if t >= at and v == 0:
+                off_us = (t - at) / US
+                break
+        reset_ms = (b.watchdog_reset_at - at) / SYSCLK * 1e3 if b.watchdog_reset_at else None
+        c.check("%s while armed: MOE 0 within 5 µs, then the watchdog resets the board within 2.1 ms" % what,
+                was_on == 1 and off_us is not None and off_us < 5 and reset_ms is not None and reset_ms < 2.1,
+                "armed MOE %d, MOE 0 after %s µs, reset after %s ms" % (
+                    was_on, "%.2f" % off_us if off_us is not None else "-",
+                    "%.2f" % reset_ms if reset_ms is not None else "-"))
+
+
+def watchdog_starved(b, host, c):
+    """Item 3: a thread-mode task that stops (the telemetry writer waits for a UART DMA transfer
+    that never ends) starves the watchdog: the bridge off and a reset within the 100 ms window."""
+    r = host.exchange(CLEAR)
+    b.run_until(b.cycles + 40 * 1000 * US)
     r = host.exchange(ARM)
     b.run_until(b.cycles + 2000 * US)
     was_on = moe(b)
-    b.current_override = 5.5  # above the hardware trip
-    b.run_until(b.cycles + 300 * US)
-    tripped_hw = b.comp_trip_at is not None and moe(b) == 0
-    b.current_override = -5.5
-    b.run_until(b.cycles + 1000 * US)
-    b.current_override = None
-    b.run_until(b.cycles + 2000 * US)
-    host.exchange(PING)
-    tel = telemetry(b)
-    c.check("an overcurrent above the DAC threshold trips TIM1's break through COMP3 (MOE 0, latched)",
-            was_on == 1 and tripped_hw and tel and tel[-1]["faults"] & BRIDGE_BREAK,
-            "armed MOE %d, comparator trip %s, faults %s" % (was_on, b.comp_trip_at is not None,
-                                                             names(tel[-1]["faults"] if tel else 0)))
+    b.tx_stalled = True
+    at = b.cycles
+    # keep the operator talking, so that only the stalled task can explain what follows
+    try:
+        for _ in range(20):
+            host.command(PING)
+            b.run_until(b.cycles + 10 * 1000 * US)
+    except Stop:
+        if b.watchdog_reset_at is None:
+            raise
+    off = next(((t - at) / SYSCLK * 1e3 for t, v in b.moe_history if t >= at and v == 0), None)
+    reset_ms = (b.watchdog_reset_at - at) / SYSCLK * 1e3 if b.watchdog_reset_at else None
+    c.check("a stalled telemetry task: bridge off and a watchdog reset within 100 ms + 2 ms of the stall",
+            was_on == 1 and off is not None and reset_ms is not None and reset_ms <= 103 and off <= reset_ms,
+            "armed MOE %d, MOE 0 after %s ms, reset after %s ms" % (
+                was_on, "%.1f" % off if off is not None else "-", "%.1f" % reset_ms if reset_ms is not None else "-"))
+
+
+def after_watchdog_reset(elf, c):
+    """The boot after a watchdog reset (RCC_CSR.IWDGRSTF) holds the bridge off with watchdog_reset
+    latched until an operator clears it."""
+    b, host = booted(elf, reset_flags=WATCHDOG)
+    r = host.exchange(ARM)
+    c.check("after a watchdog reset the board boots with watchdog_reset latched and refuses arming",
+            r is not None and r["status"] != 0 and r["faults"] & (1 << 9) and moe(b) == 0, str(r))
+    r = host.exchange(CLEAR)
+    b.run_until(b.cycles + 40 * 1000 * US)
+    r2 = host.exchange(ARM)
+    c.check("a clear then lets it arm", r is not None and r["status"] == 0 and r2 is not None and r2["status"] == 0,
+            "%s, %s" % (r, r2))
 
 
 if __name__ == "__main__":
