@@ -1069,9 +1069,11 @@ def main():
     spec, params = drive_params(elf)
     try:
         scenario(b, host, c, spec, params)
+        watchdog_starved(b, host, c)
     except Stop as e:
         stopped(c, b, e)
-    for case in ((overcurrent_trips,) if HW_TRIP else ()) + (refused_on_mismatch, after_watchdog_reset):
+    for case in ((overcurrent_trips,) if HW_TRIP else ()) + (refused_on_mismatch, unexpected_exceptions,
+                                                               after_watchdog_reset):
         try:
             case(elf, c)
         except Stop as e:

@@ -39,8 +39,9 @@ use embassy_stm32::timer::{BkIn1, BreakInputPin, Channel};
 use embassy_stm32::usart::{self, Config as UartConfig, RingBufferedUartRx, Uart, UartTx};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, dma, interrupt, pac, peripherals, Config};
-use embassy_time::{Instant, Timer};
+use embassy_time::{with_timeout, Duration, Instant, Timer};
 use firmware::board_check::{self, HwTrip};
+use firmware::checkin::{Checkins, Task, COMMAND_IDLE_CHECKIN_MS};
 use firmware::drive::{
     boot_config, dead_time_ticks, encode_queued, encode_replies, execute, quiet_window_max_duty,
     BridgeTiming, CommandPort, DriveCounters, DriveLoop, PowerStage, ReplyQueue, Slot, TelemetryQueue,
@@ -75,6 +76,10 @@ static COUNTERS: DriveCounters = DriveCounters::new();
 static COMMAND_RING: Slot<[u8; 256]> = Slot::new();
 /// Command replies from the command task to the UART writer.
 static REPLIES: Slot<ReplyQueue> = Slot::new();
+/// The thread-mode tasks' check-ins: the interrupt feeds the watchdog only while all come.
+static CHECKINS: Checkins = Checkins::new();
+/// Replies the command task had no queue room for (its `CommandPort::replies_dropped`).
+static REPLIES_DROPPED: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
 /// The board check's mismatches, for the status log.
 static BOARD_FAULTS: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
 
@@ -100,6 +105,33 @@ fn bridge_off() {
 /// the reset-default timeout (about 512 ms) if start-up had not configured it yet.
 fn watchdog_start() {
     pac::IWDG.kr().write(|w| w.set_key(Key::START));
+}
+
+/// NMI (RM0440: the clock security system, SRAM parity and flash ECC errors can raise it): the
+/// bridge off at once and left to the watchdog, as in the panic handler; never returns, so no
+/// unexpected source can keep the bridge switching.
+#[allow(unsafe_code)] // cortex-m-rt requires an NMI handler to be an `unsafe fn`.
+#[cortex_m_rt::exception]
+unsafe fn NonMaskableInt() -> ! {
+    cortex_m::interrupt::disable();
+    bridge_off();
+    watchdog_start();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// Any interrupt or exception without a handler of its own (cortex-m-rt's default looped with
+/// the bridge switching at its last duty until the watchdog reset): bridge off, then the watchdog.
+#[allow(unsafe_code)] // cortex-m-rt's DefaultHandler must be an `unsafe fn`.
+#[cortex_m_rt::exception]
+unsafe fn DefaultHandler(_irqn: i16) -> ! {
+    cortex_m::interrupt::disable();
+    bridge_off();
+    watchdog_start();
+    loop {
+        cortex_m::asm::nop();
+    }
 }
 
 /// One 32-bit register read at `addr`, for the board check's table.
@@ -298,6 +330,8 @@ struct BoardStage {
     _adc: InjectedAdc<'static, ADC1, 3>,
     _break_pin: Flex<'static>,
     watchdog: IndependentWatchdog<'static, IWDG>,
+    /// Ticks since every thread-mode task last checked in.
+    stale_ticks: u32,
 }
 
 impl PowerStage for BoardStage {
@@ -351,7 +385,13 @@ impl PowerStage for BoardStage {
     }
 
     fn feed_watchdog(&mut self) {
-        self.watchdog.pet();
+        // Only while every thread-mode task checks in (firmware::checkin); a hung task turns
+        // the bridge off now and the watchdog resets the board within its 2 ms.
+        if CHECKINS.may_feed(&mut self.stale_ticks) {
+            self.watchdog.pet();
+        } else {
+            bridge_off();
+        }
     }
 
     fn sample_edge_ok(&self) -> bool {
@@ -605,7 +645,7 @@ async fn main(spawner: Spawner) {
         );
     }
     BOARD_FAULTS.store(mismatches, core::sync::atomic::Ordering::Relaxed);
-    let stage = BoardStage { _pwm: pwm, _adc: injected, _break_pin: break_pin, watchdog };
+    let stage = BoardStage { _pwm: pwm, _adc: injected, _break_pin: break_pin, watchdog, stale_ticks: 0 };
     // SAFETY: the only write to DRIVE_STATE; `.ccmram` is NOLOAD, and this write initialises it.
     #[allow(unsafe_code)]
     let drive = unsafe { DRIVE_STATE.write(DriveLoop::new(controller, stage, timing, producer, &COUNTERS)) };
@@ -654,6 +694,7 @@ async fn telemetry_tx(
     let mut reported = (0u32, 0u32, 0u32, 0u32, 0u32);
     let mut stack_logged = 0;
     loop {
+        CHECKINS.check_in(Task::Telemetry);
         let n = encode_replies(&mut replies, &mut batch);
         let n = n + encode_queued(&mut queue, &mut batch[n..]);
         if n > 0 {
@@ -671,24 +712,25 @@ async fn telemetry_tx(
                 info!("gma-drive: stack peak {} B of {} B", stack_peak, firmware::stack::size());
             }
             let load = |c: &core::sync::atomic::AtomicU32| c.load(core::sync::atomic::Ordering::Relaxed);
-            let (dropped, late, trips, off, board) = (
+            let (dropped, late, trips, off, replies_dropped) = (
                 load(&COUNTERS.telemetry_dropped),
                 load(&COUNTERS.deadline_overruns),
                 load(&COUNTERS.trips),
                 load(&COUNTERS.period_off),
-                load(&BOARD_FAULTS),
+                load(&REPLIES_DROPPED),
             );
             // The counters are totals since boot: said when one has grown, not every second.
-            if (dropped, late, trips, off, board) != reported {
-                reported = (dropped, late, trips, off, board);
+            if (dropped, late, trips, off, replies_dropped) != reported {
+                reported = (dropped, late, trips, off, replies_dropped);
                 warn!(
-                    "gma-drive: telemetry dropped {} of {}, deadline overruns {}, trips {:#x}, \
+                    "gma-drive: telemetry dropped {} of {}, command replies dropped {}, deadline overruns {}, trips {:#x}, \
                      board check {:#x}, longest tick {} cycles, single tick intervals off ±2 % {} (last 32-tick window {} cycles)",
                     dropped,
                     TELEMETRY_QUEUE,
+                    replies_dropped,
                     late,
                     trips,
-                    board,
+                    load(&BOARD_FAULTS),
                     load(&COUNTERS.max_tick_cycles),
                     off,
                     load(&COUNTERS.last_window_cycles)
@@ -707,9 +749,13 @@ async fn command_rx(mut rx: RingBufferedUartRx<'static>, replies: Producer<'stat
     let mut port = CommandPort::new(replies);
     let mut chunk = [0u8; 32];
     loop {
-        let n = match rx.read(&mut chunk).await {
-            Ok(n) => n,
-            Err(e) => {
+        CHECKINS.check_in(Task::Command);
+        // Bounded, so that a silent line still checks in (firmware::checkin).
+        let read = with_timeout(Duration::from_millis(COMMAND_IDLE_CHECKIN_MS), rx.read(&mut chunk)).await;
+        let n = match read {
+            Err(_) => continue,
+            Ok(Ok(n)) => n,
+            Ok(Err(e)) => {
                 // Overrun or framing error: the frame being assembled fails its CRC and is
                 // counted as corrupt; the decoder resynchronises at the next delimiter.
                 warn!("gma-drive: command UART {}", e);
@@ -718,6 +764,7 @@ async fn command_rx(mut rx: RingBufferedUartRx<'static>, replies: Producer<'stat
         };
         let corrupt = port.decoder.corrupt;
         on_command_bytes(&mut port, &chunk[..n]);
+        REPLIES_DROPPED.store(port.replies_dropped, core::sync::atomic::Ordering::Relaxed);
         if port.decoder.corrupt != corrupt {
             warn!("gma-drive: corrupt command frames {}", port.decoder.corrupt);
         }
