@@ -18,6 +18,7 @@ lists the failed checks and exits 1; `force-fail` perturbs every check's expecta
 one must fail (the run then exits 1 with every check FAILED).
 """
 
+import math
 import os
 import re
 import struct
@@ -180,7 +181,6 @@ class Board:
         self.tim1_start = None  # cycle at which the counter last started from 0 (CEN or UG)
         self.tim1_extreme_n = 0  # extremes processed since start
         self.tim1_rep = 0
-        self.tim1_rcr_active = 0
         self.break_pin = False  # BKIN (PA6) driven to its active level
         self.break_sources = set()
         self.moe_history = []  # (cycle, moe)
@@ -207,6 +207,7 @@ class Board:
         self.watchdog_reset_at = None
         # USART2 + DMA
         self.tx_bytes = bytearray()
+        self._scan, self._frames = 0, []  # frames() parses tx_bytes incrementally
         self.tx_pending = []  # (done cycle, channel, bytes)
         self.tx_stalled = False
         self.rx_queue = []  # (cycle, byte)
@@ -233,14 +234,10 @@ class Board:
         addr = base + offset
         word = addr & ~3
         shift = (addr - word) * 8
-        if size < 4:
+        if size < 4:  # a byte or halfword store merges into its word
             mask = ((1 << (8 * size)) - 1) << shift
-            old = self.rd(word)
-            value = (old & ~mask) | ((value << shift) & mask)
-            full = (value, mask)
-        else:
-            full = (value, 0xFFFFFFFF)
-        self.write_reg(word, full[0], full[1])
+            value = (self.rd(word) & ~mask) | ((value << shift) & mask)
+        self.write_reg(word, value)
 
     def tim1_arr(self):
         return self.rd(TIM1 + 0x2C) or 0xFFFF
@@ -298,7 +295,7 @@ class Board:
             v = sum(1 << (e - 16 - 32 * n) for e, _ in self.active if 32 * n <= e - 16 < 32 * n + 32)
         elif a == 0xE000ED04:  # ICSR: VECTACTIVE
             v = self.active[-1][0] if self.active else 0
-        elif a == COMP + 0x00 or a == COMP + 0x08 or a == COMP + 0x04 or (COMP <= a < COMP + 0x1C):
+        elif COMP <= a < COMP + 0x1C:  # COMPx_CSR.VALUE: the modelled output
             v = (v & ~(1 << 30)) | (self.comp_output((a - COMP) // 4 + 1) << 30)
         elif a in (DAC1 + 0x34, DAC3 + 0x34):  # DAC_SR: DACxRDY = ENx
             cr = self.rd(a - 0x34)
@@ -309,7 +306,7 @@ class Board:
             v = self.rd(a - 0x30 + 0x14) & 0xFFF
         return v
 
-    def write_reg(self, a, v, mask):
+    def write_reg(self, a, v):
         old = self.rd(a)
         if a == RCC + 0x94:
             if v & (1 << 23):  # RMVF
@@ -436,7 +433,7 @@ class Board:
     def tim1_restart(self):
         self.tim1_start = self.cycles
         self.tim1_extreme_n = 0
-        self.tim1_rep = self.tim1_rcr_active = self.rd(TIM1 + 0x30) & 0xFFFF
+        self.tim1_rep = self.rd(TIM1 + 0x30) & 0xFFFF
         if self.fault == "edge" and self.tim1_rep:
             self.tim1_rep -= 1
 
@@ -517,7 +514,6 @@ class Board:
             v = d * self.bus_v
             tau = COIL_L / COIL_R
             i_inf = v / COIL_R
-            import math
             self.coil_i = i_inf + (self.coil_i - i_inf) * math.exp(-100e-6 / tau)
         else:
             self.coil_i = 0.0  # the diodes return it to the bus within the tick (≈ 1 ms τ ignored)
@@ -900,13 +896,6 @@ class Board:
             if chunk:
                 self._frames.append(parse_frame(chunk))
 
-    _scan = 0
-
-    @property
-    def _frames(self):
-        if "_frame_list" not in self.__dict__:
-            self._frame_list = []
-        return self._frame_list
 
 
 def parse_frame(chunk):
@@ -1113,7 +1102,7 @@ def scenario(b, host, c, spec, params):
             "; ".join(bad))
     c.check("bridge off after boot (MOE = 0)", moe(b) == 0)
     # 3. The 10 kHz interrupt on injected conversions.
-    t0, n0, w0 = b.cycles, b.adc_isr_entries, len(b.ccr_writes)
+    n0, w0 = b.adc_isr_entries, len(b.ccr_writes)
     b.run_until(b.cycles + 40 * 1000 * US)  # 40 ms: past the 30.6 ms bridge-off calibration
     n = b.adc_isr_entries - n0
     entries = b.adc_isr_entry_cycles[n0:]
@@ -1204,7 +1193,7 @@ def overcurrent_trips(elf, c):
     a minute would latch repeated_trips)."""
     for amps, comp in ((5.5, "COMP3"), (-5.5, "COMP1"), (4.2, None)):
         b, host = booted(elf)
-        r = host.exchange(ARM)
+        host.exchange(ARM)
         b.run_until(b.cycles + 2000 * US)
         was_on = moe(b)
         b.current_override = amps
@@ -1247,7 +1236,7 @@ def unexpected_exceptions(elf, c):
     off at once and end in a watchdog reset."""
     for irq, prio, what in ((-14, -2, "NMI"), (64, 0, "an interrupt with no handler (COMP1_2_3, DefaultHandler)")):
         b, host = booted(elf)
-        r = host.exchange(ARM)
+        host.exchange(ARM)
         b.run_until(b.cycles + 2000 * US)
         was_on = moe(b)
         at = b.cycles
@@ -1255,7 +1244,7 @@ def unexpected_exceptions(elf, c):
         off_us = None
         try:
             b.run_until(b.cycles + 20 * 1000 * US)
-        except Stop as e:
+        except Stop:
             if b.watchdog_reset_at is None:
                 raise
         for t, v in b.moe_history:
@@ -1273,9 +1262,9 @@ def unexpected_exceptions(elf, c):
 def watchdog_starved(b, host, c):
     """Item 3: a thread-mode task that stops (the telemetry writer waits for a UART DMA transfer
     that never ends) starves the watchdog: the bridge off and a reset within the 100 ms window."""
-    r = host.exchange(CLEAR)
+    host.exchange(CLEAR)
     b.run_until(b.cycles + 40 * 1000 * US)
-    r = host.exchange(ARM)
+    host.exchange(ARM)
     b.run_until(b.cycles + 2000 * US)
     was_on = moe(b)
     b.tx_stalled = True
