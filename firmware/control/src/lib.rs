@@ -24,6 +24,7 @@ pub mod telemetry;
 pub mod tick;
 pub mod timing;
 pub mod units;
+pub mod watchdog;
 
 use model_core::{
     Actuator, ActuatorParams, Compensator, CompensatorState, MagnetizationLaw, ModelSpec, ParamError,
