@@ -96,7 +96,7 @@ impl ControlConfig {
         current_loop: CurrentLoopParams::REFERENCE,
         limits: FaultLimits::REFERENCE,
         reference: Waveform::Sine { freq_hz: 100.0, amplitude: 12.5, bias: 15.0 },
-        preview_ticks: 3,
+        preview_ticks: 4,
         pid: Some(PidParams { kp: 0.01, ki: 0.016, kd: 0.04, limit_a: 1.0 }),
         resonant: Some(ResonantParams {
             gain_a_per_um: 0.0005,

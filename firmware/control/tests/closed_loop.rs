@@ -173,7 +173,9 @@ fn compensated_tracking_of_a_100_hz_sine_with_the_pwm_delay() {
             ControlConfig::REFERENCE.resonant,
         );
         println!("  λ_s × {lambda}, k × {k}: {rms:.2} %");
-        assert!(rms <= 1.1, "λ_s × {lambda}, k × {k}: {rms:.2} % RMS");
+        // 1.1 before the current loop was made robust to the coil's inductance: (1.1, 0.9)
+        // went from 0.98 % to 1.11 %.
+        assert!(rms <= 1.15, "λ_s × {lambda}, k × {k}: {rms:.2} % RMS");
     }
 }
 
@@ -769,4 +771,67 @@ fn a_multivalued_ja_set_is_refused_by_the_board() {
     // The Preisach law has no mean field: its set loads whatever the J–A table holds.
     let p = with_ratio(1.5);
     assert!(gma_control::compensator_model(spec("preisach+mech"), &p, cfg.current_loop.tick_s).is_ok());
+}
+
+/// A 0 → 0.5 A step with `params` on the delayed rig whose coil has `l_ratio` × 6 mH, bus at
+/// `bus_v`; returns the overshoot [% of the step] and the first tick from which the current stays
+/// within 2 % (+ 2 codes) of the step.
+fn current_step_at(params: CurrentLoopParams, l_ratio: f32, bus_v: f64) -> (f32, usize) {
+    let mut rig = rig(spec("ja"), &ActuatorParams::TERFENOL_DEMO);
+    rig.bus_v = bus_v;
+    rig.plant.set_coil_inductance_h(6e-3 * l_ratio);
+    let mut pi = CurrentLoop::new(params).unwrap();
+    let target = 0.5;
+    let mut trace = Vec::new();
+    for _ in 0..80 {
+        let raw = rig.sample();
+        let i = rig.calibration.current(raw.current);
+        let cmd = pi.step(Amps(target), i, raw.bus);
+        rig.apply(&TickOutput { duty: cmd.duty, bridge_enabled: true, frame: Default::default() }).unwrap();
+        trace.push(rig.current_a() as f32);
+    }
+    let overshoot = (trace.iter().fold(f32::MIN, |m, &v| m.max(v)) - target) / target * 100.0;
+    let settled = (0..trace.len())
+        .find(|&k| trace[k..].iter().all(|v| (v - target).abs() <= 0.02 * target + 0.008))
+        .unwrap_or(trace.len());
+    (overshoot, settled)
+}
+
+/// A Terfenol-D coil's inductance follows the rod's permeability: the current loop must hold
+/// from half to one and a half times the nominal 6 mH. The design for the nominal coil alone
+/// (`CurrentLoopParams::NOMINAL_ONLY`) overshoots about 49 % at 0.5 L.
+#[test]
+fn current_step_overshoot_over_the_coil_inductance_range() {
+    let ratios = [0.5f32, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2, 1.3, 1.4, 1.5];
+    let mut worst = (f32::MIN, 0.0f32);
+    for &l in &ratios {
+        for bus_v in [21.0, 24.0, 30.0] {
+            let (os, _) = current_step_at(CurrentLoopParams::REFERENCE, l, bus_v);
+            if os > worst.0 {
+                worst = (os, l);
+            }
+        }
+    }
+    let per_l: Vec<String> = ratios
+        .iter()
+        .map(|&l| format!("{l}: {:.1}", current_step_at(CurrentLoopParams::REFERENCE, l, 24.0).0))
+        .collect();
+    let (at_04, _) = current_step_at(CurrentLoopParams::REFERENCE, 0.4, 24.0);
+    let (old_05, _) = current_step_at(CurrentLoopParams::NOMINAL_ONLY, 0.5, 24.0);
+    let (old_04, _) = current_step_at(CurrentLoopParams::NOMINAL_ONLY, 0.4, 24.0);
+    println!("current-step overshoot over 0.5–1.5 L: max {:.1} %", worst.0);
+    println!(
+        "  per L/L_nom at 24 V (%): {}; worst at {} L; 0.4 L: {at_04:.1} %; the nominal-only design: \
+         {old_05:.1} % at 0.5 L, {old_04:.1} % at 0.4 L",
+        per_l.join(", "),
+        worst.1
+    );
+    assert!(worst.0 <= 10.0, "overshoot {:.1} % at {} L", worst.0, worst.1);
+    // The comparison can fail too: the design for the nominal coil alone does not hold.
+    assert!(old_05 > 40.0, "the nominal-only design at 0.5 L: {old_05:.1} %");
+    // Every inductance in the range settles (the ends slowly: the zero at 1.2 L).
+    for &l in &ratios {
+        let (_, settled) = current_step_at(CurrentLoopParams::REFERENCE, l, 24.0);
+        assert!(settled <= 30, "{l} L: settled after {settled} ticks");
+    }
 }
