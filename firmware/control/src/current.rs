@@ -104,15 +104,13 @@ pub struct CurrentLoopParams {
     pub coil_inductance_h: f32,
     /// Tick period T [s].
     pub tick_s: f32,
-    /// Closed-loop pole in (0, 1) when the coil has the gain's inductance and the model and the
+    /// Closed-loop pole in (0, 1) when the coil has the nominal inductance and the model and the
     /// zero are exact: 0.4 settles a step to 2 % in 5 ticks (1 % in 6), no overshoot.
     pub pole: f32,
     /// Largest share of the bus voltage the bridge applies (dead time, bootstrap): 0.95.
     pub max_duty: f32,
     /// The inductance the delay model assumes, as a share of `coil_inductance_h`.
     pub model_inductance_ratio: f32,
-    /// The inductance the gain is designed for (K_p = (1 − pole)/b), as a share.
-    pub gain_inductance_ratio: f32,
     /// The inductance whose pole the PI zero cancels, as a share.
     pub zero_inductance_ratio: f32,
     /// The regeneration limit.
@@ -128,7 +126,6 @@ impl CurrentLoopParams {
         pole: 0.45,
         max_duty: 0.95,
         model_inductance_ratio: 0.6,
-        gain_inductance_ratio: 1.0,
         zero_inductance_ratio: 1.2,
         regen: RegenLimit::REFERENCE,
     };
@@ -138,7 +135,6 @@ impl CurrentLoopParams {
     pub const NOMINAL_ONLY: CurrentLoopParams = CurrentLoopParams {
         pole: 0.4,
         model_inductance_ratio: 1.0,
-        gain_inductance_ratio: 1.0,
         zero_inductance_ratio: 1.0,
         regen: RegenLimit::NONE,
         ..Self::REFERENCE
@@ -210,7 +206,6 @@ impl CurrentLoop {
         }
         for (name, r) in [
             ("model_inductance_ratio", p.model_inductance_ratio),
-            ("gain_inductance_ratio", p.gain_inductance_ratio),
             ("zero_inductance_ratio", p.zero_inductance_ratio),
         ] {
             if !(r.is_finite() && (0.1..=10.0).contains(&r)) {
@@ -221,7 +216,7 @@ impl CurrentLoop {
             return Err(CurrentLoopError::Parameter("regen"));
         }
         let r = p.coil_resistance_ohm;
-        let gain_b = (1.0 - coil_pole(&p, p.gain_inductance_ratio)) / r;
+        let gain_b = (1.0 - coil_pole(&p, 1.0)) / r;
         let model_p = coil_pole(&p, p.model_inductance_ratio);
         Ok(Self {
             kp: (1.0 - p.pole) / gain_b,

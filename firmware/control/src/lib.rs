@@ -84,8 +84,8 @@ pub struct ControlConfig {
     /// the step.
     pub max_feedforward_slew_um: f32,
     /// Driving the coil's current to zero before the bridge opens, on a software trip and on a
-    /// disarm; `None` opens it at once (the coil's energy then goes into the bus).
-    pub drain: Option<DrainParams>,
+    /// disarm; [`DrainParams::NONE`] opens it at once (the coil's energy then goes into the bus).
+    pub drain: DrainParams,
 }
 
 /// How the controller brings the coil's current to zero before it opens the bridge (a software
@@ -101,7 +101,7 @@ pub struct ControlConfig {
 /// `rise_margin_a` from one tick to the next).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DrainParams {
-    /// Longest drain [ticks].
+    /// Longest drain [ticks]; 0: no drain.
     pub max_ticks: u16,
     /// Current below which the drain is done [A].
     pub done_a: f32,
@@ -118,6 +118,9 @@ impl DrainParams {
     /// reads about 4.4 A), a rise of 20 mA (5 codes) tolerated.
     pub const REFERENCE: DrainParams =
         DrainParams { max_ticks: 100, done_a: 0.05, abort_a: 4.5, rise_margin_a: 0.02 };
+
+    /// No drain: the bridge opens in the tick of the trip or the disarm (the design before).
+    pub const NONE: DrainParams = DrainParams { max_ticks: 0, ..Self::REFERENCE };
 }
 
 impl ControlConfig {
@@ -146,7 +149,7 @@ impl ControlConfig {
         calibration_settle_ticks: 50,
         max_reference_um: 50.0,
         max_feedforward_slew_um: SLEW_UM_PER_TICK,
-        drain: Some(DrainParams::REFERENCE),
+        drain: DrainParams::REFERENCE,
     };
 }
 
@@ -352,7 +355,7 @@ impl Controller {
 
     /// Starts driving the current to zero (when the design does so), from an armed bridge.
     fn begin_drain(&mut self) {
-        if self.cfg.drain.is_some() && self.armed {
+        if self.cfg.drain.max_ticks > 0 && self.armed {
             self.drain_ticks = Some(0);
             self.drain_quiet = 0;
             self.drain_last_a = f32::INFINITY;
@@ -592,7 +595,7 @@ impl Controller {
         faults: FaultCode,
         bus: Volts,
     ) -> Option<TickOutput> {
-        let (n, d) = (self.drain_ticks?, self.cfg.drain?);
+        let (n, d) = (self.drain_ticks?, self.cfg.drain);
         let a = i.0.abs();
         let give_up = faults.0 & FaultCode::OPENS_AT_ONCE.0 != 0
             || a.is_nan()

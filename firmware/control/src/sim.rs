@@ -117,11 +117,11 @@ impl Injection {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BusCapacitance {
     /// Bulk capacitance [F].
-    pub capacitance_f: f64,
+    pub capacitance_f: f32,
     /// What discharges it besides the bridge (the bus divider) [Ω].
-    pub bleed_ohm: f64,
+    pub bleed_ohm: f32,
     /// The rig's tick [s].
-    pub tick_s: f64,
+    pub tick_s: f32,
 }
 
 impl BusCapacitance {
@@ -187,6 +187,7 @@ pub struct Rig<P> {
 impl<P: Plant> Rig<P> {
     /// `plant` at rest; the probe reads 20 µm there, the bus is 24 V through a 1:16 divider
     /// (52.8 V full scale, 12.9 mV per code), no conversion noise. `seed` fixes the noise.
+    #[inline(never)]
     pub fn new(plant: P, seed: u64) -> Self {
         let rest_um = plant.displacement_um();
         Self {
@@ -322,7 +323,9 @@ impl<P: Plant> Rig<P> {
         };
         let bus = match self.bus_capacitance {
             None => bus0,
-            Some(c) => (bus0 - share * i0 * 0.5 * c.tick_s / c.capacitance_f).max(self.supply_now()),
+            Some(c) => {
+                (bus0 - share * i0 * 0.5 * c.tick_s as f64 / c.capacitance_f as f64).max(self.supply_now())
+            }
         };
         let drive = if !enabled {
             CoilDrive::Freewheel { bus_v: bus.min(limit) }
@@ -331,6 +334,7 @@ impl<P: Plant> Rig<P> {
         };
         self.plant.step(drive)?;
         if let Some(c) = self.bus_capacitance {
+            let (tick_s, cap_f, bleed_ohm) = (c.tick_s as f64, c.capacitance_f as f64, c.bleed_ohm as f64);
             let i_mean = 0.5 * (i0 + self.plant.current_a());
             // The bridge's input current (averaged: the coil's current times the share of the
             // bus across it; a clipped stage draws what its output delivers).
@@ -339,9 +343,9 @@ impl<P: Plant> Rig<P> {
                 CoilDrive::Freewheel { bus_v } => -i0.signum() * bus_v,
             };
             let i_bridge = if bus > 1e-9 { v_coil / bus * i_mean } else { 0.0 };
-            let mut v = self.bus_cap_v.max(self.supply_now()) - i_bridge * c.tick_s / c.capacitance_f;
-            v -= v * c.tick_s / (c.bleed_ohm * c.capacitance_f); // τ = 5.9 s: Euler is exact enough
-                                                                 // The supply's diode: it sources whatever holds the bus at its voltage, sinks nothing.
+            let mut v = self.bus_cap_v.max(self.supply_now()) - i_bridge * tick_s / cap_f;
+            v -= v * tick_s / (bleed_ohm * cap_f); // τ = 5.9 s: Euler is exact enough
+                                                   // The supply's diode: it sources whatever holds the bus at its voltage, sinks nothing.
             self.bus_cap_v = v.max(self.supply_now());
             self.bus_peak_v = self.bus_peak_v.max(self.bus_cap_v);
         }

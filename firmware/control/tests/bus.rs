@@ -11,7 +11,7 @@ use gma_control::faults::FaultCode;
 use gma_control::pid::PidParams;
 use gma_control::sim::{diode_discharge_peak_v, BusCapacitance, CoilActuator, Fault, Injection, Rig};
 use gma_control::units::Amps;
-use gma_control::{ControlConfig, Controller, ResetCause, TickOutput};
+use gma_control::{ControlConfig, Controller, DrainParams, ResetCause, TickOutput};
 use model_core::{ActuatorParams, ModelSpec};
 
 fn model() -> ModelSpec {
@@ -44,7 +44,7 @@ fn config(protected: bool, max_current_a: f32) -> ControlConfig {
         ControlConfig {
             max_current_a,
             pid,
-            drain: None,
+            drain: DrainParams::NONE,
             current_loop: CurrentLoopParams { regen: RegenLimit::NONE, ..r.current_loop },
             ..r
         }

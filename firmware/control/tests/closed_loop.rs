@@ -55,7 +55,7 @@ fn boot_and_arm(ctl: &mut Controller, rig: &mut Rig<CoilActuator>) {
 /// Ticks while the controller drives the coil's current to zero after a trip or a disarm (at
 /// most the drain's bound); returns how many.
 fn drain(ctl: &mut Controller, rig: &mut Rig<CoilActuator>) -> usize {
-    let max = ControlConfig::REFERENCE.drain.unwrap().max_ticks as usize;
+    let max = ControlConfig::REFERENCE.drain.max_ticks as usize;
     let mut n = 0;
     while ctl.draining() {
         assert!(n <= max, "still draining after {n} ticks");
