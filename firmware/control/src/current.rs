@@ -158,8 +158,10 @@ pub struct CurrentLoop {
     /// The internal coil model: pole e^{−TR/L_model} and b = (1 − pole)/R [A/V].
     model_p: f32,
     model_b: f32,
-    regen: RegenLimit,
-    tick_s: f32,
+    /// The regeneration limit, per tick: ½ C V_max² / T [W], ½ C / T [W/V²], the most [W].
+    regen_headroom_w: f32,
+    regen_w_per_v2: f32,
+    regen_max_w: f32,
     last_error: f32,
     /// The voltage commanded last tick (across the coil during the coming period) [V].
     last_voltage: f32,
@@ -218,14 +220,20 @@ impl CurrentLoop {
         let r = p.coil_resistance_ohm;
         let gain_b = (1.0 - coil_pole(&p, 1.0)) / r;
         let model_p = coil_pole(&p, p.model_inductance_ratio);
+        let unlimited = p.regen == RegenLimit::NONE;
         Ok(Self {
             kp: (1.0 - p.pole) / gain_b,
             zero: coil_pole(&p, p.zero_inductance_ratio),
             max_duty: p.max_duty,
             model_p,
             model_b: (1.0 - model_p) / r,
-            regen: p.regen,
-            tick_s: p.tick_s,
+            regen_headroom_w: if unlimited {
+                f32::INFINITY
+            } else {
+                0.5 * p.regen.bus_capacitance_f * p.regen.max_bus_v * p.regen.max_bus_v / p.tick_s
+            },
+            regen_w_per_v2: if unlimited { 0.0 } else { 0.5 * p.regen.bus_capacitance_f / p.tick_s },
+            regen_max_w: p.regen.max_regen_w,
             last_error: 0.0,
             last_voltage: 0.0,
             model_a: 0.0,
@@ -241,8 +249,9 @@ impl CurrentLoop {
             max_duty: 0.0,
             model_p: 0.0,
             model_b: 0.0,
-            regen: RegenLimit { max_bus_v: 0.0, bus_capacitance_f: 0.0, max_regen_w: 0.0 },
-            tick_s: 1.0,
+            regen_headroom_w: 0.0,
+            regen_w_per_v2: 0.0,
+            regen_max_w: 0.0,
             last_error: 0.0,
             last_voltage: 0.0,
             model_a: 0.0,
@@ -283,8 +292,10 @@ impl CurrentLoop {
         };
         // Power returned to the bus: −v·i where v opposes i. Held to the bus's allowance by
         // moving v toward 0 (never past it: |p_min / i| < |v| when the limit binds).
-        let committed_j = (-self.last_voltage * measured.0).max(0.0) * self.tick_s;
-        let p_min = -self.regen.allowed_w(bus.0, committed_j, self.tick_s);
+        // (RegenLimit::allowed_w with the constants folded in at design time.)
+        let committed_w = (-self.last_voltage * measured.0).max(0.0);
+        let headroom_w = self.regen_headroom_w - self.regen_w_per_v2 * bus.0 * bus.0 - committed_w;
+        let p_min = if headroom_w > 0.0 { -headroom_w.min(self.regen_max_w) } else { 0.0 };
         let regen_limited = v * measured.0 < p_min;
         if regen_limited {
             v = p_min / measured.0;
@@ -314,6 +325,37 @@ mod tests {
                 i
             })
             .collect()
+    }
+
+    /// The loop's folded-in regeneration limit is `RegenLimit::allowed_w`: ½·80 µF·(30² − V²)
+    /// per 100 µs less what is committed: 38.4 W at 27 V with 30 W committed, 129.6 W (cut to
+    /// 100 W) at 24 V, 2.4 W at 29.9 V, none at 29.9 V with 30 W committed.
+    #[test]
+    fn the_regeneration_limit_is_the_bus_headroom() {
+        let r = RegenLimit::REFERENCE;
+        assert!(
+            (r.allowed_w(27.0, 30.0 * 1e-4, 1e-4) - 38.4).abs() < 1e-3,
+            "{}",
+            r.allowed_w(27.0, 3e-3, 1e-4)
+        );
+        assert_eq!(r.allowed_w(24.0, 0.0, 1e-4), 100.0);
+        assert!((r.allowed_w(29.9, 0.0, 1e-4) - 2.396).abs() < 0.01);
+        assert_eq!(r.allowed_w(29.9, 30.0 * 1e-4, 1e-4), 0.0);
+        assert_eq!(r.allowed_w(f32::NAN, 0.0, 1e-4), 0.0);
+        assert_eq!(RegenLimit::NONE.allowed_w(40.0, 1.0, 1e-4), f32::MAX);
+        // The loop, from rest: a step down from 3 A asks for a large negative voltage. At 29.9 V
+        // it returns at most the 2.4 W headroom, and says so; at 24 V the limit does not bind.
+        let mut pi = CurrentLoop::new(CurrentLoopParams::REFERENCE).unwrap();
+        let cmd = pi.step(Amps(0.0), Amps(3.0), Volts(29.9));
+        assert!(cmd.regen_limited && cmd.voltage.0 * 3.0 >= -2.41 && cmd.voltage.0 < 0.0, "{cmd:?}");
+        let mut pi = CurrentLoop::new(CurrentLoopParams::REFERENCE).unwrap();
+        let cmd = pi.step(Amps(0.0), Amps(3.0), Volts(24.0));
+        assert!(!cmd.regen_limited && cmd.voltage.0 < -20.0, "{cmd:?}");
+        // With 30 W already committed at 27 V: 38.4 W more, v = −12.8 V against 3 A.
+        let mut pi = CurrentLoop::new(CurrentLoopParams::REFERENCE).unwrap();
+        pi.last_voltage = -10.0;
+        let cmd = pi.step(Amps(0.0), Amps(3.0), Volts(27.0));
+        assert!(cmd.regen_limited && (cmd.voltage.0 + 12.8).abs() < 0.01, "{cmd:?}");
     }
 
     #[test]
