@@ -3,7 +3,6 @@
 #![no_std]
 
 pub mod board_check;
-pub mod checkin;
 pub mod drive;
 #[cfg(target_os = "none")]
 pub mod fault;

@@ -41,7 +41,6 @@ use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, dma, interrupt, pac, peripherals, Config};
 use embassy_time::{with_timeout, Duration, Instant, Timer};
 use firmware::board_check::{self, HwTrip};
-use firmware::checkin::{Checkins, Task, COMMAND_IDLE_CHECKIN_MS};
 use firmware::drive::{
     boot_config, dead_time_ticks, encode_queued, encode_replies, execute, quiet_window_max_duty,
     BridgeTiming, CommandPort, DriveCounters, DriveLoop, PowerStage, ReplyQueue, Slot, TelemetryQueue,
@@ -51,6 +50,8 @@ use firmware::drive_params::{MODEL_SPEC, PARAMS_POSTCARD, PARAMS_SOURCE};
 use gma_control::command::{Reply, MAX_REPLY_ENCODED};
 use gma_control::crash::{Crash, CrashRecord};
 use gma_control::telemetry::{TimedFrame, MAX_ENCODED};
+use gma_control::watchdog::participants::{COMMAND_TASK, CONTROL_ISR, TELEMETRY_TASK};
+use gma_control::watchdog::{participants, CheckIn};
 use gma_control::{Controller, ResetCause};
 use heapless::spsc::{Consumer, Producer};
 use {defmt_rtt as _, embassy_stm32 as _};
@@ -76,8 +77,19 @@ static COUNTERS: DriveCounters = DriveCounters::new();
 static COMMAND_RING: Slot<[u8; 256]> = Slot::new();
 /// Command replies from the command task to the UART writer.
 static REPLIES: Slot<ReplyQueue> = Slot::new();
-/// The thread-mode tasks' check-ins: the interrupt feeds the watchdog only while all come.
-static CHECKINS: Checkins = Checkins::new();
+/// The check-ins of the interrupt and the two thread-mode tasks (`gma_control::watchdog`): the
+/// interrupt feeds the watchdog only while all come, within [`CHECK_IN_WINDOW_TICKS`].
+static CHECK_IN: CheckIn = CheckIn::new(&participants::ALL);
+/// How long the interrupt goes on feeding the 2 ms watchdog without a complete round of
+/// check-ins [ticks]: 100 ms. `CheckIn::take_if_all` consumes the check-ins on each complete
+/// round, so without a window the watchdog would be fed only as often as the slowest task
+/// checks in: the command task, idle, every [`COMMAND_IDLE_CHECKIN_MS`] (20 ms), and busy for
+/// ≈ 2.5 ms building a parameter load's model outside the critical section — either resets a
+/// healthy board through the 2 ms watchdog. 100 ms is five idle command check-ins; a task silent
+/// for longer is hung: the bridge goes off at once and the watchdog resets the board 2 ms later.
+const CHECK_IN_WINDOW_TICKS: u32 = 1000;
+/// The command task's check-in period while no byte arrives [ms] (its read's timeout).
+const COMMAND_IDLE_CHECKIN_MS: u64 = 20;
 /// Replies the command task had no queue room for (its `CommandPort::replies_dropped`).
 static REPLIES_DROPPED: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
 /// The board check's mismatches, for the status log.
@@ -330,7 +342,7 @@ struct BoardStage {
     _adc: InjectedAdc<'static, ADC1, 3>,
     _break_pin: Flex<'static>,
     watchdog: IndependentWatchdog<'static, IWDG>,
-    /// Ticks since every thread-mode task last checked in.
+    /// Ticks since the last complete round of check-ins (`CHECK_IN.take_if_all`).
     stale_ticks: u32,
 }
 
@@ -385,9 +397,16 @@ impl PowerStage for BoardStage {
     }
 
     fn feed_watchdog(&mut self) {
-        // Only while every thread-mode task checks in (firmware::checkin); a hung task turns
-        // the bridge off now and the watchdog resets the board within its 2 ms.
-        if CHECKINS.may_feed(&mut self.stale_ticks) {
+        // Only while every participant checks in (gma_control::watchdog): the interrupt here,
+        // the command and telemetry tasks in thread mode, each round within the window; a hung
+        // task turns the bridge off now and the watchdog resets the board within its 2 ms.
+        CHECK_IN.check_in(CONTROL_ISR);
+        if CHECK_IN.take_if_all() {
+            self.stale_ticks = 0;
+        } else {
+            self.stale_ticks = self.stale_ticks.saturating_add(1);
+        }
+        if self.stale_ticks <= CHECK_IN_WINDOW_TICKS {
             self.watchdog.pet();
         } else {
             bridge_off();
@@ -694,7 +713,7 @@ async fn telemetry_tx(
     let mut reported = (0u32, 0u32, 0u32, 0u32, 0u32);
     let mut stack_logged = 0;
     loop {
-        CHECKINS.check_in(Task::Telemetry);
+        CHECK_IN.check_in(TELEMETRY_TASK);
         let n = encode_replies(&mut replies, &mut batch);
         let n = n + encode_queued(&mut queue, &mut batch[n..]);
         if n > 0 {
@@ -749,8 +768,8 @@ async fn command_rx(mut rx: RingBufferedUartRx<'static>, replies: Producer<'stat
     let mut port = CommandPort::new(replies);
     let mut chunk = [0u8; 32];
     loop {
-        CHECKINS.check_in(Task::Command);
-        // Bounded, so that a silent line still checks in (firmware::checkin).
+        CHECK_IN.check_in(COMMAND_TASK);
+        // Bounded, so that a silent line still checks in (CHECK_IN_WINDOW_TICKS).
         let read = with_timeout(Duration::from_millis(COMMAND_IDLE_CHECKIN_MS), rx.read(&mut chunk)).await;
         let n = match read {
             Err(_) => continue,
