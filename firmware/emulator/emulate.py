@@ -191,6 +191,8 @@ class Board:
         self.adc_isr_entry_cycles = []
         # Analog plant: coil current [A] from the bridge's duty; displacement follows the current.
         self.coil_i = 0.0
+        self.coil_mean_i = 0.0  # the tick's mean current: what the centred conversion sees
+        self.loaded_ccr = None  # CCR1, CCR2 as the last update event loaded them (preload)
         self.bus_v = 24.0
         self.current_override = None  # forced coil current sample [A]
         self.current_sense_codes = []
@@ -485,7 +487,7 @@ class Board:
 
     def channel_volts(self, ch):
         if ch == 1:  # PA0: current shunt amplifier
-            i = self.current_override if self.current_override is not None else self.coil_i
+            i = self.current_override if self.current_override is not None else self.coil_mean_i
             return CURRENT_ZERO_V + CURRENT_V_PER_A * i
         if ch == 2:  # PA1: displacement probe (rest 25 µm, 4 µm/A)
             return (25.0 + 4.0 * abs(self.coil_i)) * DISP_V_PER_UM
@@ -505,18 +507,27 @@ class Board:
         self.wr(ADC1, self.rd(ADC1) | (1 << 5) | (1 << 6))  # JEOC | JEOS
 
     def plant_step(self):
-        """The coil over one 100 µs tick at the duty the compare registers set (RL, bus stiff)."""
+        """The coil over the 100 µs tick that ends at this trigger (RL, bus stiff), at the duty
+        the previous update event loaded: CCR1/CCR2 are preloaded, so what the interrupt writes
+        after trigger n drives the coil from trigger n + 1 (the one-tick delay of the board and
+        of gma-control's rig); the conversion sees the tick's mean current. This update event
+        then loads what the interrupt wrote since."""
         arr = self.tim1_arr()
         moe = (self.rd(TIM1 + 0x44) >> 15) & 1
-        if moe:
-            a, b = self.rd(TIM1 + 0x34), self.rd(TIM1 + 0x38)
+        if moe and self.loaded_ccr is not None:
+            a, b = self.loaded_ccr
             d = (a - b) / arr
             v = d * self.bus_v
             tau = COIL_L / COIL_R
             i_inf = v / COIL_R
-            self.coil_i = i_inf + (self.coil_i - i_inf) * math.exp(-100e-6 / tau)
+            x = 100e-6 / tau
+            i0 = self.coil_i
+            self.coil_i = i_inf + (i0 - i_inf) * math.exp(-x)
+            self.coil_mean_i = i_inf + (i0 - i_inf) * (1.0 - math.exp(-x)) / x
         else:
             self.coil_i = 0.0  # the diodes return it to the bus within the tick (≈ 1 ms τ ignored)
+            self.coil_mean_i = 0.0
+        self.loaded_ccr = (self.rd(TIM1 + 0x34), self.rd(TIM1 + 0x38))
         self.check_comparators()
 
     # ---------- COMP / DAC ----------
@@ -939,6 +950,9 @@ class Host:
 
 
 PING, ARM, DISARM, CLEAR, REFERENCE, LOAD = 1, 2, 3, 4, 5, 6
+# The drive-to-zero's bound on a software trip or a disarm: DrainParams::REFERENCE.max_ticks
+# (100) ticks of 100 µs, and one tick for the command to reach the interrupt.
+DRAIN_BOUND_US = 10100
 FAULT_BITS = ["overcurrent", "coil_i2t", "current_sensor_range", "displacement_sensor_range",
               "displacement_stuck", "parameters_invalid", "bus_undervoltage", "bus_overvoltage",
               "current_offset", "watchdog_reset", "command_timeout", "bridge_break", "missed_deadline",
@@ -1125,11 +1139,13 @@ def scenario(b, host, c, spec, params):
     c.check("ping acknowledged", r is not None and r["status"] == 0, str(r))
     r = host.exchange(REFERENCE, struct.pack("<Bfff", 3, 0.0, 10.0, 0.0))
     c.check("set reference (constant 10 µm) acknowledged", r is not None and r["status"] == 0, str(r))
+    # The compare values from the arm on: the current loop's step from 0 A to the reference's
+    # current (the plant has no noise: settled, the loop holds one or two codes).
+    w0 = len(b.ccr_writes)
     r = host.exchange(ARM)
     c.check("arm acknowledged, reply says armed", r is not None and r["status"] == 0 and r["armed"] == 1, str(r))
     b.run_until(b.cycles + 500 * US)
     c.check("arming sets MOE (bridge on)", moe(b) == 1)
-    w0 = len(b.ccr_writes)
     for _ in range(3):
         b.run_until(b.cycles + 10 * 1000 * US)
         host.exchange(PING)
@@ -1139,16 +1155,31 @@ def scenario(b, host, c, spec, params):
             len(duty_codes) > 3 and abs(b.coil_i) > 0.05,
             "%d distinct CCR1 values, coil %.3f A" % (len(duty_codes), b.coil_i))
     # 5. Disarm.
+    # The disarm drives the coil's current to zero before MOE falls (gma_control::DrainParams:
+    # open when |i| < 50 mA twice, at the latest 100 ticks = 10 ms after the disarm): MOE must be 0
+    # within that bound, and the coil's current must be near zero at the instant it falls.
+    i_before = b.coil_i
     r = host.exchange(DISARM)
+    disarmed_at = b.cycles
+    b.run_until(b.cycles + DRAIN_BOUND_US * US, lambda: moe(b) == 0)
+    off_us = (b.cycles - disarmed_at) / SYSCLK * 1e6
+    i_at_off = b.coil_i
     b.run_until(b.cycles + 300 * US)
-    c.check("disarm acknowledged and MOE cleared", r is not None and r["status"] == 0 and moe(b) == 0, str(r))
+    c.check("disarm acknowledged, the current driven to ~0 (< 0.1 A) before MOE fell, MOE 0 within the drain's "
+            "%d ms" % (DRAIN_BOUND_US // 1000),
+            r is not None and r["status"] == 0 and moe(b) == 0 and off_us <= DRAIN_BOUND_US and abs(i_at_off) < 0.1,
+            "%s, coil %.3f A before, MOE 0 after %.0f µs at %.3f A" % (r, i_before, off_us, i_at_off))
     # 6. Load parameters (the compiled-in set, over the wire).
     payload = bytes([len(spec)]) + spec.encode() + params
     r = host.exchange(LOAD, payload, wait_us=20000)
     c.check("load parameters (%s, %d bytes) acknowledged" % (spec, len(payload)),
             r is not None and r["status"] == 0, str(r))
     b.run_until(b.cycles + 40 * 1000 * US)  # calibration window again after the load
-    # 7. A silent operator: armed, then no frame for 200 ms.
+    # 7. A silent operator: armed, then no frame for 200 ms. The load put the parameter set's
+    # own reference (a 100 Hz sine) back; the constant one again, as the emulated probe
+    # (25 + 4 |i| µm) is no actuator to track a sine with (the current would swing through zero
+    # and read as displacement_stuck, a true verdict on that model).
+    host.exchange(REFERENCE, struct.pack("<Bfff", 3, 0.0, 10.0, 0.0))
     r = host.exchange(ARM)
     armed_at = b.cycles
     ok = r is not None and r["status"] == 0
@@ -1197,10 +1228,14 @@ def overcurrent_trips(elf, c):
         b.run_until(b.cycles + 2000 * US)
         was_on = moe(b)
         b.current_override = amps
+        override_at = b.cycles
         b.run_until(b.cycles + 300 * US)
         at = b.comp_trip_at
         hw = at is not None and any(t == at and v == 0 for t, v in b.moe_history)
         b.current_override = None
+        # The software trip drives the current to zero first: MOE 0 within the drain's bound.
+        b.run_until(override_at + DRAIN_BOUND_US * US, lambda: moe(b) == 0)
+        off_us = next(((t - override_at) / US for t, v in b.moe_history if t >= override_at and v == 0), None)
         b.run_until(b.cycles + 2000 * US)
         host.exchange(PING)
         tel = telemetry(b)
@@ -1212,9 +1247,11 @@ def overcurrent_trips(elf, c):
                         was_on, at is not None, hw, names(faults)))
         else:
             c.check("%+.1f A (above the 4 A software limit, below the 4.4 A hardware one): the firmware trips, "
-                    "no comparator" % amps,
-                    was_on == 1 and at is None and moe(b) == 0 and faults & 1 and not faults & BRIDGE_BREAK,
-                    "armed MOE %d, comparator trip %s, faults %s" % (was_on, at is not None, names(faults)))
+                    "no comparator, MOE 0 after the drain, within its %d ms" % (amps, DRAIN_BOUND_US // 1000),
+                    was_on == 1 and at is None and moe(b) == 0 and faults & 1 and not faults & BRIDGE_BREAK
+                    and off_us is not None and off_us <= DRAIN_BOUND_US,
+                    "armed MOE %d, comparator trip %s, MOE 0 after %s µs, faults %s" % (
+                        was_on, at is not None, "%.0f" % off_us if off_us is not None else None, names(faults)))
 
 
 def refused_on_mismatch(elf, c):
