@@ -162,6 +162,11 @@ pub trait PowerStage {
     fn next_conversion_done(&self) -> bool;
     /// A free-running CPU cycle counter [cycles].
     fn cycle_count(&self) -> u32;
+    /// Whether the conversion came at the sampling edge the design expects (on the board: TIM1
+    /// CR1.DIR read in the interrupt, `firmware::board_check`); stand-ins have none to check.
+    fn sample_edge_ok(&self) -> bool {
+        true
+    }
 }
 
 /// What the interrupt has seen since boot (bits, for the status log). Each one also latches a
@@ -182,6 +187,10 @@ pub mod trip {
     pub const ARMING_BLOCKED: u32 = 1 << 4;
     /// The interval between interrupt entries was not the tick period: `TICK_TIMING`.
     pub const TICK_PERIOD: u32 = 1 << 5;
+    /// The board's configuration read back differently from its table, or a conversion came at
+    /// the wrong counter edge (`firmware::board_check`): `PARAMETERS_INVALID`, latched again on
+    /// every tick, so that nothing but a reset clears it.
+    pub const BOARD_CHECK: u32 = 1 << 6;
 }
 
 /// Counters the interrupt publishes for thread mode (it is their only writer).
@@ -220,6 +229,10 @@ impl DriveCounters {
     }
 }
 
+/// The board-check bit the interrupt sets when [`DEADLINE_LATCH_AFTER`] conversions in a row came
+/// at the wrong counter edge (`firmware::board_check::route::SAMPLE_EDGE`).
+pub const SAMPLE_EDGE_FAULT: u32 = 1 << 29;
+
 /// Bridge timing: compare values from the signed duty.
 #[derive(Debug, Clone, Copy)]
 pub struct BridgeTiming {
@@ -257,6 +270,10 @@ pub struct DriveLoop<S: PowerStage> {
     /// Since the period was last judged wrong: the clean-window count then (`tick_timing`
     /// stays latched until the count moves on).
     timing_suspect: Option<u32>,
+    /// Mismatches of the board's configuration check (`firmware::board_check` bits; 0: none).
+    board_faults: u32,
+    /// Consecutive ticks whose conversion came at the wrong counter edge.
+    wrong_edge_in_a_row: u8,
 }
 
 impl<S: PowerStage> DriveLoop<S> {
@@ -279,7 +296,20 @@ impl<S: PowerStage> DriveLoop<S> {
             gate: OutputGate::new(),
             period: tick_period_check(),
             timing_suspect: None,
+            board_faults: 0,
+            wrong_edge_in_a_row: 0,
         }
+    }
+
+    /// The board's configuration check at boot (`firmware::board_check`): any bit set refuses
+    /// every arming until reset.
+    pub fn set_board_faults(&mut self, mismatches: u32) {
+        self.board_faults |= mismatches;
+    }
+
+    /// The configuration check's mismatches so far (the interrupt adds the sampling edge's).
+    pub fn board_faults(&self) -> u32 {
+        self.board_faults
     }
 
     /// The controller (faults, commands from thread mode).
@@ -309,6 +339,21 @@ impl<S: PowerStage> DriveLoop<S> {
             self.timing_suspect = Some(self.period.clean_windows);
         } else if self.timing_suspect.is_some_and(|at| self.period.clean_windows != at) {
             self.timing_suspect = None;
+        }
+        if self.stage.sample_edge_ok() {
+            self.wrong_edge_in_a_row = 0;
+        } else {
+            // A late entry (a critical section in thread mode over 22 µs) reads the direction
+            // after the next extreme: one such tick is latency; a wrong phase is every tick.
+            self.wrong_edge_in_a_row = self.wrong_edge_in_a_row.saturating_add(1);
+            if self.wrong_edge_in_a_row >= DEADLINE_LATCH_AFTER {
+                self.board_faults |= SAMPLE_EDGE_FAULT;
+            }
+        }
+        if self.board_faults != 0 {
+            // Before the tick, as for the period: the controller holds the bridge off in it.
+            self.trips |= trip::BOARD_CHECK;
+            self.controller.latch_fault(FaultCode::PARAMETERS_INVALID);
         }
         if self.timing_suspect.is_some() {
             // Latched before the tick, so that the controller holds the bridge off in it, and

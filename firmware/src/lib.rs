@@ -2,6 +2,7 @@
 //! pieces its QEMU smoke test and benches share.
 #![no_std]
 
+pub mod board_check;
 pub mod drive;
 #[cfg(target_os = "none")]
 pub mod fault;

@@ -81,7 +81,10 @@ fn run(bus_v: f64, injections: Vec<Injection>, clear_at: Option<u64>) -> Outcome
             o.first_faults = out.frame.faults;
         }
         let cleared = clear_at.is_some_and(|c| k >= c);
-        if o.tripped_at.is_some() && !cleared && (out.bridge_enabled || out.frame.faults == 0) {
+        // After a trip the bridge stays on only while the controller drives the coil's current
+        // to zero (gma_control::DrainParams), and never again after that.
+        let on_outside_the_drain = out.bridge_enabled && !ctl.draining();
+        if o.tripped_at.is_some() && !cleared && (on_outside_the_drain || out.frame.faults == 0) {
             o.safe_after_trip = false;
         }
         if let Some(t) = o.tripped_at {

@@ -60,6 +60,21 @@ impl FaultCode {
     /// latest measurement window is good.
     pub const CALIBRATION: FaultCode = FaultCode(Self::CURRENT_OFFSET.0 | Self::REST_POSITION.0);
 
+    /// Faults after which the bridge opens in the tick that sees them, without first driving
+    /// the coil's current to zero ([`crate::DrainParams`]): where switching can feed the fault
+    /// (a gate-driver fault on the break input, MOE lost), where the loop's timing cannot be
+    /// trusted (a missed deadline, a wrong tick period), where the loop itself is invalid
+    /// (`parameters_invalid`: a non-finite duty) or cannot see the current (the current
+    /// sensor at a rail, a bad current zero).
+    pub const OPENS_AT_ONCE: FaultCode = FaultCode(
+        Self::BRIDGE_BREAK.0
+            | Self::MISSED_DEADLINE.0
+            | Self::TICK_TIMING.0
+            | Self::PARAMETERS_INVALID.0
+            | Self::CURRENT_SENSOR_RANGE.0
+            | Self::CURRENT_OFFSET.0,
+    );
+
     /// No fault.
     pub const NONE: FaultCode = FaultCode(0);
 
@@ -158,11 +173,15 @@ impl FaultLimits {
     /// (the reference actuator tracking its 25 µm sine spans 18 µm per ampere of current span
     /// on our simulated rig, nine times the limit; ±2 codes of noise span 0.1 µm, a sixth of
     /// the least span a 0.3 A swing demands); bus 12–34 V with 1 V hysteresis, 3 ticks
-    /// (300 µs) to qualify (a 24 V supply; 34 V leaves margin to 40 V parts). A trip does NOT
-    /// stay under 34 V: with the bridge off the coil's ½·L·I² returns through the body diodes
-    /// into the 100 µF bus, √(24² + L·I²/C) = 39.2 V from 4 A (48 mJ) and 41.7 V from 4.4 A
-    /// (58 mJ); any trip above 3.1 A passes 34 V, so an overcurrent trip also latches
-    /// `bus_overvoltage` unless the board absorbs the energy (firmware/README.md, "Safe
+    /// (300 µs) to qualify (a 24 V supply; 34 V leaves margin to 40 V parts). A software trip
+    /// drives the current to zero before the bridge opens ([`crate::DrainParams`]; the bus
+    /// then stays under the current loop's 30 V regeneration limit). A hardware break does NOT
+    /// stay under 34 V: with all four switches off the coil's ½·L·I² returns through the body
+    /// diodes into the 100 µF bus, less what the winding's 6 Ω take on the way (the L–R–C
+    /// discharge, [`crate::sim::diode_discharge_peak_v`]): 34.7 V from 4 A (48 mJ) and 36.3 V
+    /// from 4.4 A (58 mJ) with ideal diodes (√(24² + L·I²/C) = 39.2 / 41.7 V without the
+    /// resistance); any break above 3.83 A passes 34 V, and also latches `bus_overvoltage`
+    /// unless the board absorbs the energy (firmware/README.md, "Safe
     /// state"). Current zero within ±0.15 V (±0.75 A, ±186 codes) of 1.65 V and spreading at
     /// most 32 codes (0.13 A) over its window; rest position spreading at most 1 µm, and at
     /// most 20 µm from the one kept since the first arming. The
@@ -536,27 +555,35 @@ mod tests {
         }
     }
 
-    /// The bus after a trip: the coil's ½ L I² into the bus capacitance on top of 24 V. The
+    /// The bus after a hardware break (all four switches off): the coil's ½ L I² into the bus
+    /// capacitance on top of 24 V, less the winding's resistive loss during the discharge. The
     /// figures firmware/README.md and `FaultLimits::REFERENCE` state, and their consequence:
-    /// the bus over-voltage trip sees every overcurrent trip.
+    /// the bus over-voltage trip sees every break from above 3.83 A.
     #[test]
-    fn the_coil_energy_of_an_overcurrent_trip_exceeds_the_bus_limit() {
-        let (bus_v, bus_f) = (24.0f32, 100e-6f32); // the reference board's supply and bulk capacitance
-        let l_h = crate::current::CurrentLoopParams::REFERENCE.coil_inductance_h;
-        let peak = |i: f32| (bus_v * bus_v + l_h * i * i / bus_f).sqrt();
+    fn the_coil_energy_of_a_hardware_break_exceeds_the_bus_limit() {
+        use crate::sim::diode_discharge_peak_v;
+        let (bus_v, bus_f) = (24.0f64, 100e-6f64); // the reference board's supply and bulk capacitance
+        let p = crate::current::CurrentLoopParams::REFERENCE;
+        let (l_h, r_ohm) = (p.coil_inductance_h as f64, p.coil_resistance_ohm as f64);
+        let peak = |i: f64, c: f64| diode_discharge_peak_v(i, r_ohm, l_h, c, bus_v);
+        let lossless = |i: f64| (bus_v * bus_v + l_h * i * i / bus_f).sqrt();
         let limits = FaultLimits::REFERENCE;
-        assert!((peak(limits.overcurrent_a) - 39.2).abs() < 0.05, "{}", peak(4.0));
-        assert!((peak(4.4) - 41.7).abs() < 0.05, "{}", peak(4.4));
-        assert!((0.5 * l_h * 16.0 - 0.048).abs() < 1e-6);
+        let trip = limits.overcurrent_a as f64;
+        assert!((peak(trip, bus_f) - 34.67).abs() < 0.02, "{}", peak(trip, bus_f));
+        assert!((peak(4.4, bus_f) - 36.27).abs() < 0.02, "{}", peak(4.4, bus_f));
+        // Without the resistance (the figures before): 39.2 and 41.7 V.
+        assert!((lossless(trip) - 39.19).abs() < 0.01 && (lossless(4.4) - 41.68).abs() < 0.01);
+        assert!((0.5 * l_h * 16.0 - 0.048).abs() < 1e-9);
         assert!(
-            peak(limits.overcurrent_a) > limits.max_bus_v,
-            "a trip no longer passes the bus limit: update the docs"
+            peak(trip, bus_f) > limits.max_bus_v as f64,
+            "a break no longer passes the bus limit: update the docs"
         );
-        // The largest current whose energy stays under the trip on this bus: 3.1 A.
-        let i_max = ((limits.max_bus_v * limits.max_bus_v - bus_v * bus_v) * bus_f / l_h).sqrt();
-        assert!((i_max - 3.11).abs() < 0.01, "{i_max}");
-        // The bulk capacitance that keeps a 4.4 A trip under the 34 V trip: 200 µF.
-        let c_min = l_h * 4.4 * 4.4 / (limits.max_bus_v * limits.max_bus_v - bus_v * bus_v);
-        assert!((c_min - 200e-6).abs() < 1e-6, "{c_min}");
+        // The largest current whose break stays under the trip on this bus: 3.83 A.
+        let max_v = limits.max_bus_v as f64;
+        assert!(peak(3.82, bus_f) < max_v && peak(3.84, bus_f) > max_v);
+        // The bulk capacitance that keeps a 4.4 A break under the 34 V trip: 126 µF (108 µF
+        // for 4 A); 201 µF without the resistance.
+        assert!(peak(4.4, 125e-6) > max_v && peak(4.4, 127e-6) < max_v);
+        assert!(peak(4.0, 107e-6) > max_v && peak(4.0, 109e-6) < max_v);
     }
 }

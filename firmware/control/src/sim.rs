@@ -12,6 +12,15 @@
 //! acts at once. The bus voltage goes through a divider into a 12-bit channel. [`CoilActuator`] is the no_std plant; the workbench (host-sim) puts its
 //! plant simulator in the same rig.
 //!
+//! The bus: stiff by default (the supply holds [`Rig::bus_v`] whatever the bridge does). With
+//! [`Rig::bus_capacitance`] set it is a capacitance fed from the supply through a diode: the
+//! supply cannot sink current, so what the bridge returns (the coil's current through the body
+//! diodes on a trip, or the bridge's input current d·i when negative in regenerative running)
+//! charges the capacitance above the supply's voltage, and only the bus divider's bleed and
+//! the coil take it back. Per tick the coil sees the bus at the tick's midpoint, predicted from
+//! the current at its start; the charge is the tick's mean current (trapezoid) — within 0.1 V
+//! of a fine integration of the L–R–C discharge (`tests::the_rig_bus_follows_the_lrc_discharge`).
+//!
 //! The rig's analog side is `f64`, the workbench plant's precision; [`CoilActuator`] rounds to
 //! `f32` at its input.
 
@@ -104,14 +113,63 @@ impl Injection {
     }
 }
 
+/// A bus capacitance behind a supply that cannot sink current (a diode in series).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BusCapacitance {
+    /// Bulk capacitance [F].
+    pub capacitance_f: f32,
+    /// What discharges it besides the bridge (the bus divider) [Ω].
+    pub bleed_ohm: f32,
+    /// The rig's tick [s].
+    pub tick_s: f32,
+}
+
+impl BusCapacitance {
+    /// The reference board: 100 µF bulk, the 56 kΩ + 3.3 kΩ divider, 10 kHz.
+    pub const REFERENCE_BOARD: BusCapacitance =
+        BusCapacitance { capacitance_f: 100e-6, bleed_ohm: 59.3e3, tick_s: 1e-4 };
+}
+
+/// Peak bus voltage when a coil carrying `i0_a` discharges through ideal diodes into
+/// `capacitance_f` charged to `bus_v` (all four switches off at once: L di/dt = −v − R i,
+/// C dv/dt = i until i = 0; the supply's diode blocks). Fine fixed-step RK4 (10 ns); the figure
+/// the hardware break's worst case is documented with.
+pub fn diode_discharge_peak_v(i0_a: f64, r_ohm: f64, l_h: f64, capacitance_f: f64, bus_v: f64) -> f64 {
+    let dt = 1e-8;
+    let f = |i: f64, v: f64| ((-v - r_ohm * i) / l_h, i / capacitance_f);
+    let (mut i, mut v) = (i0_a.abs(), bus_v);
+    let mut peak = v;
+    // Bounded: a quarter of the L–C period is at most 2.5 ms for any coil and bank here.
+    for _ in 0..10_000_000 {
+        if i <= 0.0 {
+            break;
+        }
+        let k1 = f(i, v);
+        let k2 = f(i + 0.5 * dt * k1.0, v + 0.5 * dt * k1.1);
+        let k3 = f(i + 0.5 * dt * k2.0, v + 0.5 * dt * k2.1);
+        let k4 = f(i + dt * k3.0, v + dt * k3.1);
+        i += dt / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
+        v += dt / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
+        peak = peak.max(v);
+    }
+    peak
+}
+
 /// The rig: a plant behind the board's bridge and front end, and the faults injected between.
 pub struct Rig<P> {
     /// The plant (a test may change it mid-run, e.g. short the winding).
     pub plant: P,
     /// The front end's calibration.
     pub calibration: Calibration,
-    /// Nominal bus voltage [V].
+    /// Nominal bus voltage [V]: the supply's (with [`Rig::bus_capacitance`], the voltage the
+    /// supply's diode holds the bus at, at least).
     pub bus_v: f64,
+    /// `None`: a stiff bus. `Some`: the bus capacitance behind a supply that cannot sink.
+    pub bus_capacitance: Option<BusCapacitance>,
+    /// The capacitance's voltage [V] (with a capacitance; starts at the supply's).
+    pub bus_cap_v: f64,
+    /// The highest bus voltage so far [V].
+    pub bus_peak_v: f64,
     /// Bus voltage at the bus channel's full-scale code [V] (the divider ratio × ADC reference).
     pub bus_full_scale_v: f64,
     /// Conversion noise on the current and displacement channels: uniform in ± this many codes.
@@ -129,12 +187,16 @@ pub struct Rig<P> {
 impl<P: Plant> Rig<P> {
     /// `plant` at rest; the probe reads 20 µm there, the bus is 24 V through a 1:16 divider
     /// (52.8 V full scale, 12.9 mV per code), no conversion noise. `seed` fixes the noise.
+    #[inline(never)]
     pub fn new(plant: P, seed: u64) -> Self {
         let rest_um = plant.displacement_um();
         Self {
             plant,
             calibration: Calibration::REFERENCE_BOARD,
             bus_v: 24.0,
+            bus_capacitance: None,
+            bus_cap_v: 24.0,
+            bus_peak_v: 24.0,
             bus_full_scale_v: 52.8,
             adc_noise_codes: 0,
             injections: heapless::Vec::new(),
@@ -166,10 +228,27 @@ impl<P: Plant> Rig<P> {
         self.tick
     }
 
-    fn bus_now(&self) -> f64 {
+    /// A capacitive bus charged to its supply: call after setting `bus_v`.
+    pub fn with_bus_capacitance(mut self, c: BusCapacitance) -> Self {
+        self.bus_capacitance = Some(c);
+        self.bus_cap_v = self.bus_v;
+        self.bus_peak_v = self.bus_v;
+        self
+    }
+
+    /// What the supply holds the bus at (its sag included).
+    fn supply_now(&self) -> f64 {
         self.active()
             .filter_map(|f| if let Fault::BusSag { bus_v } = f { Some(bus_v) } else { None })
             .fold(self.bus_v, f64::min)
+    }
+
+    /// The bus voltage now [V].
+    pub fn bus_now(&self) -> f64 {
+        match self.bus_capacitance {
+            None => self.supply_now(),
+            Some(_) => self.bus_cap_v.max(self.supply_now()),
+        }
     }
 
     /// `c` plus this conversion's noise, within the 12-bit range.
@@ -220,7 +299,7 @@ impl<P: Plant> Rig<P> {
     /// update is the previous tick's, `out.duty` loads at the next; `out.bridge_enabled == false`
     /// (and the break input) switches the bridge off at once.
     pub fn apply(&mut self, out: &TickOutput) -> Result<(), P::Error> {
-        let bus = self.bus_now();
+        let bus0 = self.bus_now();
         let duty = self.loaded_duty;
         // A disabled bridge writes no duty: it restarts from the zero the firmware leaves loaded.
         self.loaded_duty = if out.bridge_enabled { out.duty } else { 0.0 };
@@ -230,14 +309,46 @@ impl<P: Plant> Rig<P> {
             .active()
             .filter_map(|f| if let Fault::AmplifierSaturation { max_v } = f { Some(max_v) } else { None })
             .fold(f64::INFINITY, f64::min);
+        let stuck = self.active().any(|f| f == Fault::BridgeStuckOn);
+        let i0 = self.plant.current_a();
+        // The share of the bus across the coil (≥ 0 into the coil), and the bus the coil sees:
+        // at the tick's midpoint, predicted from the current at its start (a stiff bus: the
+        // supply's).
+        let share = if !enabled {
+            -i0.signum()
+        } else if stuck {
+            1.0
+        } else {
+            duty.clamp(-1.0, 1.0) as f64
+        };
+        let bus = match self.bus_capacitance {
+            None => bus0,
+            Some(c) => {
+                (bus0 - share * i0 * 0.5 * c.tick_s as f64 / c.capacitance_f as f64).max(self.supply_now())
+            }
+        };
         let drive = if !enabled {
             CoilDrive::Freewheel { bus_v: bus.min(limit) }
-        } else if self.active().any(|f| f == Fault::BridgeStuckOn) {
-            CoilDrive::Voltage(bus.clamp(-limit, limit))
         } else {
-            CoilDrive::Voltage((duty.clamp(-1.0, 1.0) as f64 * bus).clamp(-limit, limit))
+            CoilDrive::Voltage((share * bus).clamp(-limit, limit))
         };
         self.plant.step(drive)?;
+        if let Some(c) = self.bus_capacitance {
+            let (tick_s, cap_f, bleed_ohm) = (c.tick_s as f64, c.capacitance_f as f64, c.bleed_ohm as f64);
+            let i_mean = 0.5 * (i0 + self.plant.current_a());
+            // The bridge's input current (averaged: the coil's current times the share of the
+            // bus across it; a clipped stage draws what its output delivers).
+            let v_coil = match drive {
+                CoilDrive::Voltage(v) => v,
+                CoilDrive::Freewheel { bus_v } => -i0.signum() * bus_v,
+            };
+            let i_bridge = if bus > 1e-9 { v_coil / bus * i_mean } else { 0.0 };
+            let mut v = self.bus_cap_v.max(self.supply_now()) - i_bridge * tick_s / cap_f;
+            v -= v * tick_s / (bleed_ohm * cap_f); // τ = 5.9 s: Euler is exact enough
+                                                   // The supply's diode: it sources whatever holds the bus at its voltage, sinks nothing.
+            self.bus_cap_v = v.max(self.supply_now());
+            self.bus_peak_v = self.bus_peak_v.max(self.bus_cap_v);
+        }
         self.tick += 1;
         Ok(())
     }
@@ -291,6 +402,18 @@ impl CoilActuator {
             current_a: 0.0,
             displacement_m: state.mech.displacement_m,
         })
+    }
+}
+
+impl CoilActuator {
+    /// Coil inductance [H] (a Terfenol-D coil's follows the rod's permeability).
+    pub fn coil_inductance_h(&self) -> f32 {
+        self.coil_inductance_h
+    }
+
+    /// Sets the coil's inductance [H] (at least 1 µH).
+    pub fn set_coil_inductance_h(&mut self, l_h: f32) {
+        self.coil_inductance_h = l_h.max(1e-6);
     }
 }
 

@@ -39,16 +39,19 @@ use embassy_stm32::timer::{BkIn1, BreakInputPin, Channel};
 use embassy_stm32::usart::{self, Config as UartConfig, RingBufferedUartRx, Uart, UartTx};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, dma, interrupt, pac, peripherals, Config};
-use embassy_time::{Instant, Timer};
+use embassy_time::{with_timeout, Duration, Instant, Timer};
+use firmware::board_check::{self, HwTrip};
 use firmware::drive::{
     boot_config, dead_time_ticks, encode_queued, encode_replies, execute, quiet_window_max_duty,
     BridgeTiming, CommandPort, DriveCounters, DriveLoop, PowerStage, ReplyQueue, Slot, TelemetryQueue,
-    PWM_HZ, TELEMETRY_QUEUE, TICK_CYCLES,
+    PWM_HZ, SYSCLK_HZ, TELEMETRY_QUEUE, TICK_CYCLES,
 };
 use firmware::drive_params::{MODEL_SPEC, PARAMS_POSTCARD, PARAMS_SOURCE};
 use gma_control::command::{Reply, MAX_REPLY_ENCODED};
 use gma_control::crash::{Crash, CrashRecord};
 use gma_control::telemetry::{TimedFrame, MAX_ENCODED};
+use gma_control::watchdog::participants::{COMMAND_TASK, CONTROL_ISR, TELEMETRY_TASK};
+use gma_control::watchdog::{participants, CheckIn};
 use gma_control::{Controller, ResetCause};
 use heapless::spsc::{Consumer, Producer};
 use {defmt_rtt as _, embassy_stm32 as _};
@@ -74,6 +77,31 @@ static COUNTERS: DriveCounters = DriveCounters::new();
 static COMMAND_RING: Slot<[u8; 256]> = Slot::new();
 /// Command replies from the command task to the UART writer.
 static REPLIES: Slot<ReplyQueue> = Slot::new();
+/// The check-ins of the interrupt and the two thread-mode tasks (`gma_control::watchdog`): the
+/// interrupt feeds the watchdog only while all come, within [`CHECK_IN_WINDOW_TICKS`].
+static CHECK_IN: CheckIn = CheckIn::new(&participants::ALL);
+/// How long the interrupt goes on feeding the 2 ms watchdog without a complete round of
+/// check-ins [ticks]: 100 ms. `CheckIn::take_if_all` consumes the check-ins on each complete
+/// round, so without a window the watchdog would be fed only as often as the slowest task
+/// checks in: the command task, idle, every [`COMMAND_IDLE_CHECKIN_MS`] (20 ms), and busy for
+/// ≈ 2.5 ms building a parameter load's model outside the critical section — either resets a
+/// healthy board through the 2 ms watchdog. 100 ms is five idle command check-ins; a task silent
+/// for longer is hung: the bridge goes off at once and the watchdog resets the board 2 ms later.
+const CHECK_IN_WINDOW_TICKS: u32 = 1000;
+/// The command task's check-in period while no byte arrives [ms] (its read's timeout).
+const COMMAND_IDLE_CHECKIN_MS: u64 = 20;
+/// Replies the command task had no queue room for (its `CommandPort::replies_dropped`).
+static REPLIES_DROPPED: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
+/// The board check's mismatches, for the status log.
+static BOARD_FAULTS: core::sync::atomic::AtomicU32 = core::sync::atomic::AtomicU32::new(0);
+
+/// The counter direction TIM1 must show in the conversion interrupt: counting up, just past the
+/// trough. After the software update event that follows the RCR write, the repetition counter
+/// (3) lets every 4th extreme through and the counter started at 0, so each update is an
+/// underflow (RM0440 §28.3.3, "Repetition counter"). The quiet window around the sample is the
+/// same at a peak, but a trigger moved to the other extreme means the timer's phase is not the
+/// one the firmware set: refused.
+const SAMPLE_DIR: pac::timer::vals::Dir = pac::timer::vals::Dir::UP;
 
 /// Encoded telemetry per DMA transfer: up to 8 frames (0.6 ms of UART time at 4 Mbaud), after
 /// the replies waiting then.
@@ -89,6 +117,105 @@ fn bridge_off() {
 /// the reset-default timeout (about 512 ms) if start-up had not configured it yet.
 fn watchdog_start() {
     pac::IWDG.kr().write(|w| w.set_key(Key::START));
+}
+
+/// NMI (RM0440: the clock security system, SRAM parity and flash ECC errors can raise it): the
+/// bridge off at once and left to the watchdog, as in the panic handler; never returns, so no
+/// unexpected source can keep the bridge switching.
+#[allow(unsafe_code)] // cortex-m-rt requires an NMI handler to be an `unsafe fn`.
+#[cortex_m_rt::exception]
+unsafe fn NonMaskableInt() -> ! {
+    cortex_m::interrupt::disable();
+    bridge_off();
+    watchdog_start();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// Any interrupt or exception without a handler of its own (cortex-m-rt's default looped with
+/// the bridge switching at its last duty until the watchdog reset): bridge off, then the watchdog.
+#[allow(unsafe_code)] // cortex-m-rt's DefaultHandler must be an `unsafe fn`.
+#[cortex_m_rt::exception]
+unsafe fn DefaultHandler(_irqn: i16) -> ! {
+    cortex_m::interrupt::disable();
+    bridge_off();
+    watchdog_start();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// One 32-bit register read at `addr`, for the board check's table.
+#[allow(unsafe_code)]
+fn read_register(addr: u32) -> u32 {
+    // SAFETY: called only with the addresses of `board_check::expected` and `check_modes`:
+    // registers of this part (RM0440 memory map) whose peripherals are clocked by then, and
+    // none of which changes state on a read (no FIFO, no clear-on-read flag).
+    unsafe { core::ptr::read_volatile(addr as *const u32) }
+}
+
+/// The overcurrent comparators (firmware::board_check::HwTrip): DAC thresholds, the comparators,
+/// and a self-test with the bridge off before they are routed to the break: each must follow its
+/// DAC to both sides of the current amplifier's zero (PA0 ≈ 1.65 V), so that a missing board wire
+/// or a wrong input selection is measured, not assumed. Returns the route bits of a failed test.
+fn overcurrent_comparators(trip: &HwTrip) -> u32 {
+    use board_check::{comp, route};
+    use embassy_stm32::pac::comp::regs::Csr;
+    use embassy_stm32::pac::gpio::vals::Moder;
+    pac::RCC.ahb2enr().modify(|w| {
+        w.set_dac1en(true);
+        w.set_dac3en(true);
+        w.set_gpioaen(true);
+        w.set_gpioben(true);
+    });
+    pac::RCC.apb2enr().modify(|w| w.set_syscfgen(true));
+    // PA4 (DAC1 OUT1) and PB1 (COMP1 INP) analog; PA0 is the ADC's already.
+    pac::GPIOA.moder().modify(|w| {
+        w.set_moder(0, Moder::ANALOG);
+        w.set_moder(4, Moder::ANALOG);
+    });
+    pac::GPIOB.moder().modify(|w| w.set_moder(1, Moder::ANALOG));
+    // DAC_MCR (RM0440 §22.7.16): HFSEL = 10 (AHB clock above 160 MHz); DAC3 CH1 MODE = 011
+    // (on-chip peripherals only, no buffer), DAC1 CH1 MODE = 000 (its pin, buffered).
+    pac::DAC3.mcr().modify(|w| w.0 = (w.0 & !((0b11 << 14) | 0b111)) | (0b10 << 14) | 0b011);
+    pac::DAC1.mcr().modify(|w| w.0 = (w.0 & !((0b11 << 14) | 0b111)) | (0b10 << 14));
+    let set = |positive: u16, negative: u16| {
+        pac::DAC3.dhr12r(0).write(|w| w.0 = positive as u32);
+        pac::DAC1.dhr12r(0).write(|w| w.0 = negative as u32);
+        // DAC settling (buffered, ≤ 3 µs) and the comparator's propagation: 20 µs.
+        cortex_m::asm::delay(SYSCLK_HZ / 50_000);
+    };
+    pac::DAC3.cr().modify(|w| w.0 |= 1);
+    pac::DAC1.cr().modify(|w| w.0 |= 1);
+    // DACxRDY (DAC_SR bit 11), bounded.
+    for _ in 0..10_000 {
+        if pac::DAC3.sr().read().0 & pac::DAC1.sr().read().0 & (1 << 11) != 0 {
+            break;
+        }
+    }
+    pac::COMP3.csr().write_value(Csr(comp::COMP3_CSR));
+    pac::COMP1.csr().write_value(Csr(comp::COMP1_CSR));
+    let out3 = || pac::COMP3.csr().read().0 & comp::VALUE != 0;
+    let out1 = || pac::COMP1.csr().read().0 & comp::VALUE != 0;
+    let mut faults = 0;
+    // COMP3 high when PA0 > DAC3; COMP1 high when PB1 (DAC1) > PA0.
+    set(0, 4095);
+    let (p_low, n_high) = (out3(), out1());
+    set(4095, 0);
+    let (p_high, n_low) = (out3(), out1());
+    set(trip.positive_code, trip.negative_code);
+    let (p_idle, n_idle) = (out3(), out1());
+    if !(p_low && !p_high && !p_idle) {
+        faults |= route::POSITIVE;
+    }
+    if !(n_high && !n_low && !n_idle) {
+        faults |= route::NEGATIVE;
+    }
+    // Read-only until reset (COMPx_CSR.LOCK).
+    pac::COMP3.csr().write_value(Csr(comp::COMP3_CSR | comp::LOCK));
+    pac::COMP1.csr().write_value(Csr(comp::COMP1_CSR | comp::LOCK));
+    faults
 }
 
 #[panic_handler]
@@ -215,6 +342,8 @@ struct BoardStage {
     _adc: InjectedAdc<'static, ADC1, 3>,
     _break_pin: Flex<'static>,
     watchdog: IndependentWatchdog<'static, IWDG>,
+    /// Ticks since the last complete round of check-ins (`CHECK_IN.take_if_all`).
+    stale_ticks: u32,
 }
 
 impl PowerStage for BoardStage {
@@ -268,7 +397,24 @@ impl PowerStage for BoardStage {
     }
 
     fn feed_watchdog(&mut self) {
-        self.watchdog.pet();
+        // Only while every participant checks in (gma_control::watchdog): the interrupt here,
+        // the command and telemetry tasks in thread mode, each round within the window; a hung
+        // task turns the bridge off now and the watchdog resets the board within its 2 ms.
+        CHECK_IN.check_in(CONTROL_ISR);
+        if CHECK_IN.take_if_all() {
+            self.stale_ticks = 0;
+        } else {
+            self.stale_ticks = self.stale_ticks.saturating_add(1);
+        }
+        if self.stale_ticks <= CHECK_IN_WINDOW_TICKS {
+            self.watchdog.pet();
+        } else {
+            bridge_off();
+        }
+    }
+
+    fn sample_edge_ok(&self) -> bool {
+        pac::TIM1.cr1().read().dir() == SAMPLE_DIR
     }
 
     fn next_conversion_done(&self) -> bool {
@@ -414,6 +560,11 @@ async fn main(spawner: Spawner) {
     pwm.set_break_enable(true);
 
     pwm.set_repetition_counter(3);
+    // A software update event (TIM1_EGR.UG): the counter restarts at 0 and the repetition
+    // counter takes 3 now, not at whichever extreme came next after the write, so every update
+    // (the ADC trigger) is an underflow; the interrupt checks the edge (CR1.DIR). Before MMS2
+    // routes updates to TRGO2 and before the ADC listens: no conversion starts from it.
+    pac::TIM1.egr().write(|w| w.set_ug(true));
     pwm.set_mms2(Mms2::UPDATE);
     let period_ticks = pwm.get_max_duty();
     // Center-aligned: the counter runs up and down once per PWM period, so the timer clock is
@@ -425,6 +576,11 @@ async fn main(spawner: Spawner) {
     pwm.set_duty(Channel::Ch2, half);
     pwm.enable(Channel::Ch1);
     pwm.enable(Channel::Ch2);
+    // The hardware overcurrent trip: the comparators, self-tested, then routed to the break
+    // (TIM1_AF1, RM0440 §28.6.26) next to BKIN, before the lock below.
+    let hw_trip = HwTrip::new(&boot_config().limits, &boot_config().calibration);
+    let route_faults = overcurrent_comparators(&hw_trip);
+    pac::TIM1.af1().modify(|w| w.0 = (w.0 & !0x1FFF) | board_check::TIM1_AF1);
     // Lock level 3 (TIM1_BDTR.LOCK, RM0440 Rev 4 §28.6.20; writable once per reset): dead time,
     // break configuration, idle levels, OSSI/OSSR, output polarities and the output compare
     // modes (OCxM, OCxPE) can no longer change until reset — a stray write cannot undo the safe
@@ -481,10 +637,38 @@ async fn main(spawner: Spawner) {
     // SAFETY: the only write to TELEMETRY.
     #[allow(unsafe_code)]
     let (producer, consumer) = unsafe { TELEMETRY.write(TelemetryQueue::new()) }.split();
-    let stage = BoardStage { _pwm: pwm, _adc: injected, _break_pin: break_pin, watchdog };
+    // The board checks its own configuration (firmware::board_check): every field the drive's
+    // safety rests on, read back against the reference manual's table; a mismatch refuses
+    // arming until reset (`parameters_invalid` latched on every tick) and is logged here.
+    let table = board_check::expected(&hw_trip);
+    let mismatches = board_check::check(&table, read_register) | route_faults;
+    for (k, e) in table.iter().enumerate() {
+        if mismatches & (1 << k) != 0 {
+            let got = read_register(e.addr) & e.mask;
+            error!("gma-drive: board check: {} reads {:#x}, want {:#x}: arming refused", e.what, got, e.want);
+        }
+    }
+    if route_faults & board_check::route::POSITIVE != 0 {
+        error!("gma-drive: board check: COMP3 (PA0 against DAC3 CH1) does not follow its threshold: arming refused");
+    }
+    if route_faults & board_check::route::NEGATIVE != 0 {
+        error!("gma-drive: board check: COMP1 (PB1 against PA0) does not follow DAC1 OUT1: is PA4 wired to PB1? Arming refused");
+    }
+    if mismatches == 0 {
+        info!(
+            "gma-drive: board check: {} register fields as RM0440's table; overcurrent comparators at ±{} A (DAC codes {}, {})",
+            board_check::ENTRIES,
+            hw_trip.trip_a,
+            hw_trip.positive_code,
+            hw_trip.negative_code
+        );
+    }
+    BOARD_FAULTS.store(mismatches, core::sync::atomic::Ordering::Relaxed);
+    let stage = BoardStage { _pwm: pwm, _adc: injected, _break_pin: break_pin, watchdog, stale_ticks: 0 };
     // SAFETY: the only write to DRIVE_STATE; `.ccmram` is NOLOAD, and this write initialises it.
     #[allow(unsafe_code)]
     let drive = unsafe { DRIVE_STATE.write(DriveLoop::new(controller, stage, timing, producer, &COUNTERS)) };
+    drive.set_board_faults(mismatches);
     critical_section::with(|cs| DRIVE.borrow(cs).replace(Some(drive)));
 
     #[allow(unsafe_code)]
@@ -498,6 +682,13 @@ async fn main(spawner: Spawner) {
         core.NVIC.set_priority(pac::Interrupt::USART2, 2 << 4);
         // Everything slow is done: from here every tick feeds it within 2 ms.
         watchdog_start();
+        // The conversions have run since the ADC was set up: the flag of the last one is stale
+        // (its entry would come at any counter position). The first entry is a fresh one.
+        pac::ADC1.isr().write(|w| {
+            w.set_jeos(true);
+            w.set_jeoc(true);
+        });
+        NVIC::unpend(pac::Interrupt::ADC1_2);
         NVIC::unmask(pac::Interrupt::ADC1_2);
     }
     info!("gma-drive: watchdog running, tick period checked at {} cycles ± 2 % over 32 ticks", TICK_CYCLES);
@@ -519,9 +710,10 @@ async fn telemetry_tx(
 ) -> ! {
     let mut batch = [0u8; TX_BATCH];
     let mut last_report = Instant::now();
-    let mut reported = (0u32, 0u32, 0u32, 0u32);
+    let mut reported = (0u32, 0u32, 0u32, 0u32, 0u32);
     let mut stack_logged = 0;
     loop {
+        CHECK_IN.check_in(TELEMETRY_TASK);
         let n = encode_replies(&mut replies, &mut batch);
         let n = n + encode_queued(&mut queue, &mut batch[n..]);
         if n > 0 {
@@ -539,22 +731,25 @@ async fn telemetry_tx(
                 info!("gma-drive: stack peak {} B of {} B", stack_peak, firmware::stack::size());
             }
             let load = |c: &core::sync::atomic::AtomicU32| c.load(core::sync::atomic::Ordering::Relaxed);
-            let (dropped, late, trips, off) = (
+            let (dropped, late, trips, off, replies_dropped) = (
                 load(&COUNTERS.telemetry_dropped),
                 load(&COUNTERS.deadline_overruns),
                 load(&COUNTERS.trips),
                 load(&COUNTERS.period_off),
+                load(&REPLIES_DROPPED),
             );
             // The counters are totals since boot: said when one has grown, not every second.
-            if (dropped, late, trips, off) != reported {
-                reported = (dropped, late, trips, off);
+            if (dropped, late, trips, off, replies_dropped) != reported {
+                reported = (dropped, late, trips, off, replies_dropped);
                 warn!(
-                    "gma-drive: telemetry dropped {} of {}, deadline overruns {}, trips {:#x}, longest tick {} cycles, \
-                     single tick intervals off ±2 % {} (last 32-tick window {} cycles)",
+                    "gma-drive: telemetry dropped {} of {}, command replies dropped {}, deadline overruns {}, trips {:#x}, \
+                     board check {:#x}, longest tick {} cycles, single tick intervals off ±2 % {} (last 32-tick window {} cycles)",
                     dropped,
                     TELEMETRY_QUEUE,
+                    replies_dropped,
                     late,
                     trips,
+                    load(&BOARD_FAULTS),
                     load(&COUNTERS.max_tick_cycles),
                     off,
                     load(&COUNTERS.last_window_cycles)
@@ -573,9 +768,13 @@ async fn command_rx(mut rx: RingBufferedUartRx<'static>, replies: Producer<'stat
     let mut port = CommandPort::new(replies);
     let mut chunk = [0u8; 32];
     loop {
-        let n = match rx.read(&mut chunk).await {
-            Ok(n) => n,
-            Err(e) => {
+        CHECK_IN.check_in(COMMAND_TASK);
+        // Bounded, so that a silent line still checks in (CHECK_IN_WINDOW_TICKS).
+        let read = with_timeout(Duration::from_millis(COMMAND_IDLE_CHECKIN_MS), rx.read(&mut chunk)).await;
+        let n = match read {
+            Err(_) => continue,
+            Ok(Ok(n)) => n,
+            Ok(Err(e)) => {
                 // Overrun or framing error: the frame being assembled fails its CRC and is
                 // counted as corrupt; the decoder resynchronises at the next delimiter.
                 warn!("gma-drive: command UART {}", e);
@@ -584,6 +783,7 @@ async fn command_rx(mut rx: RingBufferedUartRx<'static>, replies: Producer<'stat
         };
         let corrupt = port.decoder.corrupt;
         on_command_bytes(&mut port, &chunk[..n]);
+        REPLIES_DROPPED.store(port.replies_dropped, core::sync::atomic::Ordering::Relaxed);
         if port.decoder.corrupt != corrupt {
             warn!("gma-drive: corrupt command frames {}", port.decoder.corrupt);
         }

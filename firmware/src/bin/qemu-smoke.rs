@@ -164,15 +164,58 @@ fn closed_loop(force_fail: bool) -> u32 {
     if rig.injections.push(unplugged).is_err() {
         return failures + 1;
     }
+    // A software trip drives the coil's current to zero before the bridge opens
+    // (`ControlConfig::drain`): the fault latched and the controller disarmed in the trip tick's
+    // record, the bridge on after it only while `draining()`, off within the drain's bound
+    // (`max_ticks` after the trip tick), the coil's current near zero when it opens.
+    let sensor = FaultCode::DISPLACEMENT_SENSOR_RANGE;
     let out = ctl.tick(&rig.sample());
-    if out.bridge_enabled || !FaultCode(out.frame.faults).contains(FaultCode::DISPLACEMENT_SENSOR_RANGE) {
+    let in_its_tick = FaultCode(out.frame.faults).contains(sensor) && !ctl.armed();
+    let mut only_while_draining = !out.bridge_enabled || ctl.draining();
+    let mut latched = in_its_tick;
+    let (mut opened_after, mut open_at_a) = (None, f64::NAN);
+    if !out.bridge_enabled {
+        (opened_after, open_at_a) = (Some(0u32), rig.current_a());
+    }
+    let _ = rig.apply(&out);
+    let bound = u32::from(cfg.drain.max_ticks);
+    let mut k = 0;
+    while opened_after.is_none() && k < bound + 5 {
+        k += 1;
+        let i_a = rig.current_a();
+        let out = ctl.tick(&rig.sample());
+        only_while_draining &= !out.bridge_enabled || ctl.draining();
+        latched &= FaultCode(out.frame.faults).contains(sensor);
+        if !out.bridge_enabled {
+            (opened_after, open_at_a) = (Some(k), i_a);
+        }
+        let _ = rig.apply(&out);
+    }
+    let ok = in_its_tick
+        && latched
+        && only_while_draining
+        && opened_after.is_some_and(|k| k <= bound)
+        && open_at_a.abs() < 0.1;
+    if ok == force_fail {
         hprintln!(
-            "qemu-smoke: FAIL probe disconnect not tripped in its tick (faults {:#x})",
-            out.frame.faults
+            "qemu-smoke: FAIL probe disconnect not latched in its tick or the bridge not off within the drain's {} ticks \
+             (faults {:#x}, latched {}, on only while draining {}, off after {:?} ticks at {} A)",
+            bound,
+            out.frame.faults,
+            latched,
+            only_while_draining,
+            opened_after,
+            open_at_a
         );
         failures += 1;
     } else {
-        hprintln!("qemu-smoke: probe disconnect tripped in its tick (faults {:#x})", out.frame.faults);
+        hprintln!(
+            "qemu-smoke: probe disconnect latched in its tick (faults {:#x}), bridge off after {:?} ticks of drain at {} A (bound {})",
+            out.frame.faults,
+            opened_after,
+            open_at_a,
+            bound
+        );
     }
     let mut bad = p;
     bad.ja.k_a_per_m = f32::NAN;
@@ -478,11 +521,23 @@ fn drive_loop() -> u32 {
         }
         let rearm = op.send(&mut drive, &Command::Arm);
         rig_a.bus_v = 40.0;
-        let mut tripped_after = None;
-        for k in 0..10 {
+        // Latched within 3 ticks (the qualifying ticks), the bridge then on only while the
+        // current is driven to zero and off within the drain's bound: over 30 V the regeneration
+        // limit lets no energy back, so the current decays through the winding.
+        let (mut tripped_after, mut off_after) = (None, None);
+        let mut only_while_draining = true;
+        let bound = u32::from(cfg.drain.max_ticks) + 3;
+        for k in 1..=bound + 5 {
             let out = trigger(&mut drive, &mut rig_a);
-            if !out.bridge_enabled && FaultCode(out.frame.faults).contains(FaultCode::BUS_OVERVOLTAGE) {
-                tripped_after = Some(k + 1);
+            let latched = FaultCode(out.frame.faults).contains(FaultCode::BUS_OVERVOLTAGE);
+            if latched && tripped_after.is_none() {
+                tripped_after = Some(k);
+            }
+            if tripped_after.is_some() {
+                only_while_draining &= !out.bridge_enabled || drive.controller().draining();
+            }
+            if latched && !out.bridge_enabled && !drive.stage().outputs_enabled {
+                off_after = Some(k);
                 break;
             }
         }
@@ -490,14 +545,22 @@ fn drive_loop() -> u32 {
         rig_a.bus_v = 24.0;
         trigger(&mut drive, &mut rig_a);
         let cleared = op.send(&mut drive, &Command::ClearFaults);
-        hprintln!("qemu-smoke: drive loop: bus at 40 V tripped after {:?} ticks", tripped_after);
+        hprintln!(
+            "qemu-smoke: drive loop: bus at 40 V tripped after {:?} ticks, bridge off after {:?} (bound {})",
+            tripped_after,
+            off_after,
+            bound
+        );
         check(
             acked(rearm)
                 && tripped_after.is_some_and(|k| k <= 3)
+                && only_while_draining
+                && off_after.is_some_and(|k| k <= bound)
                 && !drive.stage().outputs_enabled
                 && refused_while_over.is_some_and(|r| r.outcome == Err(Refusal::FaultStillPresent))
                 && acked(cleared),
-            "bus over-voltage: tripped within 3 ticks, kept while present, cleared by command after",
+            "bus over-voltage: tripped within 3 ticks, bridge off within the drain's bound (on only while draining), \
+             kept while present, cleared by command after",
         );
     }
 
