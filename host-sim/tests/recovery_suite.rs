@@ -372,6 +372,7 @@ fn report_and_assert(outcomes: &[Outcome]) {
         }
     }
     let mut noises: Vec<f64> = outcomes.iter().map(|o| o.current_lsb).collect();
+    noises.sort_by(f64::total_cmp);
     noises.dedup();
     for n in noises {
         let at: Vec<&Outcome> = outcomes.iter().filter(|o| o.current_lsb == n).collect();
