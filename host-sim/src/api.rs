@@ -244,8 +244,9 @@ impl ReadSettings {
     }
 }
 
-/// Reads one measurement CSV as the CLI does; the warning says when `max_samples` cut it short.
-pub fn read_recording(path: PathBuf, read: &ReadSettings) -> Result<(Recording, Option<Warning>)> {
+/// Reads one measurement CSV as the CLI does; the warnings say when `max_samples` cut it short,
+/// and what the reader says about its columns and time axis.
+pub fn read_recording(path: PathBuf, read: &ReadSettings) -> Result<(Recording, Vec<Warning>)> {
     let opts = read.options()?;
     common::read_recording(Input::open(&path)?, read.max_samples, &opts)
 }
@@ -402,7 +403,7 @@ pub fn fit(
     // Said as the CLI says them (a binding shows them: the Python package as `UserWarning`s).
     crate::cli::fit::add_time_limit_warning(&mut summary, &mut warnings, s.time_limit_s);
     for w in &warnings {
-        crate::warning::warn(w);
+        w.say();
     }
     let invalid: Vec<String> = warnings.iter().filter(|w| w.invalidates()).map(|w| w.to_string()).collect();
     if !invalid.is_empty() {
@@ -527,7 +528,11 @@ pub fn compare(
             }
         }
     }
-    for w in &warnings {
+    // Said as the CLI says them: the reader's notes as notes, then the model's warnings.
+    for w in &read_warnings {
+        w.say();
+    }
+    for w in &warnings[read_warnings.len()..] {
         crate::warning::warn(w);
     }
     let summary = CompareSummary {

@@ -301,6 +301,54 @@ impl ReadOptions {
     }
 }
 
+/// Whether a file whose first line is `first` is a magnetization-loop file rather than a
+/// recording, decided on its header as the recording reader maps it (`--column`, and headers
+/// that name their quantity and unit such as `Displacement (um)`): a time axis, a drive and a
+/// displacement make a recording, whatever loop columns it logs beside them. A header with loop
+/// columns, a time axis and a drive whose only displacement is a column of another name
+/// (`x_um`) could be either, and is refused naming both readings.
+pub fn is_loop_file(name: &str, first: &str, opts: &ReadOptions) -> Result<bool> {
+    if !crate::loops::looks_like_loop(first) {
+        return Ok(false);
+    }
+    let sep = if !first.contains(',') && first.contains(';') {
+        ';'
+    } else if !first.contains(',') && first.contains('\t') {
+        '\t'
+    } else {
+        ','
+    };
+    let headers: Vec<&str> = first.split(sep).map(|h| h.trim().trim_matches('"').trim()).collect();
+    if headers.iter().any(|h| opts.claims(h)) {
+        return Ok(false);
+    }
+    let (named, _) = opts.with_named_units(&headers);
+    let has = |k: usize| match named.map_of(k) {
+        Some(m) => headers.contains(&m.header.as_str()),
+        None => headers.contains(&COLUMNS[k]) && !named.claims(COLUMNS[k]),
+    };
+    let (time, drive, displacement) = (has(0), has(1) || has(2), has(3));
+    if time && drive && displacement {
+        return Ok(false);
+    }
+    let named_like_displacement =
+        headers.iter().find(|h| !named.claims(h) && crate::read_doubts::suggested(h) == Some(3));
+    if let (true, true, Some(x)) = (time, drive, named_like_displacement) {
+        let loop_columns: Vec<String> = headers
+            .iter()
+            .filter(|h| ["field_A_per_m", "flux_density_T", "magnetization_A_per_m"].contains(h))
+            .map(|h| format!("`{h}`"))
+            .collect();
+        crate::located!(name, Some(1), None;
+            "the header reads two ways: as a magnetization loop ({}), or as a recording with a time axis and a              drive whose displacement is `{}`; to read it as the recording, give `--column {}`; to fit its loop,              write the loop columns to a file of their own",
+            loop_columns.join(", "),
+            crate::files::echo(x),
+            crate::read_doubts::column_option(3, x)
+        );
+    }
+    Ok(true)
+}
+
 /// Words a header may name each canonical column by (ignoring case, same order as
 /// [`COLUMNS`]) before its unit in brackets or parentheses: `Time [s]`, `I (mA)`.
 const QUANTITIES: [&[&str]; COLUMNS.len()] = [

@@ -6,6 +6,7 @@
 pub mod analysis;
 pub mod api;
 pub mod cases;
+pub mod cell_text;
 pub mod cli;
 pub mod columns;
 pub mod diagnose;
@@ -19,6 +20,7 @@ pub mod plant;
 pub mod plots;
 pub mod progress;
 pub mod provenance;
+pub mod read_doubts;
 pub mod record;
 pub mod recording;
 pub mod report;

@@ -10,6 +10,7 @@ use crate::columns::{ColumnMap, ReadOptions, Resample, MAX_GAP_STEPS};
 use crate::error::Located;
 use crate::files::{echo, output_dir, partial_file, persist, Input};
 use crate::located;
+use crate::read_doubts::ReadDoubt;
 
 /// The recognised columns, in the order the workbench writes them.
 pub const COLUMNS: [&str; 7] =
@@ -24,6 +25,8 @@ pub struct ReadOutcome {
     pub rows: u64,
     /// Of those, the rows kept (at most `max_samples`), before any resampling.
     pub kept: usize,
+    /// What is to be said about how it was read (columns not used, the time axis).
+    pub doubts: Vec<ReadDoubt>,
 }
 
 /// Largest allowed deviation of one time step from the median step (fraction of the median).
@@ -214,7 +217,8 @@ impl Recording {
         max_samples: usize,
         opts: &ReadOptions,
     ) -> Result<ReadOutcome> {
-        let (delimiter, sep_line, input) = separated(input).map_err(|e| crate::files::read_error(file, e))?;
+        let (delimiter, sep_line, head, input) =
+            separated(input).map_err(|e| crate::files::read_error(file, e))?;
         // The header's line: after a `sep=` line, the second.
         let header_line = 1 + u64::from(sep_line);
         // Row lengths are checked row by row (a line of spaces is blank, not a row of one field).
@@ -224,8 +228,6 @@ impl Recording {
             .delimiter(delimiter)
             .from_reader(input);
         let headers = rdr.headers().map_err(|e| csv_error(file, e))?.clone();
-        // Cells of a `;` or tab export may have decimal commas (a European spreadsheet's).
-        let decimal_comma = delimiter != b',';
         if headers.iter().all(|h| h.trim().is_empty()) {
             // The header is the line before the reader's position (blank lines before it skipped).
             let line = rdr.position().line().saturating_sub(1).max(1);
@@ -252,6 +254,17 @@ impl Recording {
         }
         let opts = &named;
         let index = locate_columns(file, header_line, &headers, opts)?;
+        let used: Vec<bool> = (0..headers.len()).map(|c| index.contains(&Some(c))).collect();
+        let mut doubts =
+            crate::read_doubts::column_doubts(file, &headers.iter().collect::<Vec<_>>(), &used, opts);
+        // Cells of a `;` or tab export may have a decimal comma (a European spreadsheet's), and
+        // the other mark then groups thousands: the first rows show which.
+        let mut mark = (delimiter != b',').then(|| {
+            let rows = head.iter().position(|b| *b == b'\n').map_or(&[][..], |end| &head[end + 1..]);
+            let read: Vec<usize> = index.iter().flatten().copied().collect();
+            crate::cell_text::DecimalMark::sniffed(rows, delimiter, header_line + 1, &read)
+        });
+        let mut stamps = crate::cell_text::Stamps::default();
         let maps: [Option<&ColumnMap>; COLUMNS.len()] = std::array::from_fn(|k| opts.map_of(k));
         if index[0].is_none() {
             let found: Vec<&str> = headers.iter().collect();
@@ -303,12 +316,26 @@ impl Recording {
             for (k, idx) in index.iter().enumerate() {
                 let Some(c) = *idx else { continue };
                 let raw = rec.get(c).unwrap_or("").trim();
-                let raw = match decimal_comma && raw.contains(',') {
-                    true => std::borrow::Cow::Owned(raw.replace(',', ".")),
-                    false => std::borrow::Cow::Borrowed(raw),
+                let raw = match &mut mark {
+                    Some(mark) => mark.normalise(file, line, c as u64 + 1, raw)?,
+                    None => std::borrow::Cow::Borrowed(raw),
                 };
                 values[k] = cell(file, line, c + 1, k, &raw, maps[k])?;
+                if k == 0 {
+                    let (pow10, negated) = maps[0].map_or((0, false), |m| (m.unit.pow10, m.negated));
+                    let stamp = stamps.read(&raw, values[0], pow10, negated);
+                    values[0] = stamp.t;
+                    if stamp.rebased {
+                        // The first stamp, read before the second gave the step, is the origin.
+                        time.last = Some(0.0);
+                        t0 = Some(0.0);
+                        if eligible > 0 {
+                            cols[0][0] = 0.0;
+                        }
+                    }
+                }
             }
+            time.resolution_s = stamps.resolution_s;
             time.push(file, line, time_col, values[0])?;
             let start = *t0.get_or_insert(values[0]);
             if opts.trim_start_s.is_none() || values[0] >= start + trim {
@@ -356,7 +383,11 @@ impl Recording {
         if let Some(Resample::Linear) = opts.resample {
             r = r.resampled_linear(max_samples)?;
         }
-        Ok(ReadOutcome { recording: r, rows: eligible, kept })
+        if let Some(origin) = stamps.origin() {
+            doubts.push(ReadDoubt::StampsFromFirst { file: file.to_string(), origin: origin.to_string() });
+        }
+        doubts.extend(crate::read_doubts::time_doubt(&r));
+        Ok(ReadOutcome { recording: r, rows: eligible, kept, doubts })
     }
 
     /// The recording linearly interpolated onto a uniform grid at its median step, from its
@@ -471,11 +502,12 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// The column separator of a measurement file, whether a first line named it, and the file to
-/// read: a spreadsheet's `sep=X` first line names it (the line is read as blank, so rows keep
-/// their line numbers); otherwise a
+/// The column separator of a measurement file, whether a first line named it, the file's first
+/// bytes from its header on (as far as one read buffered them: what the decimal mark is sniffed
+/// from), and the file to read: a spreadsheet's `sep=X` first line names it (the line is read
+/// as blank, so rows keep their line numbers); otherwise a
 /// header without a comma but with `;` or tabs is separated by those, else by commas.
-fn separated<R: std::io::Read>(input: R) -> std::io::Result<(u8, bool, impl std::io::Read)> {
+fn separated<R: std::io::Read>(input: R) -> std::io::Result<(u8, bool, Vec<u8>, impl std::io::Read)> {
     use std::io::BufRead;
     let mut buf = std::io::BufReader::with_capacity(1 << 16, input);
     let first_line = |bytes: &[u8]| -> String {
@@ -498,7 +530,8 @@ fn separated<R: std::io::Read>(input: R) -> std::io::Result<(u8, bool, impl std:
         None if !first.contains(',') && first.contains('\t') => (b'\t', b""),
         None => (b',', b""),
     };
-    Ok((delimiter, named.is_some(), std::io::Read::chain(blank, buf)))
+    let head = buf.fill_buf()?.to_vec();
+    Ok((delimiter, named.is_some(), head, std::io::Read::chain(blank, buf)))
 }
 
 /// Largest plausible magnitude per column (same order as [`COLUMNS`]); a value beyond is a unit
@@ -572,6 +605,8 @@ struct TimeCheck {
     /// `--resample`: steps may jitter; only gaps over [`MAX_GAP_STEPS`] median steps are refused.
     resample: bool,
     last: Option<f64>,
+    /// How finely the latest stamp's text resolves it [s] (0: not known).
+    resolution_s: f64,
     /// Steps (line, step) held until the reference step is known.
     pending: Vec<(u64, f64)>,
     reference: Option<f64>,
@@ -581,11 +616,17 @@ impl TimeCheck {
     fn push(&mut self, file: &str, line: u64, col: usize, t: f64) -> Result<()> {
         let Some(last) = self.last.replace(t) else { return Ok(()) };
         if t <= last {
-            located!(file, Some(line), Some(col as u64); "time_s does not increase ({t} s after {last} s on the line before)");
+            // A stamp repeated where the step is finer than the stamps' last digit.
+            let step = self.reference.or(self.pending.last().map(|p| p.1));
+            let hint = match t == last {
+                true => crate::cell_text::resolution_hint(self.resolution_s, step),
+                false => String::new(),
+            };
+            located!(file, Some(line), Some(col as u64); "time_s does not increase ({t} s after {last} s on the line before){hint}");
         }
         let step = t - last;
         match self.reference {
-            Some(dt) => jitter(file, line, col, step, dt, self.resample),
+            Some(dt) => jitter(file, line, col, step, dt, self.resample, self.resolution_s),
             None => {
                 self.pending.push((line, step));
                 if self.pending.len() == REFERENCE_STEPS {
@@ -608,7 +649,7 @@ impl TimeCheck {
         }
         self.reference = Some(dt);
         for (line, step) in std::mem::take(&mut self.pending) {
-            jitter(file, line, col, step, dt, self.resample)?;
+            jitter(file, line, col, step, dt, self.resample, self.resolution_s)?;
         }
         Ok(())
     }
@@ -622,8 +663,16 @@ impl TimeCheck {
 }
 
 /// One time step against the median step `dt`: within [`MAX_JITTER`], or with `resample` at
-/// most [`MAX_GAP_STEPS`] steps.
-fn jitter(file: &str, line: u64, col: usize, step: f64, dt: f64, resample: bool) -> Result<()> {
+/// most [`MAX_GAP_STEPS`] steps; `resolution_s` is how finely the stamps are written.
+fn jitter(
+    file: &str,
+    line: u64,
+    col: usize,
+    step: f64,
+    dt: f64,
+    resample: bool,
+    resolution_s: f64,
+) -> Result<()> {
     if resample {
         // A gap of exactly MAX_GAP_STEPS steps is bridged: the time stamps' rounding may add the
         // jitter allowed without resampling.
@@ -639,8 +688,9 @@ fn jitter(file: &str, line: u64, col: usize, step: f64, dt: f64, resample: bool)
         located!(file, Some(line), Some(col as u64);
             "time step {step:.3e} s differs from the median step {dt:.3e} s by more than {:.0} % (missing \
              samples or jittered time stamps; `--resample linear` interpolates jittered time stamps onto \
-             a uniform grid)",
-            MAX_JITTER * 100.0
+             a uniform grid){}",
+            MAX_JITTER * 100.0,
+            crate::cell_text::resolution_hint(resolution_s, Some(dt))
         );
     }
     Ok(())

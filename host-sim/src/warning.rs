@@ -264,6 +264,9 @@ pub enum Warning {
         /// The file gives B (the offset is then μ0 × the centre in B).
         flux_density: bool,
     },
+    /// How a measurement file was read: columns not used, a name that looks like a recognised
+    /// column, time stamps rebased, an implausible time axis.
+    Read(crate::read_doubts::ReadDoubt),
 }
 
 /// Sample periods from which on a time column may well be in ms read as seconds: 10 ms is
@@ -274,6 +277,19 @@ impl Warning {
     /// Whether the result is invalid (nothing may be written from it), not merely doubtful.
     pub fn invalidates(&self) -> bool {
         matches!(self, Warning::Multivalued { .. } | Warning::IntegrationFailed { .. })
+    }
+
+    /// As said on stderr: a note (what was done) or a warning.
+    pub fn said(&self) -> Said {
+        match self {
+            Warning::Read(d) if d.is_note() => Said::Note(self.to_string()),
+            _ => Said::Warning(self.to_string()),
+        }
+    }
+
+    /// Says it on stderr (`gma: note: …` or `gma: warning: …`), or to [`heard`]'s caller.
+    pub fn say(&self) {
+        say(self.said());
     }
 }
 
@@ -443,6 +459,7 @@ impl fmt::Display for Warning {
                  magnetostrictive materials (Terfenol-D ≈ 1e-3): is `displacement_um` in µm (`--column \
                  displacement_um=NAME:mm` converts mm, `:nm` nm) and `rod_length_m` the rod's active length?"
             ),
+            Warning::Read(doubt) => write!(f, "{doubt}"),
         }
     }
 }

@@ -60,11 +60,11 @@ fn opt<'py, T: IntoPyObject<'py>>(py: Python<'py>, v: Option<T>) -> Py<PyAny> {
     v.and_then(|v| v.into_pyobject(py).ok()).map(|o| o.into_any().unbind()).unwrap_or_else(|| py.None())
 }
 
-/// A doubt about what was read (`max_samples` cut the file short) as a Python `UserWarning`,
-/// which `warnings.catch_warnings` and notebooks see (stderr they may not).
-/// Worded as every other call's warnings (`warning: …`).
-fn warn(py: Python<'_>, w: Option<host_sim::warning::Warning>) -> PyResult<()> {
-    let said: Vec<_> = w.iter().map(|w| host_sim::warning::Said::Warning(w.to_string())).collect();
+/// Doubts about what was read (`max_samples` cut the file short, columns not used) as Python
+/// `UserWarning`s, which `warnings.catch_warnings` and notebooks see (stderr they may not).
+/// Worded as every other call's notes and warnings (`note: …`, `warning: …`).
+fn warn(py: Python<'_>, w: impl IntoIterator<Item = host_sim::warning::Warning>) -> PyResult<()> {
+    let said: Vec<_> = w.into_iter().map(|w| w.said()).collect();
     say_as_warnings(py, &said)
 }
 

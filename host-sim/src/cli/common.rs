@@ -151,7 +151,7 @@ impl Prepared {
     /// `fit` lists them with its other warnings).
     pub fn warn_about_inputs(&self) {
         for w in &self.input_warnings {
-            warn(w);
+            w.say();
         }
     }
 }
@@ -315,18 +315,20 @@ pub fn repeated_inputs(inputs: &[(String, String)], counts_in: &'static str) -> 
         .collect()
 }
 
-/// Reads opened inputs: all recordings or all loop files (decided by each first line; a first
-/// line with a `--column` header is a recording's). `opts` applies to recordings only. The
-/// warnings say which inputs `max_samples` cut short.
+/// Reads opened inputs: all recordings or all loop files (decided by each first line, as
+/// [`crate::columns::is_loop_file`] maps it). `opts` applies to recordings only. The warnings
+/// say which inputs `max_samples` cut short, and what the reader says about each recording.
 pub fn read_data(
     fit_in: Vec<Input>,
     val_in: Vec<Input>,
     max_samples: usize,
     opts: &ReadOptions,
 ) -> Result<(Data, Vec<Warning>)> {
-    let is_loop =
-        |line: &str| loops::looks_like_loop(line) && !line.split([',', '\t']).any(|h| opts.claims(h.trim()));
-    let kinds: Vec<bool> = fit_in.iter().chain(&val_in).map(|i| is_loop(&i.first_line())).collect();
+    let kinds: Vec<bool> = fit_in
+        .iter()
+        .chain(&val_in)
+        .map(|i| crate::columns::is_loop_file(&i.name, &i.first_line(), opts))
+        .collect::<Result<_>>()?;
     if kinds.iter().any(|k| *k) && !kinds.iter().all(|k| *k) {
         bail!(
             "mixing magnetization-loop files and displacement recordings in one fit: fit them separately \
@@ -356,28 +358,30 @@ pub fn read_data(
     Ok((data, cut))
 }
 
-/// What was read, its warning (if any) set aside in `cut`.
-fn kept<T>(cut: &mut Vec<Warning>, (read, warning): (T, Option<Warning>)) -> T {
+/// What was read, its warnings set aside in `cut`.
+fn kept<T, W: IntoIterator<Item = Warning>>(cut: &mut Vec<Warning>, (read, warning): (T, W)) -> T {
     cut.extend(warning);
     read
 }
 
 /// Reads one recording as a stream (mapped, trimmed and resampled as `opts` say), keeping at
-/// most `max_samples` (the warning says when it cut the file short).
+/// most `max_samples`; the warnings say when it cut the file short, and what the reader has to
+/// say about its columns and time axis.
 pub fn read_recording(
     input: Input,
     max_samples: usize,
     opts: &ReadOptions,
-) -> Result<(Recording, Option<Warning>)> {
+) -> Result<(Recording, Vec<Warning>)> {
     let read = Recording::read_input_with(input, max_samples, opts)?;
     let r = read.recording;
-    let cut = (read.rows > read.kept as u64).then(|| Warning::Truncated {
+    let mut warnings: Vec<Warning> = read.doubts.into_iter().map(Warning::Read).collect();
+    warnings.extend((read.rows > read.kept as u64).then(|| Warning::Truncated {
         file: r.name.clone(),
         found: read.rows,
         kept: read.kept,
         kept_s: Some(r.duration_s()),
         after_trim_start: opts.trim_start_s.is_some(),
-    });
+    }));
     // Gaps bridged by `--resample linear` are data the rig did not record: said.
     if opts.resample.is_some() && r.len() > read.kept {
         crate::warning::note(format_args!(
@@ -390,5 +394,5 @@ pub fn read_recording(
             r.len() - read.kept
         ));
     }
-    Ok((r, cut))
+    Ok((r, warnings))
 }

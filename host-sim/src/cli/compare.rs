@@ -91,7 +91,7 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         "the mean NRMSE",
     ));
     for w in &cut {
-        crate::warning::warn(w);
+        w.say();
     }
     let mut summary = match data {
         Data::Loops(files, _) => {

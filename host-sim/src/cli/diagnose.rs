@@ -1,6 +1,6 @@
 //! `gma diagnose`: fit a model, analyse what it leaves unexplained, name the missing effect.
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use clap::Args;
 
 use super::common::{Data, ModelFiles};
@@ -37,11 +37,18 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
     })?;
     p.warn_about_inputs();
     let Data::Recordings(fit_files, val_files) = &p.data else {
-        bail!(
-            "diagnose works on displacement recordings; for magnetization loops use `gma fit`, `gma compare` or \
-             `gma report` (to compare J–A forms or laws on a loop, fit each: `--model ja` with `[ja] variant` set \
-             in `--params`, or `--model preisach`, and compare their NRMSE)"
-        );
+        let name = match &p.data {
+            Data::Loops(files, _) => files.first().map_or("the input", |f| f.name.as_str()),
+            Data::Recordings(..) => "the input",
+        };
+        return Err(crate::error::Located::file(
+            name,
+            "is a magnetization loop (no time axis, drive and displacement): diagnose works on displacement \
+             recordings; for magnetization loops use `gma fit`, `gma compare` or `gma report` (to compare J–A \
+             forms or laws on a loop, fit each: `--model ja` with `[ja] variant` set in `--params`, or `--model \
+             preisach`, and compare their NRMSE)",
+        )
+        .into());
     };
     if a.ja_variants {
         check_ja_variants(p.spec)?;

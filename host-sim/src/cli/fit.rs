@@ -15,7 +15,7 @@ use crate::provenance::Provenance;
 use crate::recording::Recording;
 use crate::results::{FileScoreRow, FitSummary, FitText};
 use crate::uncertainty;
-use crate::warning::{warn, Warning};
+use crate::warning::Warning;
 
 /// Options of `gma fit`.
 #[derive(Args)]
@@ -129,7 +129,7 @@ pub fn run(a: &FitArgs) -> Result<()> {
     let j = a.mf.json;
     say!(j, "{summary}");
     for w in &warnings {
-        warn(w);
+        w.say();
     }
     // An invalid result is an error: nothing is written, and --json gets the error object.
     let invalid: Vec<String> = warnings.iter().filter(|w| w.invalidates()).map(|w| w.to_string()).collect();

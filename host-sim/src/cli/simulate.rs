@@ -167,8 +167,8 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     let (rec, what, drive) = match drive_input {
         Some(input) => {
             let (measured, cut) = read_recording(input, a.read.max_samples, &read_opts)?;
-            if let Some(w) = cut {
-                crate::warning::warn(w);
+            for w in cut {
+                w.say();
             }
             let (rec, drive) = run_on_drive(a, spec, &p, &measured, &name)?;
             let what = format!(
