@@ -387,18 +387,26 @@ pub fn output_dir(path: &Path) -> &Path {
     path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."))
 }
 
-/// A temporary file in `dir` for an output being written (`.gma-*.partial`, a unique name: a
-/// run killed mid-write leaves one of these, never a truncated result under the final name, and
-/// concurrent runs never share one).
+/// A temporary file in `dir` for an output being written (`.gma-PID-START-XXXXXX.partial`, a
+/// unique name: a run killed mid-write leaves one of these, never a truncated result under the
+/// final name, and concurrent runs never share one). The name records the writing process, so
+/// the first write into `dir` removes the partials of writers no longer running.
 pub fn partial_file(dir: &Path) -> Result<tempfile::NamedTempFile> {
-    partial_file_with_suffix(dir, ".partial")
+    partial_file_with_suffix(dir, crate::partials::SUFFIX)
 }
 
-/// As [`partial_file`], with a suffix (an encoder may need the target's extension).
+/// As [`partial_file`], with another of the endings [`crate::partials`] knows (an encoder may
+/// need the target's extension: [`crate::partials::PNG_SUFFIX`]).
 pub fn partial_file_with_suffix(dir: &Path, suffix: &str) -> Result<tempfile::NamedTempFile> {
-    tempfile::Builder::new().prefix(".gma-").suffix(suffix).tempfile_in(dir).with_context(|| {
-        format!("cannot create a file in {} (does it exist, and may it be written?)", display(dir))
-    })
+    crate::partials::remove_stale_once(dir);
+    tempfile::Builder::new()
+        .prefix(&crate::partials::prefix())
+        .rand_bytes(crate::partials::RANDOM_CHARS)
+        .suffix(suffix)
+        .tempfile_in(dir)
+        .with_context(|| {
+            format!("cannot create a file in {} (does it exist, and may it be written?)", display(dir))
+        })
 }
 
 /// Moves a finished temporary file into place (synced, ordinary permissions, atomic rename).
