@@ -6,6 +6,7 @@ use clap::Args;
 use super::common::{Data, ModelFiles};
 use crate::diagnose::{check_ja_variants, diagnose, other_law_structure};
 use crate::provenance::Provenance;
+use crate::warning::{by_weight, warn};
 
 /// Options of `gma diagnose`. Its files are displacement recordings only (the shared `FILE`
 /// help also names loop files, which `fit` and `report` take).
@@ -35,7 +36,6 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
             .then(|| other_law_structure(spec).map(|o| (o, "the other law, refitted by --laws")))
             .transpose()
     })?;
-    p.warn_about_inputs();
     let Data::Recordings(fit_files, val_files) = &p.data else {
         bail!(
             "diagnose works on displacement recordings; for magnetization loops use `gma fit`, `gma compare` or \
@@ -57,8 +57,13 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
     if a.laws {
         d.compare_laws(p.spec, &p.init, fit_files, val_files, p.opts)?;
     }
-    say!(a.mf.json, "{d}");
+    // The verdict first, then the doubts about the inputs heaviest first, then the evidence.
+    say!(a.mf.json, "{}", d.headline());
+    for w in by_weight(&p.input_warnings) {
+        warn(w);
+    }
     a.mf.warn_if_time_limited(d.time_limited);
+    say!(a.mf.json, "{}", d.details());
     if a.mf.json {
         out!(
             "{}",
