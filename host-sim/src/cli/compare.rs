@@ -157,7 +157,8 @@ fn compare_recordings(
     let mut charts = Vec::new();
     let mut total = 0.0;
     // The table goes to a temporary file beside its target as it is made (it may be far larger
-    // than the recordings' memory), renamed into place only when everything else succeeded.
+    // than the recordings' memory), renamed into place only when everything else succeeded
+    // (`-`: streamed to stdout as it is made).
     let mut csv = match &a.out_csv {
         Some(path) => Some(csv::Writer::from_writer(OutputWriter::create(path)?)),
         None => None,
