@@ -1517,7 +1517,7 @@ mod tests {
         assert_eq!(d(vec![], vec![]).no_verdict(), "nothing significant is missing");
         let cut = d(vec![], vec![Effect::EddyCurrent]).to_string();
         assert!(
-            cut.ends_with("verdict: undecided — the time limit stopped the refit of `eddy_current` before it converged; raise the time limit (`--time-limit`, Python's `time_limit_s`)"),
+            cut.starts_with("verdict: undecided — the time limit stopped the refit of `eddy_current` before it converged; raise the time limit (`--time-limit`, Python's `time_limit_s`)"),
             "{cut}"
         );
         let both = d(vec![Effect::MechanicalDynamics], vec![Effect::EddyCurrent]).no_verdict();
