@@ -277,53 +277,26 @@ fn significance_words(n_eff: f64) -> String {
     }
 }
 
-/// The diagnosis in words (`--json` gives the same as one object).
+/// The diagnosis in words (`--json` gives the same as one object): [`Diagnosis::headline`], then
+/// [`Diagnosis::details`].
 impl std::fmt::Display for Diagnosis {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        writeln!(
-            f,
-            "model `{}`: fit NRMSE {:.3} % (whole files, as `gma fit`){}",
-            self.model,
-            self.nrmse_fit * 100.0,
-            self.nrmse_val
-                .map(|v| format!(
-                    ", validation {:.3} % (after each file's burn-in, as every score below)",
-                    v * 100.0
-                ))
-                .unwrap_or_default()
-        )?;
-        for finding in &self.findings {
-            writeln!(f, "  - {finding}")?;
-        }
-        if !self.candidates.is_empty() {
-            // The order `decide` gives; the score (R² and cut combined, for scripts) is not it.
-            writeln!(
-                f,
-                "  candidates (most likely first: the verdict, then those that pass every test, then by cut; \
-                 score = ½ R² + ½ the relative error drop):"
-            )?;
-        }
-        for c in &self.candidates {
-            writeln!(
-                f,
-                "    {:22} cut {:>5}  score {:.2}  {:.2} % → {:.2} %  {}",
-                c.effect,
-                format!("{:.2}×", c.cut()).replace("inf×", "∞"),
-                c.score,
-                c.nrmse_before * 100.0,
-                c.nrmse_after * 100.0,
-                c.evidence
-            )?;
-        }
+        write!(f, "{}\n{}", self.headline(), self.details())
+    }
+}
+
+impl Diagnosis {
+    /// The line a person reads first: the verdict (the missing effect and the model to try), or
+    /// what no verdict means.
+    pub fn headline(&self) -> String {
         match self.verdict {
-            Some(v) => write!(
-                f,
+            Some(v) => format!(
                 "verdict: `{v}` is missing{} — try `--model {}`",
                 if self.undistinguished.is_empty() {
                     String::new()
                 } else {
                     format!(
-                        ", or `{}` (the data do not tell them apart, above)",
+                        ", or `{}` (the data do not tell them apart, below)",
                         self.undistinguished.iter().map(|e| e.name()).collect::<Vec<_>>().join("`, `")
                     )
                 },
@@ -334,8 +307,45 @@ impl std::fmt::Display for Diagnosis {
                     v.alias().unwrap_or(v.name())
                 ))
             ),
-            None => write!(f, "verdict: {}", self.no_verdict()),
+            None => format!("verdict: {}", self.no_verdict()),
         }
+    }
+
+    /// What follows the headline: the given model's figures, the findings (doubts about the data
+    /// first) and the candidates.
+    pub fn details(&self) -> String {
+        let mut lines = vec![format!(
+            "model `{}`: fit NRMSE {:.3} % (whole files, as `gma fit`){}",
+            self.model,
+            self.nrmse_fit * 100.0,
+            self.nrmse_val
+                .map(|v| format!(
+                    ", validation {:.3} % (after each file's burn-in, as every score below)",
+                    v * 100.0
+                ))
+                .unwrap_or_default()
+        )];
+        lines.extend(self.findings.iter().map(|finding| format!("  - {finding}")));
+        if !self.candidates.is_empty() {
+            // The order `decide` gives; the score (R² and cut combined, for scripts) is not it.
+            lines.push(
+                "  candidates (most likely first: the verdict, then those that pass every test, then by cut; \
+                 score = ½ R² + ½ the relative error drop):"
+                    .into(),
+            );
+        }
+        lines.extend(self.candidates.iter().map(|c| {
+            format!(
+                "    {:22} cut {:>5}  score {:.2}  {:.2} % → {:.2} %  {}",
+                c.effect,
+                format!("{:.2}×", c.cut()).replace("inf×", "∞"),
+                c.score,
+                c.nrmse_before * 100.0,
+                c.nrmse_after * 100.0,
+                c.evidence
+            )
+        }));
+        lines.join("\n")
     }
 }
 
@@ -1080,6 +1090,11 @@ fn check_files(fit_files: &[Recording], val_files: &[Recording]) -> Result<()> {
 /// bent to the end of their range.
 fn baseline_findings(spec: ModelSpec, base: &FitResult, sigs: &[Signals]) -> Vec<String> {
     let mut findings = Vec::new();
+    // λ_s far outside the materials' range is most often a displacement in another unit, said
+    // first (a doubt about the data outweighs the residual's statistics) and as `gma fit` says it.
+    if let Some(w) = fit::strain_scale_doubt(&base.params, &fit::Constraints::default()) {
+        findings.push(format!("in the fit of `{spec}`: {w}"));
+    }
     let white = whiteness(&sigs.iter().map(|s| s.residual.as_slice()).collect::<Vec<_>>());
     let (not_white, white_limit) = structured_residual(white, sigs.len());
     findings.push(if not_white {
@@ -1092,12 +1107,8 @@ fn baseline_findings(spec: ModelSpec, base: &FitResult, sigs: &[Signals]) -> Vec
     } else {
         format!("residual is close to white: {:.0} % of lags 1–20 outside the 95 % band", white * 100.0)
     });
-    // λ_s far outside the materials' range is most often a displacement in another unit, said
-    // as `gma fit` says it; the other parameters the fit left at a range's end, in one finding:
-    // a structure that lacks an effect often bends a parameter that far to stand in for it.
-    if let Some(w) = fit::strain_scale_doubt(&base.params, &fit::Constraints::default()) {
-        findings.push(format!("in the fit of `{spec}`: {w}"));
-    }
+    // The other parameters the fit left at a range's end, in one finding: a structure that
+    // lacks an effect often bends a parameter that far to stand in for it.
     let at_edge: Vec<String> = base
         .free
         .iter()
@@ -1506,7 +1517,7 @@ mod tests {
         assert_eq!(d(vec![], vec![]).no_verdict(), "nothing significant is missing");
         let cut = d(vec![], vec![Effect::EddyCurrent]).to_string();
         assert!(
-            cut.ends_with("verdict: undecided — the time limit stopped the refit of `eddy_current` before it converged; raise the time limit (`--time-limit`, Python's `time_limit_s`)"),
+            cut.starts_with("verdict: undecided — the time limit stopped the refit of `eddy_current` before it converged; raise the time limit (`--time-limit`, Python's `time_limit_s`)"),
             "{cut}"
         );
         let both = d(vec![Effect::MechanicalDynamics], vec![Effect::EddyCurrent]).no_verdict();

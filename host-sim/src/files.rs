@@ -8,7 +8,9 @@
 //! the path is a regular file or new, and it is not one of the inputs. They are written to a
 //! unique hidden temporary file beside the target and renamed into place ([`write_atomic`]), so
 //! a reader, a crash or a concurrent run never sees a half-written result, and a command that
-//! fails never replaces an existing output.
+//! fails never replaces an existing output. An output path `-` is standard output
+//! ([`is_stdout`]); the temporary files of killed runs are removed by the next write into their
+//! folder ([`crate::partials`]).
 
 use std::io::{BufRead, Read, Write as _};
 use std::path::{Path, PathBuf};
@@ -285,7 +287,14 @@ pub fn echo(cell: &str) -> String {
 /// is not one of `inputs`.
 pub fn check_outputs(outputs: &[&Path], inputs: &[InputId]) -> Result<()> {
     let mut seen: Vec<PathBuf> = Vec::new();
+    let mut stdout_named = false;
     for &path in outputs {
+        if is_stdout(path) {
+            if std::mem::replace(&mut stdout_named, true) {
+                bail!("`-` (standard output) is named as an output twice; it can take only one");
+            }
+            continue;
+        }
         let name = display(path);
         let dir = output_dir(path);
         if !dir.is_dir() {
@@ -374,12 +383,98 @@ impl Drop for OutputFolder {
     }
 }
 
+/// Whether an output path is `-`: standard output, as `-` is standard input for inputs.
+pub fn is_stdout(path: &Path) -> bool {
+    path == Path::new("-")
+}
+
+/// Whether `option`'s `path` is `-` (standard output); refused with `--json`, whose one object
+/// stdout carries.
+pub fn to_stdout(option: &str, path: &Path, json: bool) -> Result<bool> {
+    if is_stdout(path) && json {
+        bail!(
+            "{option} -: standard output carries the --json object, and cannot take the output too; \
+             give {option} a file name, or leave out --json"
+        );
+    }
+    Ok(is_stdout(path))
+}
+
+/// Refuses `-` for an option that names `what` (a folder, a set of files): standard output takes
+/// one document.
+pub fn no_stdout(option: &str, path: &Path, what: &str) -> Result<()> {
+    if is_stdout(path) {
+        bail!("{option} -: {option} names {what}, and standard output (`-`) takes a single document");
+    }
+    Ok(())
+}
+
+/// An output as it is written: a temporary file beside its target, or standard output (`-`).
+pub enum OutputWriter {
+    /// Renamed onto the target by [`OutputWriter::finish`].
+    Partial(tempfile::NamedTempFile),
+    /// Written through as it comes.
+    Stdout(std::io::Stdout),
+}
+
+impl OutputWriter {
+    /// Starts writing `path` (`-`: standard output).
+    pub fn create(path: &Path) -> Result<Self> {
+        Ok(if is_stdout(path) {
+            Self::Stdout(std::io::stdout())
+        } else {
+            Self::Partial(partial_file(output_dir(path))?)
+        })
+    }
+
+    /// Puts the finished output in place: the rename, or the last bytes flushed to stdout.
+    pub fn finish(self, path: &Path) -> Result<()> {
+        match self {
+            Self::Partial(tmp) => persist(tmp, path),
+            Self::Stdout(mut out) => out.flush().map_err(stdout_error),
+        }
+    }
+}
+
+impl std::io::Write for OutputWriter {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        match self {
+            Self::Partial(tmp) => tmp.write(buf),
+            Self::Stdout(out) => out.write(buf).map_err(stdout_gone),
+        }
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        match self {
+            Self::Partial(tmp) => tmp.flush(),
+            Self::Stdout(out) => out.flush().map_err(stdout_gone),
+        }
+    }
+}
+
+/// A reader that went away (`gma … -o - | head`) ends the command quietly, as for text
+/// ([`crate::cli::print_line`]); any other error is handed back.
+fn stdout_gone(e: std::io::Error) -> std::io::Error {
+    if e.kind() == std::io::ErrorKind::BrokenPipe {
+        std::process::exit(0);
+    }
+    e
+}
+
+/// An error writing to standard output, as a message.
+fn stdout_error(e: std::io::Error) -> anyhow::Error {
+    anyhow::anyhow!("writing to standard output: {}", stdout_gone(e))
+}
+
 /// Writes `bytes` to `path` through a temporary file and a rename, so that readers never see a
-/// half-written file.
+/// half-written file; `-` writes them to standard output.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let mut tmp = partial_file(output_dir(path))?;
-    tmp.write_all(bytes).with_context(|| format!("writing {}", display(path)))?;
-    persist(tmp, path)
+    let mut out = OutputWriter::create(path)?;
+    match out.write_all(bytes) {
+        Err(e) if is_stdout(path) => Err(stdout_error(e)),
+        r => r.with_context(|| format!("writing {}", display(path))),
+    }?;
+    out.finish(path)
 }
 
 /// The folder `path` is written into (`.` for a bare file name).
@@ -387,18 +482,26 @@ pub fn output_dir(path: &Path) -> &Path {
     path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."))
 }
 
-/// A temporary file in `dir` for an output being written (`.gma-*.partial`, a unique name: a
-/// run killed mid-write leaves one of these, never a truncated result under the final name, and
-/// concurrent runs never share one).
+/// A temporary file in `dir` for an output being written (`.gma-PID-START-XXXXXX.partial`, a
+/// unique name: a run killed mid-write leaves one of these, never a truncated result under the
+/// final name, and concurrent runs never share one). The name records the writing process, so
+/// the first write into `dir` removes the partials of writers no longer running.
 pub fn partial_file(dir: &Path) -> Result<tempfile::NamedTempFile> {
-    partial_file_with_suffix(dir, ".partial")
+    partial_file_with_suffix(dir, crate::partials::SUFFIX)
 }
 
-/// As [`partial_file`], with a suffix (an encoder may need the target's extension).
+/// As [`partial_file`], with another of the endings [`crate::partials`] knows (an encoder may
+/// need the target's extension: [`crate::partials::PNG_SUFFIX`]).
 pub fn partial_file_with_suffix(dir: &Path, suffix: &str) -> Result<tempfile::NamedTempFile> {
-    tempfile::Builder::new().prefix(".gma-").suffix(suffix).tempfile_in(dir).with_context(|| {
-        format!("cannot create a file in {} (does it exist, and may it be written?)", display(dir))
-    })
+    crate::partials::remove_stale_once(dir);
+    tempfile::Builder::new()
+        .prefix(&crate::partials::prefix())
+        .rand_bytes(crate::partials::RANDOM_CHARS)
+        .suffix(suffix)
+        .tempfile_in(dir)
+        .with_context(|| {
+            format!("cannot create a file in {} (does it exist, and may it be written?)", display(dir))
+        })
 }
 
 /// Moves a finished temporary file into place (synced, ordinary permissions, atomic rename).
@@ -470,6 +573,14 @@ mod tests {
         assert_eq!(escape_control("a\u{1b}[31mb\u{7}"), "a\\u{1b}[31mb\\u{7}");
         let long = "x".repeat(100);
         assert_eq!(echo(&long).chars().count(), MAX_ECHO_CHARS + 1);
+    }
+
+    #[test]
+    fn standard_output_takes_one_output_and_no_file_checks() {
+        let dash = Path::new("-");
+        check_outputs(&[dash], &[]).unwrap();
+        let e = check_outputs(&[dash, Path::new("a.csv"), dash], &[]).unwrap_err().to_string();
+        assert!(e.contains("`-` (standard output) is named as an output twice"), "{e}");
     }
 
     #[test]

@@ -16,6 +16,7 @@ pub mod files;
 pub mod fit;
 pub mod loops;
 pub mod params;
+pub mod partials;
 pub mod plant;
 pub mod plots;
 pub mod progress;

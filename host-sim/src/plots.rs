@@ -421,7 +421,10 @@ pub fn write_panels(path: &Path, charts: &[Chart], scale: XScale) -> Result<()> 
         Some("png") => {
             // The encoder picks the format from the name: draw into a unique `.png` temporary
             // file beside the target (concurrent runs never share one), then rename it into place.
-            let tmp = crate::files::partial_file_with_suffix(crate::files::output_dir(path), ".partial.png")?;
+            let tmp = crate::files::partial_file_with_suffix(
+                crate::files::output_dir(path),
+                crate::partials::PNG_SUFFIX,
+            )?;
             {
                 let root = BitMapBackend::new(tmp.path(), size).into_drawing_area();
                 // Thin: the bitmap backend joins wide polylines with unbounded miters, which

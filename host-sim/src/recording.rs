@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 
 use crate::columns::{ColumnMap, ReadOptions, Resample, MAX_GAP_STEPS};
 use crate::error::Located;
-use crate::files::{echo, output_dir, partial_file, persist, Input};
+use crate::files::{echo, Input, OutputWriter};
 use crate::located;
 use crate::read_doubts::ReadDoubt;
 
@@ -468,15 +468,15 @@ impl Recording {
         String::from_utf8(out).expect("ASCII")
     }
 
-    /// Writes the CSV atomically (temporary file in the same directory, then rename), streamed
-    /// through a buffer rather than built in memory.
+    /// Writes the CSV atomically (temporary file in the same directory, then rename; `-`:
+    /// standard output), streamed through a buffer rather than built in memory.
     pub fn write(&self, path: &Path) -> Result<()> {
-        let mut buf = std::io::BufWriter::with_capacity(1 << 16, partial_file(output_dir(path))?);
+        let mut buf = std::io::BufWriter::with_capacity(1 << 16, OutputWriter::create(path)?);
         self.write_csv(&mut buf).with_context(|| format!("writing {}", crate::files::display(path)))?;
-        let tmp = buf
+        let out = buf
             .into_inner()
             .map_err(|e| anyhow::anyhow!("writing {}: {}", crate::files::display(path), e.error()))?;
-        persist(tmp, path)
+        out.finish(path)
     }
 }
 

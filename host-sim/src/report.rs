@@ -14,6 +14,7 @@ use crate::plots::{self, Chart, Series};
 use crate::provenance::Provenance;
 use crate::recording::Recording;
 use crate::uncertainty::{self, Uncertainty, CORRELATION_WARNING};
+use crate::warning::{by_weight, Warning};
 
 /// Most effects the ladder adds before it stops.
 pub const MAX_RUNGS: usize = 4;
@@ -186,13 +187,78 @@ pub fn time_chart(rec: &Recording, sim: &Simulation, offset_um: f64, label: &str
     }
 }
 
-/// The self-contained HTML page.
+/// The doubts about the ladder's result, its last rung's fit: those about the inputs given, a
+/// strain scale outside the materials' range, a mode no file can show, and the uncertainty's
+/// (`uncertainties` per rung, as [`rung_uncertainties`] gives them).
+pub fn result_doubts(
+    rungs: &[Rung],
+    fit_files: &[Recording],
+    val_files: &[Recording],
+    input_warnings: &[Warning],
+    uncertainties: &[std::result::Result<Uncertainty, String>],
+) -> Vec<Warning> {
+    let mut doubts = input_warnings.to_vec();
+    if let Some(last) = rungs.last() {
+        doubts.extend(crate::fit::strain_scale_doubt(&last.params, &crate::fit::Constraints::default()));
+        doubts.extend(crate::fit::unresolved_mode(
+            last.spec,
+            &last.params,
+            fit_files.iter().chain(val_files),
+        ));
+    }
+    if let Some(Ok(u)) = uncertainties.last() {
+        doubts.extend(u.warnings());
+    }
+    doubts
+}
+
+/// The page's opening, what a reader looks for first: the ladder's result (its last model, that
+/// model's error and verdict) and the heaviest doubt about it, the others after it.
+fn result_html(rungs: &[Rung], doubts: &[Warning]) -> String {
+    let (Some(first), Some(last)) = (rungs.first(), rungs.last()) else { return String::new() };
+    let mean = |v: &[f64]| 100.0 * v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let mut h = format!(
+        "<h2>Result</h2><p class=v>{}</p><p>Model <code>{}</code>: fit NRMSE {:.2} %",
+        esc(&last.diagnosis.headline()),
+        last.spec,
+        mean(&last.fit_nrmse)
+    );
+    if !last.val_nrmse.is_empty() {
+        let _ = write!(h, ", validation NRMSE {:.2} %", mean(&last.val_nrmse));
+    }
+    if rungs.len() > 1 {
+        let _ = write!(
+            h,
+            " (from {:.2} % with <code>{}</code>, whole files)",
+            first.headline() * 100.0,
+            first.spec
+        );
+    }
+    h.push_str(".</p>");
+    let doubts = by_weight(doubts);
+    if let Some((top, rest)) = doubts.split_first() {
+        let _ = write!(h, "<p class=v>Warning: {}</p>", esc(&top.to_string()));
+        if !rest.is_empty() {
+            let _ =
+                write!(h, "<details><summary>{} more warning(s), heaviest first</summary><ul>", rest.len());
+            for w in rest {
+                let _ = write!(h, "<li>{}</li>", esc(&w.to_string()));
+            }
+            h.push_str("</ul></details>");
+        }
+    }
+    h
+}
+
+/// The self-contained HTML page: the result and its heaviest doubt first ([`result_doubts`]),
+/// then the ladder, the diagnoses, the loops and residuals.
 pub fn html(
     title: &str,
     rungs: &[Rung],
     fit_files: &[Recording],
     val_files: &[Recording],
     note: &str,
+    doubts: &[Warning],
 ) -> Result<String> {
     let models: Vec<(ModelSpec, ActuatorParams)> = rungs.iter().map(|r| (r.spec, r.params)).collect();
     let mut h = String::new();
@@ -208,6 +274,7 @@ pub fn html(
     if !note.is_empty() {
         let _ = write!(h, "<p>{}</p>", esc(note));
     }
+    h.push_str(&result_html(rungs, doubts));
     // Ladder table.
     h.push_str("<h2>Model ladder</h2><table><tr><th class=l>model</th><th>fit NRMSE (mean)</th><th>validation NRMSE (mean)</th>");
     for f in fit_files {

@@ -280,20 +280,43 @@ pub struct FitText {
     pub uncertainty: Option<Uncertainty>,
 }
 
-impl fmt::Display for FitSummary {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+impl FitSummary {
+    /// The line a person reads first: the model, its mean fit (and validation) NRMSE.
+    pub fn headline(&self) -> String {
         let fitted = self.files.iter().filter(|r| r.split == Some("fit") && r.is_first_of_file()).count();
-        let (what, width) = if self.text.loops { ("magnetization model", 20) } else { ("model", 40) };
-        writeln!(
-            f,
-            "{what} `{}`{} fitted to {fitted} {}: {} evaluations in {:.1} s (seed {})",
+        format!(
+            "{} `{}`{} fitted to {fitted} {}: mean fit NRMSE {:.3} %{}",
+            if self.text.loops { "magnetization model" } else { "model" },
             self.model,
             self.ja_variant.map(|v| format!(" (J–A form `{v}`)")).unwrap_or_default(),
             if self.text.loops { "loop file(s)" } else { "file(s)" },
-            self.evaluations,
-            self.text.seconds,
-            self.seed
-        )?;
+            self.nrmse_fit * 100.0,
+            self.nrmse_val.map(|v| format!(", validation {:.3} %", v * 100.0)).unwrap_or_default()
+        )
+    }
+
+    /// Everything below the headline (and the warnings, which follow it on stderr): the
+    /// parameters, the start, the correlations and each file's score.
+    pub fn details(&self) -> String {
+        let mut text = String::new();
+        // Writing to a String cannot fail.
+        let _ = self.write_details(&mut text);
+        text.trim_end_matches('\n').to_string()
+    }
+}
+
+/// The text form of a fit: [`FitSummary::headline`], then [`FitSummary::details`].
+impl fmt::Display for FitSummary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}\n{}", self.headline(), self.details())
+    }
+}
+
+impl FitSummary {
+    fn write_details(&self, f: &mut String) -> fmt::Result {
+        use fmt::Write as _;
+        let width = if self.text.loops { 20 } else { 40 };
+        writeln!(f, "  {} evaluations in {:.1} s (seed {})", self.evaluations, self.text.seconds, self.seed)?;
         let estimate = |n: &str| {
             self.text.uncertainty.as_ref().and_then(|u| u.params.iter().find(|p| p.bound.name == n).cloned())
         };
@@ -370,12 +393,7 @@ impl fmt::Display for FitSummary {
                 r.file
             )?;
         }
-        write!(
-            f,
-            "  mean fit NRMSE {:.3} %{}",
-            self.nrmse_fit * 100.0,
-            self.nrmse_val.map(|v| format!(", validation {:.3} %", v * 100.0)).unwrap_or_default()
-        )
+        Ok(())
     }
 }
 
@@ -392,8 +410,33 @@ pub struct CompareSummary {
     pub warnings: Vec<String>,
 }
 
+impl CompareSummary {
+    /// The line a person reads first: the model and its mean NRMSE.
+    pub fn headline(&self) -> String {
+        let n = self.files.iter().filter(|r| r.is_first_of_file()).count();
+        format!("model `{}`: mean NRMSE {:.3} % over {n} file(s)", self.model, self.nrmse * 100.0)
+    }
+
+    /// Everything below the headline (and the warnings, which follow it on stderr): each file's
+    /// score, residual analysis and loop features.
+    pub fn details(&self) -> String {
+        let mut text = String::new();
+        // Writing to a String cannot fail.
+        let _ = self.write_details(&mut text);
+        text.trim_end_matches('\n').to_string()
+    }
+}
+
+/// The text form of a comparison: [`CompareSummary::headline`], then [`CompareSummary::details`].
 impl fmt::Display for CompareSummary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}\n{}", self.headline(), self.details())
+    }
+}
+
+impl CompareSummary {
+    fn write_details(&self, f: &mut String) -> fmt::Result {
+        use fmt::Write as _;
         for r in &self.files {
             let plots = r.plots.as_ref().map(|p| format!("  plots: {}", p.join(", "))).unwrap_or_default();
             let offset = r.offset_um.map(|o| format!("  offset {o:8.3} µm")).unwrap_or_default();
@@ -413,7 +456,6 @@ impl fmt::Display for CompareSummary {
                 }
             }
         }
-        let n = self.files.iter().filter(|r| r.is_first_of_file()).count();
-        write!(f, "mean NRMSE {:.3} % over {n} file(s), model `{}`", self.nrmse * 100.0, self.model)
+        Ok(())
     }
 }

@@ -269,6 +269,59 @@ pub enum Warning {
     Read(crate::read_doubts::ReadDoubt),
 }
 
+/// How much a doubt matters to the person reading the result; text lists warnings heaviest
+/// first ([`by_weight`]), so the one that changes what the result means is not buried.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Weight {
+    /// The result is invalid ([`Warning::invalidates`]).
+    Invalid,
+    /// The data or their reading look wrong: a unit, a sign or order, a time base, the files
+    /// given; the numbers may mean something else than they seem to.
+    Data,
+    /// The search: where it started or ended, a limit it met, its time limit.
+    Search,
+    /// The statistics of a sound estimate: correlated or unidentifiable parameters.
+    Statistical,
+}
+
+impl Warning {
+    /// How much it matters, by kind (never by its text).
+    pub fn weight(&self) -> Weight {
+        match self {
+            Warning::Multivalued { .. } | Warning::IntegrationFailed { .. } => Weight::Invalid,
+            // What the reader did (a note) weighs least; what it doubts is about the data.
+            Warning::Read(d) if d.is_note() => Weight::Statistical,
+            Warning::Read(_) => Weight::Data,
+            Warning::StrainScaleUnlikely { .. }
+            | Warning::ModeAboveNyquist { .. }
+            | Warning::WeakLoop { .. }
+            | Warning::LoopClockwise { .. }
+            | Warning::LoopOffCentre { .. }
+            | Warning::ValidationIsFitFile { .. }
+            | Warning::SameInputTwice { .. }
+            | Warning::FitFileAfterVal { .. }
+            | Warning::Truncated { .. }
+            | Warning::PreisachPlaneWide { .. } => Weight::Data,
+            Warning::AtEdge { .. }
+            | Warning::SquarerThanJa { .. }
+            | Warning::StartKept { .. }
+            | Warning::StartMoved { .. }
+            | Warning::TimeLimit { .. }
+            | Warning::AlphaAtLimit { .. } => Weight::Search,
+            Warning::Correlated { .. } | Warning::NotIdentifiable { .. } | Warning::NoUncertainty { .. } => {
+                Weight::Statistical
+            }
+        }
+    }
+}
+
+/// `warnings` heaviest first ([`Warning::weight`]), those of one weight in the order given.
+pub fn by_weight<'a>(warnings: impl IntoIterator<Item = &'a Warning>) -> Vec<&'a Warning> {
+    let mut sorted: Vec<&Warning> = warnings.into_iter().collect();
+    sorted.sort_by_key(|w| w.weight());
+    sorted
+}
+
 /// Sample periods from which on a time column may well be in ms read as seconds: 10 ms is
 /// 100 Hz, where a rig logging an actuator's dynamics records at 1–100 kHz.
 const SLOW_STEP_S: f64 = 0.01;
@@ -276,7 +329,7 @@ const SLOW_STEP_S: f64 = 0.01;
 impl Warning {
     /// Whether the result is invalid (nothing may be written from it), not merely doubtful.
     pub fn invalidates(&self) -> bool {
-        matches!(self, Warning::Multivalued { .. } | Warning::IntegrationFailed { .. })
+        self.weight() == Weight::Invalid
     }
 
     /// As said on stderr: a note (what was done) or a warning.
@@ -481,6 +534,19 @@ mod tests {
         let text = zero.to_string();
         assert!(!text.contains("nearest end"), "{text}");
         assert!(text.contains("began at 2.4495e-2, the middle of that range"), "{text}");
+    }
+
+    /// A doubt about the data's unit comes before the search's and the statistics', whatever
+    /// order the checks found them in; those of one weight keep theirs.
+    #[test]
+    fn warnings_are_listed_heaviest_first() {
+        let correlated = |a| Warning::Correlated { a, b: "ja.alpha", rho: 0.99 };
+        let unit = Warning::StrainScaleUnlikely { lambda_s: 1e-6, lo: 1e-5, hi: 1e-2 };
+        let edge = Warning::AtEdge { param: "ja.c", value: 0.0, lo: 0.0, hi: 0.95 };
+        let found = [correlated("ja.a_a_per_m"), edge.clone(), correlated("ja.c"), unit.clone()];
+        let listed = by_weight(&found);
+        assert_eq!(listed, [&unit, &edge, &found[0], &found[2]]);
+        assert!(Warning::Multivalued { ratio: 1.2 }.weight() < unit.weight());
     }
 
     /// What is said inside `heard` is collected in order, an inner `heard` keeps its own, and

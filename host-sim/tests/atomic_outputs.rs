@@ -154,3 +154,62 @@ fn a_large_csv_streams_in_bounded_memory() {
     assert!(size_mb > 55.0);
     assert!(kb / 1e3 < 30.0, "peak RSS {:.1} MB", kb / 1e3);
 }
+
+/// The start time of process `pid` in clock ticks after boot (`/proc/PID/stat`, field 22), as
+/// gma names its partial files.
+#[cfg(target_os = "linux")]
+fn start_time(pid: u32) -> u64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    stat.rsplit_once(')').unwrap().1.split_whitespace().nth(19).unwrap().parse().unwrap()
+}
+
+/// A run killed between writing and renaming leaves its partial; the next write into that folder
+/// removes it. Never a live writer's partial (this test process plays one), never a file that is
+/// not a gma partial, never a partial of a dead writer that was touched just now.
+#[cfg(target_os = "linux")]
+#[test]
+fn the_next_write_removes_a_killed_runs_partial_and_keeps_a_live_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    // A pid that has certainly ended: a child, waited for (so reaped).
+    let mut child = Command::new("true").spawn().unwrap();
+    let dead = child.id();
+    child.wait().unwrap();
+    let me = std::process::id();
+    let an_hour_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(3600);
+    let file = |name: &str, old: bool| {
+        let path = dir.path().join(name);
+        let f = std::fs::File::create(&path).unwrap();
+        if old {
+            f.set_modified(an_hour_ago).unwrap();
+        }
+        name.to_string()
+    };
+    let stale = file(&format!(".gma-{dead}-12345-aB3xY9.partial"), true);
+    let stale_png = file(&format!(".gma-{dead}-12345-Qw9Er7.partial.png"), true);
+    // This process's pid with another start time: the pid reused, the writer gone.
+    let reused = file(&format!(".gma-{me}-{}-Zx8Cv6.partial", start_time(me) + 1), true);
+    let kept = [
+        file(&format!(".gma-{me}-{}-Lm4Nb2.partial", start_time(me)), true), // a live writer
+        file(&format!(".gma-{dead}-12345-Fresh1.partial"), false),           // touched just now
+        file(".gma-aB3xY9.partial", true),                                   // an older gma's
+        file(&format!(".gma-{dead}-12345-aB3xY9.partial.bak"), true),        // not a partial name
+        file(&format!("gma-{dead}-12345-aB3xY9.partial"), true),             // not hidden
+    ];
+    let out = dir.path().join("rig.csv");
+    let o = Command::new(GMA)
+        .args(["simulate", "--model", "ja", "--duration-s", "0.01", "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let left: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+        .collect();
+    for gone in [&stale, &stale_png, &reused] {
+        assert!(!left.contains(gone), "{gone} was left: {left:?}");
+    }
+    for stays in &kept {
+        assert!(left.contains(stays), "{stays} was removed: {left:?}");
+    }
+    assert_eq!(left.len(), kept.len() + 1, "{left:?}");
+}

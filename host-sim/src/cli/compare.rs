@@ -6,12 +6,12 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use clap::Args;
 use model_core::{ActuatorParams, ModelSpec};
-use tempfile::NamedTempFile;
 
 use super::common::{check_max_samples, read_data, repeated_inputs, Data, ReadArgs};
 use crate::analysis;
 use crate::files::{
-    check_outputs, display, open_all, output_dir, output_folder, partial_file, persist, unique_stems, Input,
+    check_outputs, display, is_stdout, no_stdout, open_all, output_folder, to_stdout, unique_stems, Input,
+    OutputWriter,
 };
 use crate::fit::{self, Simulation};
 use crate::loops::{self, LoopFile};
@@ -21,6 +21,7 @@ use crate::provenance::Provenance;
 use crate::recording::Recording;
 use crate::report;
 use crate::results::{CompareSummary, FileScoreRow};
+use crate::warning::by_weight;
 
 /// Options of `gma compare`.
 #[derive(Args)]
@@ -45,7 +46,8 @@ pub struct CompareArgs {
     /// Also write one CSV of every recording's time series: columns `file, time_s, measured_um,
     /// model_um, residual_um` (model with its fitted offset; residual = measured − model), and
     /// `measured_flux_T, model_flux_T, residual_flux_T` when a recording has `flux_density_T`
-    /// (empty cells for the recordings without it).
+    /// (empty cells for the recordings without it). `-` writes it to standard output, and the
+    /// text to stderr (not with `--json`).
     #[arg(long, value_name = "PATH")]
     pub out_csv: Option<PathBuf>,
     /// Largest lag [samples] of the residual autocorrelation and input cross-correlation.
@@ -62,6 +64,10 @@ pub struct CompareArgs {
 /// Runs `gma compare`.
 pub fn run(a: &CompareArgs) -> Result<()> {
     let spec = params::parse_spec(&a.model)?;
+    no_stdout("--out-dir", &a.out_dir, "the folder of the plots")?;
+    if let Some(csv) = &a.out_csv {
+        to_stdout("--out-csv", csv, a.json)?;
+    }
     check_max_samples(a.read.max_samples)?;
     let read_opts = a.read.options()?;
     let params_input = a.params.as_deref().map(Input::open).transpose()?;
@@ -90,9 +96,6 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         &digests.into_iter().map(|(n, d)| (n, d.sha256())).collect::<Vec<_>>(),
         "the mean NRMSE",
     ));
-    for w in &cut {
-        w.say();
-    }
     let mut summary = match data {
         Data::Loops(files, _) => {
             if let Some(csv) = &a.out_csv {
@@ -104,15 +107,34 @@ pub fn run(a: &CompareArgs) -> Result<()> {
             }
             compare_loops(a, spec, &p, &files, &stems)?
         }
-        Data::Recordings(files, _) => compare_recordings(a, spec, &p, &files, &stems)?,
+        Data::Recordings(files, _) => {
+            let summary = compare_recordings(a, spec, &p, &files, &stems)?;
+            cut.extend(fit::unresolved_mode(spec, &p, &files));
+            summary
+        }
     };
-    summary.warnings.splice(0..0, cut.iter().map(ToString::to_string));
+    summary.warnings = cut.iter().map(ToString::to_string).collect();
     folder.keep();
-    say!(a.json, "{summary}");
+    // The result first, then its doubts heaviest first, then each file's figures.
+    let to_stderr = text_to_stderr(a);
+    say!(to_stderr, "{}", summary.headline());
+    for w in by_weight(&cut) {
+        w.say();
+    }
+    say!(to_stderr, "{}", summary.details());
+    if let Some(path) = &a.out_csv {
+        let to = if is_stdout(path) { "standard output".to_string() } else { display(path) };
+        say!(to_stderr, "time series written to {to}");
+    }
     if a.json {
         out!("{}", super::merged_json(&summary, &super::context_json(&source, &Provenance::now(None)))?);
     }
     Ok(())
+}
+
+/// Whether the text goes to stderr: stdout holds only the JSON, or the `--out-csv -` table.
+fn text_to_stderr(a: &CompareArgs) -> bool {
+    a.json || a.out_csv.as_deref().is_some_and(is_stdout)
 }
 
 /// The plots of one recording, by file-name suffix.
@@ -135,9 +157,10 @@ fn compare_recordings(
     let mut charts = Vec::new();
     let mut total = 0.0;
     // The table goes to a temporary file beside its target as it is made (it may be far larger
-    // than the recordings' memory), renamed into place only when everything else succeeded.
+    // than the recordings' memory), renamed into place only when everything else succeeded
+    // (`-`: streamed to stdout as it is made).
     let mut csv = match &a.out_csv {
-        Some(path) => Some(csv::Writer::from_writer(partial_file(output_dir(path))?)),
+        Some(path) => Some(csv::Writer::from_writer(OutputWriter::create(path)?)),
         None => None,
     };
     // Recordings with a search coil add its flux density (cells empty for the others).
@@ -194,12 +217,13 @@ fn compare_recordings(
         channels[0].analysis = summary;
         rows.extend(channels);
     }
-    let warnings: Vec<String> = fit::unresolved_mode(spec, p, recs).iter().map(ToString::to_string).collect();
-    for w in &warnings {
-        crate::warning::warn(w);
-    }
-    let summary =
-        CompareSummary { model: spec.to_string(), nrmse: total / recs.len() as f64, files: rows, warnings };
+    // Its warnings are the caller's, said after the headline.
+    let summary = CompareSummary {
+        model: spec.to_string(),
+        nrmse: total / recs.len() as f64,
+        files: rows,
+        warnings: Vec::new(),
+    };
     let table = match (&a.out_csv, csv) {
         (Some(path), Some(w)) => Some((
             path.as_path(),
@@ -207,13 +231,13 @@ fn compare_recordings(
         )),
         _ => None,
     };
-    report_all(a, &charts, table, summary)
+    report_all(&charts, table, summary)
 }
 
 /// Appends one recording's rows to the `--out-csv` table: values in shortest round-trip form,
 /// so measured − model = residual holds to rounding when read back.
 fn write_time_series(
-    w: &mut csv::Writer<NamedTempFile>,
+    w: &mut csv::Writer<OutputWriter>,
     rec: &Recording,
     sim: &Simulation,
     offset_um: f64,
@@ -249,17 +273,15 @@ fn write_time_series(
 /// Draws and writes every chart (only now that every file's chart data exists: a bad input
 /// leaves no partial set of plots) and the `--out-csv` table, and hands back the summary.
 fn report_all(
-    a: &CompareArgs,
     charts: &[(PathBuf, Vec<Chart>, XScale)],
-    table: Option<(&Path, NamedTempFile)>,
+    table: Option<(&Path, OutputWriter)>,
     summary: CompareSummary,
 ) -> Result<CompareSummary> {
     for (path, panels, scale) in charts {
         plots::write_panels(path, panels, *scale)?;
     }
-    if let Some((path, tmp)) = table {
-        persist(tmp, path)?;
-        say!(a.json, "time series written to {}", display(path));
+    if let Some((path, table)) = table {
+        table.finish(path)?;
     }
     Ok(summary)
 }
@@ -294,7 +316,6 @@ fn compare_loops(
         charts.push((out, vec![loops::chart(f, &m, &spec.to_string())], XScale::Linear));
     }
     report_all(
-        a,
         &charts,
         None,
         CompareSummary {

@@ -6,7 +6,7 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 
-use crate::files::{check_outputs, display, output_folder, shell_word, write_atomic};
+use crate::files::{check_outputs, display, no_stdout, output_folder, shell_word, write_atomic};
 use crate::fit::FitOptions;
 use crate::{cases, params, report};
 
@@ -29,6 +29,7 @@ pub fn run(a: &DemoArgs) -> Result<()> {
     let t = std::time::Instant::now();
     let j = a.json;
     let case = cases::demo();
+    no_stdout("--out-dir", &a.out_dir, "the folder of the recordings, parameter files and report")?;
     let folder = output_folder(&a.out_dir)?;
     say!(
         j,
@@ -94,14 +95,16 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         case.plant.describe(),
         case.model
     );
+    let uncertainties = report::rung_uncertainties(&rungs, &fit_files, || {});
+    let doubts = report::result_doubts(&rungs, &fit_files, &val_files, &[], &uncertainties);
     let page = report::html(
         "gma demo — finding the missing physics (SIMULATED rig)",
         &rungs,
         &fit_files,
         &val_files,
         &note,
+        &doubts,
     )?;
-    let uncertainties = report::rung_uncertainties(&rungs, &fit_files, || {});
     let provenance = crate::provenance::Provenance::now(Some(a.seed));
     let start = params::ParamSource {
         parameters_source: "the demo case's start values".into(),

@@ -6,6 +6,7 @@ use clap::Args;
 use super::common::{Data, ModelFiles};
 use crate::diagnose::{check_ja_variants, diagnose, other_law_structure};
 use crate::provenance::Provenance;
+use crate::warning::by_weight;
 
 /// Options of `gma diagnose`. Its files are displacement recordings only (the shared `FILE`
 /// help also names loop files, which `fit` and `report` take).
@@ -35,7 +36,6 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
             .then(|| other_law_structure(spec).map(|o| (o, "the other law, refitted by --laws")))
             .transpose()
     })?;
-    p.warn_about_inputs();
     let Data::Recordings(fit_files, val_files) = &p.data else {
         let name = match &p.data {
             Data::Loops(files, _) => files.first().map_or("the input", |f| f.name.as_str()),
@@ -64,8 +64,13 @@ pub fn run(a: &DiagnoseArgs) -> Result<()> {
     if a.laws {
         d.compare_laws(p.spec, &p.init, fit_files, val_files, p.opts)?;
     }
-    say!(a.mf.json, "{d}");
+    // The verdict first, then the doubts about the inputs heaviest first, then the evidence.
+    say!(a.mf.json, "{}", d.headline());
+    for w in by_weight(&p.input_warnings) {
+        w.say();
+    }
     a.mf.warn_if_time_limited(d.time_limited);
+    say!(a.mf.json, "{}", d.details());
     if a.mf.json {
         out!(
             "{}",

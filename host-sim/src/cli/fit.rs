@@ -7,7 +7,7 @@ use anyhow::{bail, Result};
 use clap::Args;
 
 use super::common::{Data, ModelFiles, Prepared};
-use crate::files::{display, names, write_atomic};
+use crate::files::{display, names, to_stdout, write_atomic};
 use crate::fit;
 use crate::loops::{self, LoopFile};
 use crate::params;
@@ -15,7 +15,7 @@ use crate::provenance::Provenance;
 use crate::recording::Recording;
 use crate::results::{FileScoreRow, FitSummary, FitText};
 use crate::uncertainty;
-use crate::warning::Warning;
+use crate::warning::{by_weight, Warning};
 
 /// Options of `gma fit`.
 #[derive(Args)]
@@ -23,7 +23,8 @@ pub struct FitArgs {
     #[command(flatten)]
     pub mf: ModelFiles,
     /// Write the identified parameter set here (TOML; `compare`, `simulate` and the firmware load
-    /// it). Written only when the fit succeeds; never one of the inputs.
+    /// it). Written only when the fit succeeds; never one of the inputs. `-` writes it to
+    /// standard output, and the fit's text to stderr (not with `--json`).
     #[arg(long, value_name = "P.toml")]
     pub params_out: Option<PathBuf>,
     /// Hold a parameter at its start value (from --params), or at VALUE, instead of fitting it
@@ -105,9 +106,13 @@ pub(crate) fn add_time_limit_warning(
 
 pub fn run(a: &FitArgs) -> Result<()> {
     let outputs: Vec<&std::path::Path> = a.params_out.as_deref().into_iter().collect();
+    let params_to_stdout = match &a.params_out {
+        Some(out) => to_stdout("--params-out", out, a.mf.json)?,
+        None => false,
+    };
     let mut p = a.mf.prepare(&outputs)?;
     // After `prepare`'s output checks: an input named as the output is said as such.
-    if let Some(out) = &a.params_out {
+    if let Some(out) = a.params_out.as_deref().filter(|_| !params_to_stdout) {
         replaces_only_a_parameter_file(out)?;
     }
     let (mut summary, params, mut warnings) = match &p.data {
@@ -126,11 +131,15 @@ pub fn run(a: &FitArgs) -> Result<()> {
         }
     };
     add_time_limit_warning(&mut summary, &mut warnings, a.mf.time_limit);
-    let j = a.mf.json;
-    say!(j, "{summary}");
-    for w in &warnings {
+    // Stdout holds only the data when it carries JSON or the parameter file.
+    let j = a.mf.json || params_to_stdout;
+    // The result first, then its doubts heaviest first (a unit before a correlation), then
+    // the details.
+    say!(j, "{}", summary.headline());
+    for w in by_weight(&warnings) {
         w.say();
     }
+    say!(j, "{}", summary.details());
     // An invalid result is an error: nothing is written, and --json gets the error object.
     let invalid: Vec<String> = warnings.iter().filter(|w| w.invalidates()).map(|w| w.to_string()).collect();
     if !invalid.is_empty() {
@@ -147,9 +156,10 @@ pub fn run(a: &FitArgs) -> Result<()> {
             &fixed,
         );
         write_atomic(out, params::to_toml_for(&params, &header, p.spec)?.as_bytes())?;
-        say!(j, "  parameters written to {}", display(out));
+        let to = if params_to_stdout { "standard output".to_string() } else { display(out) };
+        say!(j, "  parameters written to {to}");
     }
-    if j {
+    if a.mf.json {
         out!(
             "{}",
             super::merged_json(

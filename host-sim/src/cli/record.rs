@@ -6,7 +6,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use serde_json::json;
 
-use crate::files::{check_outputs, display};
+use crate::files::{check_outputs, display, no_stdout};
 use crate::record::{self, Ending};
 
 /// Options of `gma record`.
@@ -31,6 +31,7 @@ pub struct RecordArgs {
 
 /// Runs `gma record`.
 pub fn run(a: &RecordArgs) -> Result<()> {
+    no_stdout("--out", &a.out, "the first of the segments' files (each gap starts a new one)")?;
     let stream = record::open_stream(&a.input)?;
     check_outputs(&[a.out.as_path()], &[])?;
     if same_file(&a.input, &a.out) {

@@ -9,7 +9,7 @@ use serde_json::json;
 
 use super::common::{Data, ModelFiles};
 use super::fit::params_header;
-use crate::files::{check_outputs, display, output_folder, write_atomic, InputId};
+use crate::files::{check_outputs, display, no_stdout, output_folder, to_stdout, write_atomic, InputId};
 use crate::params;
 use crate::progress::Phase;
 use crate::provenance::Provenance;
@@ -21,7 +21,8 @@ use crate::{loops, report};
 pub struct ReportArgs {
     #[command(flatten)]
     pub mf: ModelFiles,
-    /// The HTML file to write (only when the report is complete; never one of the inputs).
+    /// The HTML file to write (only when the report is complete; never one of the inputs). `-`
+    /// writes the page to standard output, and the text to stderr (not with `--json`).
     #[arg(long, short, default_value = "gma-report.html")]
     pub out: PathBuf,
     /// Also write each fitted model's parameters into DIR (created if missing), as `gma fit
@@ -71,7 +72,12 @@ fn write_params(
 
 /// Runs `gma report`.
 pub fn run(a: &ReportArgs) -> Result<()> {
+    let page_to_stdout = to_stdout("--out", &a.out, a.mf.json)?;
+    if let Some(dir) = &a.params_out_dir {
+        no_stdout("--params-out-dir", dir, "a folder for one parameter file per model")?;
+    }
     let p = a.mf.prepare(&[a.out.as_path()])?;
+    let written_to = if page_to_stdout { "standard output".to_string() } else { display(&a.out) };
     // The folder now, the file names (the models found) after the ladder.
     let params_folder = match &a.params_out_dir {
         Some(dir) => Some((dir.as_path(), output_folder(dir)?)),
@@ -87,7 +93,8 @@ pub fn run(a: &ReportArgs) -> Result<()> {
         }
     }
     p.warn_about_inputs();
-    let j = a.mf.json;
+    // Stdout holds only the data when it carries JSON or the page.
+    let j = a.mf.json || page_to_stdout;
     let spec = p.spec;
     // Every input has been read to its end: their digests are final.
     let provenance = Provenance::now(Some(a.mf.seed));
@@ -111,9 +118,8 @@ pub fn run(a: &ReportArgs) -> Result<()> {
             let params_file = match &params_folder {
                 Some(_) if !invalid.is_empty() => {
                     bail!(
-                        "loop report written to {}, but the loop fit did not produce a valid model, so no parameter \
-                         file was written: {}",
-                        display(&a.out),
+                        "loop report written to {written_to}, but the loop fit did not produce a valid model, so no \
+                         parameter file was written: {}",
                         invalid.join("; ")
                     )
                 }
@@ -137,11 +143,11 @@ pub fn run(a: &ReportArgs) -> Result<()> {
                 folder.keep();
             }
             a.mf.warn_if_time_limited(res.time_limited);
-            say!(j, "loop report written to {}", display(&a.out));
+            say!(j, "loop report written to {written_to}");
             if let Some(f) = &params_file {
                 say!(j, "  parameters written to {f}");
             }
-            if j {
+            if a.mf.json {
                 let result = json!({"report": display(&a.out), "nrmse": res.nrmse, "nrmse_val": nrmse_val, "warnings": p.input_warnings.iter().chain(&res.warnings).map(|w| w.to_string()).collect::<Vec<_>>(),
                            "time_limit_reached": res.time_limited, "params_file": params_file});
                 out!("{}", super::merged_json(&result, &extra)?);
@@ -160,7 +166,10 @@ pub fn run(a: &ReportArgs) -> Result<()> {
             phase.finish();
             let phase =
                 Phase::start(p.opts.progress, "report: drawing the page (each model on each file)", 0);
-            let html = report::html(&format!("gma report — {spec}"), &rungs, fit_files, val_files, "")?;
+            let doubts =
+                report::result_doubts(&rungs, fit_files, val_files, &p.input_warnings, &uncertainties);
+            let html =
+                report::html(&format!("gma report — {spec}"), &rungs, fit_files, val_files, "", &doubts)?;
             let sections = report::uncertainty_html(&rungs, &uncertainties) + &provenance_section;
             // The page first: the parameter files after it cannot cost the report.
             write_atomic(&a.out, report::with_sections(html, &sections).as_bytes())?;
@@ -221,11 +230,11 @@ pub fn run(a: &ReportArgs) -> Result<()> {
                     Err(e) => say!(j, "  no uncertainty: {e}"),
                 }
             }
-            say!(j, "report written to {}", display(&a.out));
+            say!(j, "report written to {written_to}");
             for f in params_files.iter().flatten() {
                 say!(j, "parameters written to {f}");
             }
-            if j {
+            if a.mf.json {
                 let ladder: Vec<_> = rungs
                     .iter()
                     .zip(&uncertainties)

@@ -12,7 +12,7 @@ use serde_json::json;
 
 use super::common::{read_recording, ReadArgs};
 use crate::excitation::Excitation;
-use crate::files::{check_outputs, display, Input};
+use crate::files::{check_outputs, display, to_stdout, Input};
 use crate::fit::{self, Drive};
 use crate::params;
 use crate::plant::{EddyModel, Plant};
@@ -114,7 +114,8 @@ pub struct SimulateArgs {
     /// Seed of the noise generator.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Output CSV (written atomically: temporary file, then rename).
+    /// Output CSV (written atomically: temporary file, then rename); `-` writes it to standard
+    /// output (not with `--json`, whose object stdout carries).
     #[arg(long, short)]
     pub out: PathBuf,
     /// Print exactly one JSON object on stdout (what was written and from what).
@@ -138,6 +139,7 @@ const DRIVE_EXCLUDES: [&str; 7] =
 /// Runs the simulation and writes the CSV.
 pub fn run(a: &SimulateArgs) -> Result<()> {
     let spec = params::parse_spec(&a.model)?;
+    let to_stdout = to_stdout("--out", &a.out, a.json)?;
     if a.drive.is_none() && !a.read.is_default() {
         bail!("--column, --resample, --trim-start and --max-samples apply to the --drive FILE recording");
     }
@@ -163,7 +165,7 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     if a.no_current && !spec.has(model_core::Effect::AmplifierDynamics) {
         bail!("--no-current needs a model with `amp` (without it the current is the drive)");
     }
-    let name = display(&a.out);
+    let name = if to_stdout { "<stdout>".to_string() } else { display(&a.out) };
     let (rec, what, drive) = match drive_input {
         Some(input) => {
             let (measured, cut) = read_recording(input, a.read.max_samples, &read_opts)?;
@@ -191,7 +193,8 @@ pub fn run(a: &SimulateArgs) -> Result<()> {
     })?;
     rec.write(&a.out).with_context(|| format!("writing {name}"))?;
     if !a.quiet {
-        eprintln!("gma: wrote {} samples of SIMULATED data ({what}) to {name}", rec.len());
+        let to = if to_stdout { "standard output" } else { &name };
+        eprintln!("gma: wrote {} samples of SIMULATED data ({what}) to {to}", rec.len());
     }
     if a.json {
         // The sample period as the parameter file states it (1e-4, not its f32 image
