@@ -104,7 +104,7 @@ pub fn run(a: &CompareArgs) -> Result<()> {
             }
             compare_loops(a, spec, &p, &files, &stems)?
         }
-        Data::Recordings(files, _) => compare_recordings(a, spec, &p, &files, &stems)?,
+        Data::Recordings(files, _) => compare_recordings(a, spec, (&p, &source), &files, &stems)?,
     };
     summary.warnings.splice(0..0, cut.iter().map(ToString::to_string));
     folder.keep();
@@ -125,11 +125,14 @@ fn plot_path(a: &CompareArgs, stem: &str, kind: &str) -> PathBuf {
 fn compare_recordings(
     a: &CompareArgs,
     spec: ModelSpec,
-    p: &ActuatorParams,
+    (p, source): (&ActuatorParams, &params::ParamSource),
     recs: &[Recording],
     stems: &[String],
 ) -> Result<CompareSummary> {
     fit::check_files(spec, p, recs)?;
+    let mut doubts: Vec<_> = fit::unresolved_mode(spec, p, recs).into_iter().collect();
+    doubts.extend(fit::unfitted_gain(spec, p, source, recs));
+    doubts.extend(fit::started_mid_run_all(spec, p, recs)?);
     let model = [(spec, *p)];
     let mut rows = Vec::new();
     let mut charts = Vec::new();
@@ -152,6 +155,7 @@ fn compare_recordings(
     for (rec, stem) in recs.iter().zip(stems) {
         let sim = fit::simulate(spec, p, rec)?;
         let sc = fit::score(spec, rec, &sim);
+        doubts.extend(fit::flux_scale_doubts(std::slice::from_ref(rec), &[sc]));
         total += sc.nrmse;
         let time = report::time_chart(rec, &sim, sc.offset_um, &spec.to_string());
         let mut written = Vec::new();
@@ -194,7 +198,7 @@ fn compare_recordings(
         channels[0].analysis = summary;
         rows.extend(channels);
     }
-    let warnings: Vec<String> = fit::unresolved_mode(spec, p, recs).iter().map(ToString::to_string).collect();
+    let warnings: Vec<String> = doubts.iter().map(ToString::to_string).collect();
     for w in &warnings {
         crate::warning::warn(w);
     }
