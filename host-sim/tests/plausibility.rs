@@ -94,7 +94,7 @@ fn a_lone_spike_or_dropout_is_refused_naming_its_row() {
         {
             let mut args = cmd.to_vec();
             args.push(&f);
-            let value = format!("`displacement_um` = {bad} in the row at time_s = 0.25");
+            let value = format!("`displacement_um` = {bad} in the row at time_s = 0.2499");
             refused(
                 &gma(&args),
                 &[&format!("{name}: "), &value, "spike or dropout", "remove the row"],
