@@ -349,9 +349,10 @@ fn prepare(
     }
     let time_limit = s.time_limit_s.map(common::time_limit).transpose()?;
     let (init, params_source) = params.load(spec)?;
-    let (data, input_warnings) = read_sources(fit_src, val_src, read)?;
+    let (data, mut input_warnings) = read_sources(fit_src, val_src, read)?;
     if let Data::Recordings(fit_files, val_files) = &data {
         fit::check_files(spec, &init, fit_files.iter().chain(val_files))?;
+        input_warnings.extend(fit::started_mid_run_all(spec, &init, fit_files.iter().chain(val_files))?);
     }
     let deadline = time_limit.map(|t| Instant::now() + t);
     Ok(Prepared {
@@ -423,7 +424,8 @@ pub fn fit(
         names(&sources),
         summary.nrmse_fit * 100.0
     );
-    Ok(FitOutcome { params_toml: crate::params::to_toml_for(&fitted, &header, p.spec)?, summary })
+    let params_toml = crate::params::to_toml_for(&fitted, &header, p.spec, &summary.not_fitted)?;
+    Ok(FitOutcome { params_toml, summary })
 }
 
 /// `gma diagnose`: fit `model`, analyse what it leaves unexplained, name the missing effect.
@@ -483,7 +485,7 @@ pub fn compare(
     if sources.is_empty() {
         bail!("no recordings or loop files to compare");
     }
-    let (p, _) = params.load(spec)?;
+    let (p, source) = params.load(spec)?;
     let (mut rows, mut predictions, mut total) = (Vec::new(), Vec::new(), 0.0);
     let (data, read_warnings) = read_sources(sources, &[], read)?;
     let mut warnings: Vec<String> = read_warnings.iter().map(ToString::to_string).collect();
@@ -491,9 +493,14 @@ pub fn compare(
         Data::Recordings(recs, _) => {
             fit::check_files(spec, &p, &recs)?;
             warnings.extend(fit::unresolved_mode(spec, &p, &recs).map(|w| w.to_string()));
+            warnings.extend(fit::unfitted_gain(spec, &p, &source, &recs).map(|w| w.to_string()));
+            warnings.extend(fit::started_mid_run_all(spec, &p, &recs)?.iter().map(|w| w.to_string()));
             for rec in &recs {
                 let mut sim = fit::simulate(spec, &p, rec)?;
                 let sc = fit::score(spec, rec, &sim);
+                warnings.extend(
+                    fit::flux_scale_doubts(std::slice::from_ref(rec), &[sc]).iter().map(|w| w.to_string()),
+                );
                 total += sc.nrmse;
                 sim.displacement_um.iter_mut().for_each(|y| *y += sc.offset_um);
                 rows.extend(FileScoreRow::for_recording(&rec.name, None, &sc));

@@ -28,8 +28,10 @@ use crate::search::{minimize, Bound, Fidelity, Found, Local, Plan, SearchOptions
 use crate::warning::Warning;
 
 mod magnetic_memo;
+mod plausible;
 mod run;
 pub use magnetic_memo::MagneticMemo;
+pub use plausible::{check_files, check_physics, spikes, started_mid_run, started_mid_run_all, Spike};
 pub use run::{run_model, run_models};
 
 /// How a file drives the model.
@@ -100,99 +102,6 @@ pub fn drive_for(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
         ));
     }
     Ok(drive)
-}
-
-/// The checks of `files` before any work: each drives `spec` ([`drive_for`]) and agrees with
-/// the physics of `params` ([`check_physics`]).
-pub fn check_files<'a>(
-    spec: ModelSpec,
-    params: &ActuatorParams,
-    files: impl IntoIterator<Item = &'a Recording>,
-) -> Result<()> {
-    for rec in files {
-        drive_for(spec, rec)?;
-        check_physics(spec, params, rec)?;
-    }
-    Ok(())
-}
-
-/// Largest coil field a recording's current may imply [multiples of the magnetostriction's
-/// M_s]: beyond, the rod is saturated throughout (Terfenol-D's strain saturates near 1e5 A/m, a
-/// sixth of its M_s) and no actuator's coil makes it. A current logged in mA under `current_A`
-/// lands a thousand times beyond what the coil made.
-const MAX_COIL_FIELD_PER_MS: f64 = 2.0;
-
-/// Correlation of the measured displacement with the model's below which the probe reads the
-/// other way round (the loop reader's limit for M against H).
-const REVERSED_CORRELATION: f64 = -0.5;
-
-/// The physics a recording must agree with before a model is fitted to it or scored on it, as
-/// the loop reader checks a loop's: a coil field an actuator's coil can make, and a displacement
-/// that rises where the model's strain does. A file that fails is refused with the `--column`
-/// that reads it right; nothing here changes the data.
-pub fn check_physics(spec: ModelSpec, params: &ActuatorParams, rec: &Recording) -> Result<()> {
-    if let Some(current) = rec.current_a.as_deref() {
-        current_scale(params, &rec.name, current)?;
-    }
-    displacement_sign(spec, params, rec)
-}
-
-/// A current whose coil field (`coil.turns_per_m` × i) is beyond [`MAX_COIL_FIELD_PER_MS`],
-/// refused with the unit (mA, µA) that brings it within.
-fn current_scale(params: &ActuatorParams, name: &str, current: &[f64]) -> Result<()> {
-    // f32 as the file gives it (13541.7), f64 for the products.
-    let (given, turns) = (params.coil.turns_per_m, params.coil.turns_per_m as f64);
-    let peak = current.iter().fold(0.0f64, |a, i| a.max(i.abs()));
-    let limit = MAX_COIL_FIELD_PER_MS * params.magnetostriction.ms_a_per_m as f64;
-    if turns * peak <= limit {
-        return Ok(());
-    }
-    let unit = [("mA", 1e-3), ("uA", 1e-6)].into_iter().find(|(_, scale)| turns * peak * scale <= limit);
-    let fix = match unit {
-        Some((unit, _)) => format!(
-            "was it logged in {unit}? read it so: `--column current_A=current_A:{unit}` (a column mapped \
-             with --column: give that mapping the unit `{unit}`); "
-        ),
-        None => String::new(),
-    };
-    Err(InRecording::error(
-        name,
-        format!(
-            "`current_A` reaches {peak:.4e} A, a coil field of {:.3e} A/m (`coil.turns_per_m` = {given} × the \
-             current), above {MAX_COIL_FIELD_PER_MS} M_s ({limit:.3e} A/m): no actuator's coil makes that, and \
-             the rod would be saturated throughout, so no fit can follow the file; {fix}or the parameter \
-             set's `coil.turns_per_m` is not this coil's",
-            turns * peak
-        ),
-    ))
-}
-
-/// A displacement that falls where the model's strain rises (their correlation below
-/// [`REVERSED_CORRELATION`]), refused with the `--column` that negates it. The model is run
-/// from the demagnetised rod: its strain grows with |M|, λ = (3/2)(λ_s/M_s²)(M² − M_b²), and
-/// M follows the field turns × i + bias, so with a bias the strain rises with the current on
-/// the bias's side and without one with |i|; the model's dynamics, where the spec has them,
-/// keep a fast drive's phase.
-fn displacement_sign(spec: ModelSpec, params: &ActuatorParams, rec: &Recording) -> Result<()> {
-    let Some(y) = rec.displacement_um.as_deref() else { return Ok(()) };
-    let prep = Prepared::new(spec, rec)?.starting(InitialState::Demagnetized);
-    // A model that cannot run on the file is the fit's to say.
-    let Ok(sim) = run_model(spec, params, &prep, false) else { return Ok(()) };
-    let rho = crate::analysis::correlation(y, &sim.displacement_um);
-    if rho.is_nan() || rho >= REVERSED_CORRELATION {
-        return Ok(());
-    }
-    Err(InRecording::error(
-        &rec.name,
-        format!(
-            "the displacement falls where the model's strain rises (correlation {rho:.2} with the model's \
-             displacement for these parameters): a Terfenol-D rod lengthens as its magnetization grows, so \
-             the probe most likely reads the other way round; read the column negated: `--column \
-             displacement_um=-displacement_um` (a column mapped with --column: put `-` before its HEADER); \
-             or the parameter set's bias field (`coil.bias_a_per_m` = {} A/m) has the wrong sign for this rig",
-            params.coil.bias_a_per_m
-        ),
-    ))
 }
 
 /// Which of `rec`'s columns drives `spec`: `command_V` through the amplifier dynamics when the
@@ -966,8 +875,52 @@ pub struct Constraints {
 
 /// Every parameter `spec` identifies on these files (λ_s first), with the registry's ranges.
 pub fn identifiable(spec: ModelSpec, files: &[Recording]) -> Result<Vec<FreeParam>> {
+    Ok(free_params(spec, given_by(spec, files)?))
+}
+
+/// What `files` give a fit of `spec`.
+fn given_by(spec: ModelSpec, files: &[Recording]) -> Result<Given> {
     let command_driven = prepare(spec, files)?.iter().any(|p| p.drive != Drive::Current);
-    Ok(free_params(spec, Given::by(files, command_driven)))
+    Ok(Given::by(files, command_driven))
+}
+
+/// The parameters a fit of `spec` on `files` leaves at their start values because no file
+/// constrains them ([`crate::params::not_fitted`]), for the parameter file to mark.
+pub fn not_fitted(spec: ModelSpec, files: &[Recording]) -> Result<Vec<&'static str>> {
+    Ok(crate::params::not_fitted(spec, given_by(spec, files)?))
+}
+
+/// A command-driven recording among `files` that `params` drive through an amplifier gain their
+/// file (`source`) marks as not fitted.
+pub fn unfitted_gain(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    source: &crate::params::ParamSource,
+    files: &[Recording],
+) -> Option<Warning> {
+    if !source.parameters_not_fitted.contains(&model_core::effects::AMPLIFIER_GAIN.key) {
+        return None;
+    }
+    let rec = files.iter().find(|r| model_input(spec, r).is_ok_and(|d| d != Drive::Current))?;
+    Some(Warning::UnfittedGain {
+        file: rec.name.clone(),
+        params: source.parameters_source.clone(),
+        gain: params.amp.gain_a_per_v as f64,
+    })
+}
+
+/// The recordings whose search-coil magnetization scale ended at an end of
+/// [`FLUX_SCALE_RANGE`] (scored as `scores`, in order).
+pub fn flux_scale_doubts(files: &[Recording], scores: &[FileScore]) -> Vec<Warning> {
+    let (lo, hi) = FLUX_SCALE_RANGE;
+    files
+        .iter()
+        .zip(scores)
+        .filter_map(|(rec, s)| {
+            let scale = s.flux?.scale;
+            (scale <= lo || scale >= hi).then(|| Warning::FluxScaleAtBound { file: rec.name.clone(), scale })
+        })
+        .collect()
 }
 
 impl Constraints {

@@ -130,6 +130,9 @@ pub struct ParamSource {
     pub parameters_source: String,
     /// Tables the model uses that the file left out: the demo set's values stand in.
     pub parameters_defaulted: Vec<&'static str>,
+    /// Parameters the file marks as not fitted ([`NOT_FITTED`]: no recording constrained them).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub parameters_not_fitted: Vec<&'static str>,
 }
 
 /// `parameters_source` when no parameter file was given.
@@ -159,7 +162,11 @@ pub fn load_input_also_for(
             crate::warning::note(format_args!(
                 "no parameter file given: {role} are the built-in Terfenol-D demo set"
             ));
-            let source = ParamSource { parameters_source: DEMO_SET.into(), parameters_defaulted: Vec::new() };
+            let source = ParamSource {
+                parameters_source: DEMO_SET.into(),
+                parameters_defaulted: Vec::new(),
+                parameters_not_fitted: Vec::new(),
+            };
             Ok((ActuatorParams::TERFENOL_DEMO, source))
         }
         Some(input) => {
@@ -202,7 +209,15 @@ pub fn load_text(
             "{name}: {why}; a fit and the drive refuse it, other commands use it as given"
         ));
     }
-    Ok((f.params, ParamSource { parameters_source: name.into(), parameters_defaulted: f.defaulted }))
+    let parameters_not_fitted = not_fitted_in(text);
+    Ok((
+        f.params,
+        ParamSource {
+            parameters_source: name.into(),
+            parameters_defaulted: f.defaulted,
+            parameters_not_fitted,
+        },
+    ))
 }
 
 /// Largest parameter file read [bytes] (they are a few KB).
@@ -478,8 +493,10 @@ pub fn to_toml(p: &ActuatorParams, header: &str) -> Result<String> {
 
 /// As [`to_toml`], for a set fitted with `spec`: each table (or top-level key) of an effect or
 /// law `spec` does not use is marked as such, since its values are the start values', not
-/// fitted (a file is kept whole, so that it loads into any model).
-pub fn to_toml_for(p: &ActuatorParams, header: &str, spec: ModelSpec) -> Result<String> {
+/// fitted (a file is kept whole, so that it loads into any model), and so is each parameter in
+/// `not_fitted` ([`not_fitted`]: no recording constrained it), with [`NOT_FITTED`], which
+/// commands that would use its value read back ([`not_fitted_in`]).
+pub fn to_toml_for(p: &ActuatorParams, header: &str, spec: ModelSpec, not_fitted: &[&str]) -> Result<String> {
     let used = tables_used(spec);
     // `[amp]`'s gain drives every model from `command_V` when a file has no `current_A` (and is
     // fitted then), with `amp` in the spec or not: never said to be unused.
@@ -487,22 +504,55 @@ pub fn to_toml_for(p: &ActuatorParams, header: &str, spec: ModelSpec) -> Result<
     let unused = |t: &str| parameter_tables().any(|u| u == t) && !used.contains(&t) && t != amp;
     let note = format!("not used by model `{spec}`: the start values', not fitted");
     let mut out = String::new();
-    let mut in_table = false;
+    let mut table: Option<&str> = None;
     for line in to_toml(p, header)?.lines() {
-        if let Some(table) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
-            in_table = true;
-            if unused(table) {
-                out.push_str(&format!("# [{table}]: {note}\n"));
+        if let Some(t) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
+            table = Some(t);
+            if unused(t) {
+                out.push_str(&format!("# [{t}]: {note}\n"));
             }
         }
         out.push_str(line);
-        let top_level_key = (!in_table && !line.starts_with('#')).then(|| line.split('=').next()).flatten();
-        if top_level_key.is_some_and(|k| unused(k.trim())) {
-            out.push_str(&format!("  # {note}"));
+        let key = (!line.starts_with('#')).then(|| line.split_once('=')).flatten().map(|(k, _)| k.trim());
+        match (table, key) {
+            (None, Some(k)) if unused(k) => out.push_str(&format!("  # {note}")),
+            (Some(t), Some(k)) if not_fitted.contains(&format!("{t}.{k}").as_str()) => {
+                out.push_str(&format!("  {NOT_FITTED} no recording constrained it (the start value)"))
+            }
+            _ => {}
         }
         out.push('\n');
     }
     Ok(out)
+}
+
+/// The mark after a value no recording constrained (a fit from current-driven files leaves the
+/// amplifier gain at its start value).
+pub const NOT_FITTED: &str = "# not fitted:";
+
+/// The parameters a fit of `spec` identifies only when the files give what they need, which
+/// `given` lacks: the amplifier gain (files that give the command alone) and the rod's thermal
+/// lag (a logged coil temperature, with `thermal_drift`).
+pub fn not_fitted(spec: ModelSpec, given: Given) -> Vec<&'static str> {
+    let free: Vec<&str> = free_params(spec, given).iter().map(FreeParam::name).collect();
+    free_params(spec, Given { command_driven: true, coil_temperature: true })
+        .iter()
+        .map(FreeParam::name)
+        .filter(|n| !free.contains(n))
+        .collect()
+}
+
+/// The parameters parameter-file `text` marks [`NOT_FITTED`].
+pub fn not_fitted_in(text: &str) -> Vec<&'static str> {
+    let lines: Vec<&str> = text.lines().collect();
+    [AMPLIFIER_GAIN.key, ROD_THERMAL_LAG.key]
+        .into_iter()
+        .filter(|name| {
+            line_of(text, name)
+                .and_then(|(line, _)| lines.get(line as usize - 1))
+                .is_some_and(|l| l.contains(NOT_FITTED))
+        })
+        .collect()
 }
 
 /// The model a parameter file says it was fitted or written for, from its header (`# gma fit
@@ -657,7 +707,7 @@ mod tests {
     #[test]
     fn a_fitted_file_marks_the_tables_its_model_does_not_use() {
         let p = ActuatorParams::TERFENOL_DEMO;
-        let text = to_toml_for(&p, "gma fit --model ja+mech", spec("ja+mech")).unwrap();
+        let text = to_toml_for(&p, "gma fit --model ja+mech", spec("ja+mech"), &[]).unwrap();
         let note = "not used by model `ja+mech`: the start values', not fitted";
         for unused in ["[preisach]", "[aftereffect]", "[thermal]", "[linear]", "[anhysteretic]"] {
             assert_eq!(

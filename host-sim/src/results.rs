@@ -134,6 +134,10 @@ pub struct FitSummary {
     /// Parameters held by `--fix`, by name (displacement fits; absent when none).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fixed: Option<BTreeMap<&'static str, f64>>,
+    /// Parameters no fit file constrained, left at their start values (the amplifier gain when
+    /// every file gives the current); the parameter file marks them. Absent when none.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub not_fitted: Vec<&'static str>,
     /// Per identified continuous parameter: value, standard deviation, 95 % interval
     /// (displacement fits).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -339,6 +343,14 @@ impl FitSummary {
         }
         for (n, v) in &self.text.fixed {
             writeln!(f, "  {n:width$} = {v:.6e} (fixed)")?;
+        }
+        if !self.not_fitted.is_empty() {
+            writeln!(
+                f,
+                "  not fitted (no file constrained them; their start values are kept and marked so in a \
+                 parameter file): {}",
+                self.not_fitted.join(", ")
+            )?;
         }
         if let Some(s) = &self.start {
             match (&s.refused, s.nrmse) {

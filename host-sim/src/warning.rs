@@ -253,6 +253,38 @@ pub enum Warning {
         /// ∮ M dH over the loop's bounding box (positive: clockwise).
         share: f64,
     },
+    /// A recording's search-coil magnetization scale g ended at an end of its range
+    /// ([`crate::fit::FLUX_SCALE_RANGE`]): the column is not the rod's flux density B in T.
+    FluxScaleAtBound {
+        /// The recording.
+        file: String,
+        /// The scale it ended at (the range's end).
+        scale: f64,
+    },
+    /// A command-driven recording is run through an amplifier gain that no recording constrained
+    /// (the parameter file marks it not fitted).
+    UnfittedGain {
+        /// The recording (the first that gives the command alone).
+        file: String,
+        /// The parameter file.
+        params: String,
+        /// `amp.gain_a_per_v` as given [A/V].
+        gain: f64,
+    },
+    /// A recording whose drive starts away from rest and whose first samples follow the model
+    /// settled there, not started from rest ([`crate::fit::started_mid_run`]).
+    StartedMidRun {
+        /// The recording.
+        file: String,
+        /// Its drive column.
+        column: &'static str,
+        /// The drive's first value.
+        first: f64,
+        /// The displacement NRMSE of the first samples with the model started from rest.
+        from_rest: f64,
+        /// The same with the model settled at the first drive value.
+        settled: f64,
+    },
     /// A loop driven symmetrically whose magnetization is not centred on zero.
     LoopOffCentre {
         /// The loop file.
@@ -301,7 +333,10 @@ impl Warning {
             | Warning::SameInputTwice { .. }
             | Warning::FitFileAfterVal { .. }
             | Warning::Truncated { .. }
-            | Warning::PreisachPlaneWide { .. } => Weight::Data,
+            | Warning::PreisachPlaneWide { .. }
+            | Warning::FluxScaleAtBound { .. }
+            | Warning::UnfittedGain { .. }
+            | Warning::StartedMidRun { .. } => Weight::Data,
             Warning::AtEdge { .. }
             | Warning::SquarerThanJa { .. }
             | Warning::StartKept { .. }
@@ -506,6 +541,41 @@ impl fmt::Display for Warning {
                     share.abs() * 100.0
                 )
             }
+            Warning::FluxScaleAtBound { file, scale } => {
+                let (lo, hi) = crate::fit::FLUX_SCALE_RANGE;
+                let why = if *scale <= lo {
+                    "the flux density swings far less than the model's magnetization makes it: is \
+                     `flux_density_T` the rod's flux density B in T? A flux linkage N·A·B (V·s) must be divided \
+                     by the search coil's turns × area, and a coil much wider than the rod reads a share of its \
+                     flux"
+                } else {
+                    "the flux density swings far more than the model's magnetization makes it: is \
+                     `flux_density_T` in T? A column in mT or G reads 1000× or 10 000× too large (`--column \
+                     flux_density_T=NAME:mT`, `:G` converts)"
+                };
+                write!(
+                    f,
+                    "{file}: the search coil's magnetization scale g = {scale} ended at an end of its range \
+                     [{lo}, {hi}] (B = μ0 (H + g M) + c): {why}; the other parameters may have bent to follow it"
+                )
+            }
+            Warning::UnfittedGain { file, params, gain } => write!(
+                f,
+                "{file} gives the command, not the current, so the model is driven through `amp.gain_a_per_v` = \
+                 {gain} A/V, which {params} marks as not fitted (its files gave the current, so the gain never \
+                 acted): the displacement's scale rests on a start value; fit on command-driven files, or set \
+                 the rig amplifier's gain in [amp] and remove the mark"
+            ),
+            Warning::StartedMidRun { file, column, first, from_rest, settled } => write!(
+                f,
+                "{file}: `{column}` starts at {first}, not at rest, and the first samples follow the model settled \
+                 there ({:.2} % NRMSE) better than the model started from rest ({:.2} %), as every command runs \
+                 it (no current before the file): the rig was running when the file began, and a fit bends \
+                 the dynamics (mechanical mode, eddy lag) to hide the start transient the model then makes; \
+                 start the recording with the rig at rest, or fit a file that does",
+                settled * 100.0,
+                from_rest * 100.0
+            ),
             Warning::StrainScaleUnlikely { lambda_s, lo, hi } => write!(
                 f,
                 "`magnetostriction.lambda_s` = {lambda_s:.2e} is outside [{lo:.0e}, {hi:.0e}], the range of \

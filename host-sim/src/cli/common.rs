@@ -237,6 +237,7 @@ impl ModelFiles {
         let (data, mut input_warnings) = read_inputs(fit_in, val_in, self.read.max_samples, &read_opts)?;
         if let Data::Recordings(fit_files, val_files) = &data {
             fit::check_files(spec, &init, fit_files.iter().chain(val_files))?;
+            input_warnings.extend(fit::started_mid_run_all(spec, &init, fit_files.iter().chain(val_files))?);
             input_warnings.extend(fit::preisach_plane_advice(spec, &init, fit_files));
             if let Some((other, _)) = also {
                 input_warnings.extend(fit::preisach_plane_advice(other, &init, fit_files));

@@ -21,7 +21,7 @@ use crate::provenance::Provenance;
 use crate::recording::Recording;
 use crate::report;
 use crate::results::{CompareSummary, FileScoreRow};
-use crate::warning::by_weight;
+use crate::warning::{by_weight, Warning};
 
 /// Options of `gma compare`.
 #[derive(Args)]
@@ -108,8 +108,8 @@ pub fn run(a: &CompareArgs) -> Result<()> {
             compare_loops(a, spec, &p, &files, &stems)?
         }
         Data::Recordings(files, _) => {
-            let summary = compare_recordings(a, spec, &p, &files, &stems)?;
-            cut.extend(fit::unresolved_mode(spec, &p, &files));
+            let (summary, doubts) = compare_recordings(a, spec, (&p, &source), &files, &stems)?;
+            cut.extend(doubts);
             summary
         }
     };
@@ -147,11 +147,14 @@ fn plot_path(a: &CompareArgs, stem: &str, kind: &str) -> PathBuf {
 fn compare_recordings(
     a: &CompareArgs,
     spec: ModelSpec,
-    p: &ActuatorParams,
+    (p, source): (&ActuatorParams, &params::ParamSource),
     recs: &[Recording],
     stems: &[String],
-) -> Result<CompareSummary> {
+) -> Result<(CompareSummary, Vec<Warning>)> {
     fit::check_files(spec, p, recs)?;
+    let mut doubts: Vec<_> = fit::unresolved_mode(spec, p, recs).into_iter().collect();
+    doubts.extend(fit::unfitted_gain(spec, p, source, recs));
+    doubts.extend(fit::started_mid_run_all(spec, p, recs)?);
     let model = [(spec, *p)];
     let mut rows = Vec::new();
     let mut charts = Vec::new();
@@ -175,6 +178,7 @@ fn compare_recordings(
     for (rec, stem) in recs.iter().zip(stems) {
         let sim = fit::simulate(spec, p, rec)?;
         let sc = fit::score(spec, rec, &sim);
+        doubts.extend(fit::flux_scale_doubts(std::slice::from_ref(rec), &[sc]));
         total += sc.nrmse;
         let time = report::time_chart(rec, &sim, sc.offset_um, &spec.to_string());
         let mut written = Vec::new();
@@ -217,7 +221,7 @@ fn compare_recordings(
         channels[0].analysis = summary;
         rows.extend(channels);
     }
-    // Its warnings are the caller's, said after the headline.
+    // Its doubts are the caller's, said after the headline.
     let summary = CompareSummary {
         model: spec.to_string(),
         nrmse: total / recs.len() as f64,
@@ -231,7 +235,7 @@ fn compare_recordings(
         )),
         _ => None,
     };
-    report_all(&charts, table, summary)
+    Ok((report_all(&charts, table, summary)?, doubts))
 }
 
 /// Appends one recording's rows to the `--out-csv` table: values in shortest round-trip form,

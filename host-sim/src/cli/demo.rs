@@ -86,7 +86,13 @@ pub fn run(a: &DemoArgs) -> Result<()> {
     for (r, p) in rungs.iter().zip(&param_paths) {
         write_atomic(
             p,
-            params::to_toml_for(&r.params, &format!("gma demo, model {}", r.spec), r.spec)?.as_bytes(),
+            params::to_toml_for(
+                &r.params,
+                &format!("gma demo, model {}", r.spec),
+                r.spec,
+                &crate::fit::not_fitted(r.spec, &fit_files)?,
+            )?
+            .as_bytes(),
         )?;
         param_files.push(display(p));
     }
@@ -109,6 +115,7 @@ pub fn run(a: &DemoArgs) -> Result<()> {
     let start = params::ParamSource {
         parameters_source: "the demo case's start values".into(),
         parameters_defaulted: Vec::new(),
+        parameters_not_fitted: Vec::new(),
     };
     let sections =
         report::uncertainty_html(&rungs, &uncertainties) + &report::provenance_html(&provenance, &start);

@@ -155,7 +155,8 @@ pub fn run(a: &FitArgs) -> Result<()> {
             summary.time_limit_reached,
             &fixed,
         );
-        write_atomic(out, params::to_toml_for(&params, &header, p.spec)?.as_bytes())?;
+        let toml = params::to_toml_for(&params, &header, p.spec, &summary.not_fitted)?;
+        write_atomic(out, toml.as_bytes())?;
         let to = if params_to_stdout { "standard output".to_string() } else { display(out) };
         say!(j, "  parameters written to {to}");
     }
@@ -202,10 +203,12 @@ pub(crate) fn fit_recordings(
         warnings.push(w);
     }
     warnings.extend(fit::unresolved_mode(p.spec, &res.params, fit_files.iter().chain(val_files)));
+    warnings.extend(fit::flux_scale_doubts(fit_files, &res.fit.files));
     let mut files = rows("fit", fit_files, &res.fit.files);
     let mut nrmse_val = None;
     if !val_files.is_empty() {
         let ev = fit::evaluate(p.spec, &res.params, val_files)?;
+        warnings.extend(fit::flux_scale_doubts(val_files, &ev.files));
         files.extend(rows("val", val_files, &ev.files));
         nrmse_val = Some(ev.mean_nrmse());
     }
@@ -221,6 +224,7 @@ pub(crate) fn fit_recordings(
         time_limit_reached: res.time_limited,
         warnings: Some(warnings.iter().map(|w| w.to_string()).collect()),
         fixed: (!res.fixed.is_empty()).then(|| res.fixed.iter().copied().collect()),
+        not_fitted: fit::not_fitted(p.spec, fit_files)?,
         uncertainty: None,
         correlation: None,
         uncertainty_basis: None,
@@ -288,6 +292,7 @@ pub(crate) fn fit_loops(
         time_limit_reached: res.time_limited,
         warnings: Some(res.warnings.iter().filter(|w| !w.invalidates()).map(|w| w.to_string()).collect()),
         fixed: None,
+        not_fitted: Vec::new(),
         uncertainty: None,
         correlation: None,
         uncertainty_basis: None,

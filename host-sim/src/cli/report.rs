@@ -10,11 +10,11 @@ use serde_json::json;
 use super::common::{Data, ModelFiles};
 use super::fit::params_header;
 use crate::files::{check_outputs, display, no_stdout, output_folder, to_stdout, write_atomic, InputId};
-use crate::params;
 use crate::progress::Phase;
 use crate::provenance::Provenance;
+use crate::recording::Recording;
 use crate::results::UncertaintyFields;
-use crate::{loops, report};
+use crate::{fit, loops, params, report};
 
 /// Options of `gma report`.
 #[derive(Args)]
@@ -57,15 +57,18 @@ fn ladder_files_in(dir: &Path) -> Result<Vec<PathBuf>> {
         .collect())
 }
 
-/// Writes each model's parameter file (paths from [`params_paths`]), after checking them all.
+/// Writes each model's parameter file (paths from [`params_paths`]), after checking them all;
+/// each marks what no file constrained when fitted on `fit_files` ([`fit::not_fitted`]).
 fn write_params(
     paths: &[PathBuf],
     sets: &[(ModelSpec, ActuatorParams, String)],
     inputs: &[InputId],
+    fit_files: &[Recording],
 ) -> Result<()> {
     check_outputs(&paths.iter().map(PathBuf::as_path).collect::<Vec<_>>(), inputs)?;
     for (path, (spec, set, header)) in paths.iter().zip(sets) {
-        write_atomic(path, params::to_toml_for(set, header, *spec)?.as_bytes())?;
+        let not_fitted = if fit_files.is_empty() { Vec::new() } else { fit::not_fitted(*spec, fit_files)? };
+        write_atomic(path, params::to_toml_for(set, header, *spec, &not_fitted)?.as_bytes())?;
     }
     Ok(())
 }
@@ -134,7 +137,7 @@ pub fn run(a: &ReportArgs) -> Result<()> {
                         res.time_limited,
                         &[],
                     );
-                    write_params(&paths, &[(spec, res.apply_to(&p.init), header)], &p.inputs)?;
+                    write_params(&paths, &[(spec, res.apply_to(&p.init), header)], &p.inputs, &[])?;
                     Some(display(&paths[0]))
                 }
                 None => None,
@@ -196,7 +199,7 @@ pub fn run(a: &ReportArgs) -> Result<()> {
                             (r.spec, r.params, header)
                         })
                         .collect();
-                    write_params(&paths, &sets, &p.inputs)?;
+                    write_params(&paths, &sets, &p.inputs, fit_files)?;
                     paths.iter().map(|p| Some(display(p))).collect()
                 }
                 None => vec![None; rungs.len()],

@@ -1,0 +1,248 @@
+//! Recordings that read plausibly but are wrong in one way a rig gets wrong (a lone spike, a
+//! current clamp on backwards, a reversed search coil, a delay counted at another rate, an
+//! amplifier gain no file fitted): each must end in a refusal that names the fix, or a warning,
+//! never a plausible figure with exit 0. The files are `gma simulate`'s, edited as the rig
+//! would have spoilt them.
+
+use std::path::{Path, PathBuf};
+
+mod common;
+use common::{err, gma, refused};
+
+/// `gma simulate` with `args` into `dir/name`; its path.
+fn simulate(dir: &Path, name: &str, args: &[&str]) -> String {
+    let out = dir.join(name).display().to_string();
+    let mut all = vec!["simulate", "-o", &out];
+    all.extend(args);
+    let o = gma(&all);
+    assert!(o.status.success(), "simulate {args:?}: {}", err(&o));
+    out
+}
+
+/// `file` rewritten into `dir/name` with `edit(row index, cells)` applied to each data row
+/// (the header kept, or replaced by `header` when given).
+fn edited(
+    dir: &Path,
+    file: &str,
+    name: &str,
+    header: Option<&str>,
+    edit: impl Fn(usize, &mut Vec<String>),
+) -> String {
+    let text = std::fs::read_to_string(file).unwrap();
+    let mut lines = text.lines();
+    let first = lines.next().unwrap();
+    let mut out = format!("{}\n", header.unwrap_or(first));
+    for (k, line) in lines.enumerate() {
+        let mut cells: Vec<String> = line.split(',').map(str::to_string).collect();
+        edit(k, &mut cells);
+        out.push_str(&cells.join(","));
+        out.push('\n');
+    }
+    let path: PathBuf = dir.join(name);
+    std::fs::write(&path, out).unwrap();
+    path.display().to_string()
+}
+
+/// The column `name` of `file`'s header.
+fn column(file: &str, name: &str) -> usize {
+    let text = std::fs::read_to_string(file).unwrap();
+    text.lines().next().unwrap().split(',').position(|c| c == name).unwrap_or_else(|| panic!("{name}"))
+}
+
+/// `cell` negated (or scaled), as text.
+fn scaled(cell: &str, by: f64) -> String {
+    format!("{}", cell.parse::<f64>().unwrap() * by)
+}
+
+/// `compare --json` on `args`: the JSON, or the run's stderr.
+fn compare(args: &[&str]) -> Result<serde_json::Value, String> {
+    let mut all = vec!["compare", "--json", "--out-dir"];
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().display().to_string();
+    all.push(&out_dir);
+    all.extend(args);
+    let o = gma(&all);
+    if !o.status.success() {
+        return Err(err(&o));
+    }
+    Ok(serde_json::from_slice(&o.stdout).unwrap())
+}
+
+fn warnings(j: &serde_json::Value) -> Vec<String> {
+    j["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap().to_string()).collect()
+}
+
+/// One probe over-range sample (9999.99 µm) or one dropout to 0 in 5000 set the NRMSE's range:
+/// a wrong model read 1 % instead of 15 %, and `diagnose` said nothing was missing. Either is
+/// refused, naming the file, the row's time and the value; the same recording without it, and
+/// square-wave drives (steps in the current, a displacement that rings after each), are not.
+#[test]
+fn a_lone_spike_or_dropout_is_refused_naming_its_row() {
+    let dir = tempfile::tempdir().unwrap();
+    let sine = ["--freq-hz", "200", "--duration-s", "0.5", "--bias", "0.5", "--noise-um", "0.05"];
+    let long = simulate(dir.path(), "long.csv", &sine);
+    let y = column(&long, "displacement_um");
+    compare(&["--model", "ja+mech", &long]).unwrap();
+    // The dropout at the displacement's crest (far from 0, changing slowly).
+    let text = std::fs::read_to_string(&long).unwrap();
+    let rows: Vec<Vec<f64>> =
+        text.lines().skip(1).map(|l| l.split(',').map(|c| c.parse().unwrap()).collect()).collect();
+    let crest = (1000..rows.len() - 1).max_by(|a, b| rows[*a][y].total_cmp(&rows[*b][y])).unwrap();
+    let time = |k: usize| rows[k][0];
+    for (name, at, bad) in [("glitch.csv", 2500, "9999.99"), ("dropout.csv", crest, "0")] {
+        let f = edited(dir.path(), &long, name, None, |k, c| {
+            if k == at {
+                c[y] = bad.to_string();
+            }
+        });
+        for cmd in
+            [&["compare", "--model", "ja"][..], &["diagnose", "--model", "ja"], &["fit", "--model", "ja"]]
+        {
+            let mut args = cmd.to_vec();
+            args.push(&f);
+            let value = format!("`displacement_um` = {bad} in the row at time_s = {}", time(at));
+            refused(
+                &gma(&args),
+                &[&format!("{name}: "), &value, "spike or dropout", "remove the row"],
+                cmd[0],
+            );
+        }
+    }
+    for model in ["ja+mech", "eddy+ja+mech"] {
+        let square = simulate(
+            dir.path(),
+            "square.csv",
+            &[
+                "--model",
+                model,
+                "--waveform",
+                "square",
+                "--freq-hz",
+                "100",
+                "--noise-um",
+                "0.02",
+                "--search-coil",
+            ],
+        );
+        compare(&["--model", model, &square]).unwrap();
+    }
+}
+
+/// A current clamp on backwards (`current_A` negated) with a bias: the displacement falls as the
+/// logged current rises, and the probe was blamed (`--column displacement_um=-displacement_um`),
+/// whose fit is poor. The strain is even in the field, so with a bias the negated current puts
+/// the operating point on the field's other side: the refusal names the current's fix, and the
+/// file read with it scores as the original. A negated displacement is still the probe's.
+#[test]
+fn a_current_with_the_wrong_sign_is_told_from_a_reversed_probe() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = simulate(dir.path(), "good.csv", &["--freq-hz", "100", "--bias", "0.5", "--noise-um", "0.02"]);
+    let (i, y) = (column(&good, "current_A"), column(&good, "displacement_um"));
+    let clamp = edited(dir.path(), &good, "clamp.csv", None, |_, c| c[i] = scaled(&c[i], -1.0));
+    let probe = edited(dir.path(), &good, "probe.csv", None, |_, c| c[y] = scaled(&c[y], -1.0));
+    let (current_fix, probe_fix) =
+        ("`--column current_A=-current_A`", "`--column displacement_um=-displacement_um`");
+    let e = compare(&["--model", "ja+mech", &clamp]).unwrap_err();
+    refused(&gma(&["compare", "--model", "ja+mech", &clamp]), &["clamp.csv: ", current_fix], "clamp");
+    assert!(!e.contains(probe_fix), "{e}");
+    let e = compare(&["--model", "ja+mech", &probe]).unwrap_err();
+    assert!(e.contains(probe_fix) && !e.contains(current_fix), "{e}");
+    let twin = compare(&["--model", "ja+mech", &good]).unwrap()["nrmse"].as_f64().unwrap();
+    let fixed = compare(&["--model", "ja+mech", "--column", "current_A=-current_A", &clamp]).unwrap();
+    assert!((fixed["nrmse"].as_f64().unwrap() - twin).abs() <= 1e-9 * twin, "{fixed} against {twin}");
+}
+
+/// A search coil wound (or its integrator wired) the other way round, or a column of flux
+/// linkage N·A·B instead of B: the magnetization scale g sat at its bound unsaid. The reversed
+/// coil is refused with the `--column` that negates it; a scale at its bound is a warning.
+#[test]
+fn a_reversed_search_coil_is_refused_and_a_flux_scale_at_its_bound_is_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = "eddy+ja+mech";
+    let args = ["--model", model, "--search-coil", "--freq-hz", "100", "--bias", "0.5", "--noise-um", "0.02"];
+    let good = simulate(dir.path(), "sc.csv", &args);
+    let b = column(&good, "flux_density_T");
+    let reversed = edited(dir.path(), &good, "sc_neg.csv", None, |_, c| c[b] = scaled(&c[b], -1.0));
+    let linkage = edited(dir.path(), &good, "sc_wb.csv", None, |_, c| c[b] = scaled(&c[b], 0.01));
+    refused(
+        &gma(&["compare", "--model", model, &reversed]),
+        &["sc_neg.csv: ", "flux density falls", "`--column flux_density_T=-flux_density_T`"],
+        "reversed coil",
+    );
+    let at_bound =
+        |j: &serde_json::Value| warnings(j).into_iter().find(|w| w.contains("ended at an end of its range"));
+    let j = compare(&["--model", model, &good]).unwrap();
+    assert_eq!(at_bound(&j), None, "{j}");
+    let j = compare(&["--model", model, &linkage]).unwrap();
+    let w = at_bound(&j).unwrap_or_else(|| panic!("no warning: {j}"));
+    assert!(w.contains("sc_wb.csv") && w.contains("g = 0.1 ") && w.contains("flux linkage"), "{w}");
+}
+
+/// A parameter file whose `dt_s` is not the recording's step, with a sensor delay: the delay
+/// keeps its time (`delay_samples` counts periods of `dt_s`, as documented), ten times the
+/// recording's here, and the displacement fell against the model, so the probe was blamed. The
+/// refusal names `dt_s` and the value that counts the delay in the recording's samples.
+#[test]
+fn a_delay_counted_at_another_dt_s_is_said_naming_dt_s() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = "ja+mech+delay";
+    let rec = simulate(dir.path(), "rec.csv", &["--model", model, "--freq-hz", "200", "--noise-um", "0.02"]);
+    compare(&["--model", model, &rec]).unwrap();
+    let demo = toml::to_string(&model_core::ActuatorParams::TERFENOL_DEMO).unwrap();
+    assert!(demo.contains("dt_s = 0.0001\n"), "{demo}");
+    let p = dir.path().join("p.toml");
+    std::fs::write(&p, demo.replace("dt_s = 0.0001\n", "dt_s = 0.001\n")).unwrap();
+    let o = gma(&["compare", "--model", model, "--params", &p.display().to_string(), &rec]);
+    refused(&o, &["rec.csv: ", "`dt_s` = 0.001", "set `dt_s = 1e-4`"], "dt_s");
+    assert!(!err(&o).contains("displacement_um=-displacement_um"), "{}", err(&o));
+}
+
+/// A fit on current-driven files left `[amp] gain_a_per_v` at its start value, unmarked, and
+/// `compare` on a file that gives the command alone drove the model through it silently. The
+/// fit's JSON and parameter file mark it not fitted, and the command-driven compare warns.
+#[test]
+fn an_amplifier_gain_no_file_fitted_is_marked_and_its_use_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec =
+        simulate(dir.path(), "rec.csv", &["--freq-hz", "100", "--duration-s", "0.05", "--noise-um", "0.02"]);
+    let p = dir.path().join("p.toml").display().to_string();
+    let o = gma(&["fit", "--model", "ja", "--json", "--time-limit", "20", "--params-out", &p, &rec]);
+    assert!(o.status.success(), "{}", err(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["not_fitted"], serde_json::json!(["amp.gain_a_per_v"]), "{j}");
+    let text = std::fs::read_to_string(&p).unwrap();
+    assert!(text.lines().any(|l| l.starts_with("gain_a_per_v = ") && l.contains("# not fitted:")), "{text}");
+    // The same file as an amplifier's command at 1 A/V.
+    let cmd = edited(dir.path(), &rec, "cmd.csv", Some("time_s,command_V,displacement_um"), |_, _| {});
+    let unfitted =
+        |j: &serde_json::Value| warnings(j).into_iter().find(|w| w.contains("marks as not fitted"));
+    let j = compare(&["--model", "ja", "--params", &p, &cmd]).unwrap();
+    let w = unfitted(&j).unwrap_or_else(|| panic!("no warning: {j}"));
+    assert!(w.contains("cmd.csv") && w.contains("`amp.gain_a_per_v`"), "{w}");
+    // The current-driven file does not use the gain.
+    assert_eq!(unfitted(&compare(&["--model", "ja", "--params", &p, &rec]).unwrap()), None);
+}
+
+/// A recording cut from a running rig (its drive away from rest at the first sample) was fitted
+/// as if the rig had been off before it: the model's start transient, absent from the data, bent
+/// the fit (a mode above Nyquist, the eddy lag at its bound), with nothing said about the start.
+/// Now a warning says so; the file as `gma simulate` wrote it, from rest, gets none.
+#[test]
+fn a_recording_cut_from_a_running_rig_is_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = "eddy+ja+mech";
+    let rec = simulate(
+        dir.path(),
+        "rec.csv",
+        &["--model", model, "--freq-hz", "100", "--bias", "0.5", "--noise-um", "0.02"],
+    );
+    let mid_run = |j: &serde_json::Value| warnings(j).into_iter().find(|w| w.contains("not at rest"));
+    assert_eq!(mid_run(&compare(&["--model", model, &rec]).unwrap()), None);
+    let j = compare(&["--model", model, "--trim-start", "0.0023", &rec]).unwrap();
+    let w = mid_run(&j).unwrap_or_else(|| panic!("no warning: {j}"));
+    assert!(w.contains("rec.csv") && w.contains("`current_A` starts at"), "{w}");
+    // `fit` says it too, in its JSON's warnings.
+    let o = gma(&["fit", "--model", model, "--json", "--time-limit", "5", "--trim-start", "0.0023", &rec]);
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(mid_run(&j).is_some(), "{j}");
+}
