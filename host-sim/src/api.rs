@@ -352,7 +352,7 @@ fn prepare(
     let (data, mut input_warnings) = read_sources(fit_src, val_src, read)?;
     if let Data::Recordings(fit_files, val_files) = &data {
         fit::check_files(spec, &init, fit_files.iter().chain(val_files))?;
-        input_warnings.extend(fit::started_mid_run_all(spec, &init, fit_files.iter().chain(val_files))?);
+        input_warnings.extend(fit::data_doubts(spec, &init, fit_files.iter().chain(val_files))?);
     }
     let deadline = time_limit.map(|t| Instant::now() + t);
     Ok(Prepared {
@@ -494,7 +494,7 @@ pub fn compare(
             fit::check_files(spec, &p, &recs)?;
             warnings.extend(fit::unresolved_mode(spec, &p, &recs).map(|w| w.to_string()));
             warnings.extend(fit::unfitted_gain(spec, &p, &source, &recs).map(|w| w.to_string()));
-            warnings.extend(fit::started_mid_run_all(spec, &p, &recs)?.iter().map(|w| w.to_string()));
+            warnings.extend(fit::data_doubts(spec, &p, &recs)?.iter().map(|w| w.to_string()));
             for rec in &recs {
                 let mut sim = fit::simulate(spec, &p, rec)?;
                 let sc = fit::score(spec, rec, &sim);

@@ -363,7 +363,8 @@ const QUANTITIES: [&[&str]; COLUMNS.len()] = [
 ];
 
 /// The canonical column and unit a header names as `QUANTITY [UNIT]` or `QUANTITY (UNIT)`, when
-/// both are clear: a word of [`QUANTITIES`] and a unit that column accepts.
+/// both are clear: a word of [`QUANTITIES`] or the column's own name, and a unit that column
+/// accepts.
 fn named_quantity(header: &str) -> Option<(usize, Unit)> {
     let h = header.trim();
     let open = match h.chars().last()? {
@@ -373,7 +374,12 @@ fn named_quantity(header: &str) -> Option<(usize, Unit)> {
     };
     let (quantity, unit) = h[..h.len() - 1].rsplit_once(open)?;
     let quantity = quantity.trim().to_lowercase();
-    let k = QUANTITIES.iter().position(|words| words.contains(&quantity.as_str()))?;
+    // The canonical name itself with a unit after it (`current_A (A)`): the bracket's unit says
+    // what the values are.
+    let k = QUANTITIES
+        .iter()
+        .position(|words| words.contains(&quantity.as_str()))
+        .or_else(|| COLUMNS.iter().position(|c| c.to_lowercase() == quantity))?;
     UNITS[k].iter().find(|u| u.name == unit.trim()).map(|u| (k, *u))
 }
 

@@ -27,11 +27,13 @@ use crate::results::StartScore;
 use crate::search::{minimize, Bound, Fidelity, Found, Local, Plan, SearchOptions, Start};
 use crate::warning::Warning;
 
+mod bad_samples;
 mod magnetic_memo;
 mod plausible;
 mod run;
+pub use bad_samples::{spikes, Spike};
 pub use magnetic_memo::MagneticMemo;
-pub use plausible::{check_files, check_physics, spikes, started_mid_run, started_mid_run_all, Spike};
+pub use plausible::{check_files, check_physics, data_doubts, started_mid_run};
 pub use run::{run_model, run_models};
 
 /// How a file drives the model.

@@ -29,6 +29,7 @@ pub mod resonance;
 pub mod results;
 pub mod rig;
 pub mod rod_diffusion;
+pub mod same_samples;
 pub mod search;
 pub mod spectral;
 pub mod uncertainty;

@@ -1337,6 +1337,14 @@ fn spreadsheet_exports_are_read_as_they_are() {
     // The unit named is applied: mA is not read as A.
     let e = stderr(&o);
     assert!(e.contains("`current (mA)` read as `current_A`, mA → A"), "{e}");
+    // The canonical names with their units after them.
+    let f =
+        write(dir.path(), "units.csv", &csv("time_s [s],current_A (A),displacement_um (um)", &good_rows()));
+    let o = gma(&["compare", "--model", "ja", "--json", &f]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["nrmse"].as_f64(), Some(twin), "{j}");
+    assert!(stderr(&o).contains("`current_A (A)` read as `current_A`"), "{}", stderr(&o));
 }
 
 /// After a `sep=` line the header is the second line, and a message about it says so.

@@ -242,6 +242,52 @@ fn a_validation_file_that_is_a_fit_file_is_said_not_independent() {
     }
 }
 
+/// A fit file in another form (reprinted with other digits and CRLF line ends, its time axis
+/// shifted, cut to a slice) has other bytes and the same samples: `fit` says which fit file the
+/// validation file repeats and how much of it; the distinct validation file is not named.
+#[test]
+fn a_validation_file_that_is_a_fit_file_in_another_form_is_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let (fit, _, val) = rig(dir.path());
+    let text = std::fs::read_to_string(&fit).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap().to_string();
+    let rows: Vec<Vec<f64>> = lines.map(|l| l.split(',').map(|c| c.parse().unwrap()).collect()).collect();
+    let write = |name: &str, rows: &[Vec<f64>], shift: f64| {
+        let mut out = format!("{header}\r\n");
+        for r in rows {
+            let cells: Vec<String> = r
+                .iter()
+                .enumerate()
+                .map(|(k, v)| format!("{:.9e}", if k == 0 { v + shift } else { *v }))
+                .collect();
+            out.push_str(&cells.join(","));
+            out.push_str("\r\n");
+        }
+        let path = dir.path().join(name);
+        std::fs::write(&path, out).unwrap();
+        path.display().to_string()
+    };
+    let reprinted = write("reprinted.csv", &rows, 100.0);
+    let third = rows.len() / 3;
+    let slice = write("slice.csv", &rows[third..2 * third], 0.0);
+    let o = gma(&[
+        "fit", "--model", "linear", "--json", &fit, "--val", &reprinted, "--val", &slice, "--val", &val,
+    ]);
+    let j = json(&o);
+    let warnings: Vec<&str> = j["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap()).collect();
+    let said = |v: &str, part: &str| {
+        warnings.iter().any(|w| {
+            w.starts_with(&format!("{v} shares "))
+                && w.contains(&format!("with the fit file {fit}"))
+                && w.contains(&format!("is {part}a fit figure"))
+        })
+    };
+    assert!(said(&reprinted, ""), "{warnings:?}");
+    assert!(said(&slice, ""), "{warnings:?}");
+    assert!(!warnings.iter().any(|w| w.contains(&format!("{val} shares"))), "{warnings:?}");
+}
+
 /// `--val` takes one file: a fit file typed right after one (a shell glob `--val *val*.csv`) is
 /// said, and fitted as typed; repeated `--val`s are not.
 #[test]

@@ -246,3 +246,107 @@ fn a_recording_cut_from_a_running_rig_is_said() {
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(mid_run(&j).is_some(), "{j}");
 }
+
+/// The rows of `file` as numbers.
+fn rows(file: &str) -> Vec<Vec<f64>> {
+    let text = std::fs::read_to_string(file).unwrap();
+    text.lines().skip(1).map(|l| l.split(',').map(|c| c.parse().unwrap()).collect()).collect()
+}
+
+/// A probe that drops out for a few samples, or a file whose last row is a spike, set the NRMSE's
+/// range as a lone spike does; a probe re-zeroed in the middle of a file steps the displacement
+/// where the current does not. Each is refused naming its rows; the file without it is not.
+#[test]
+fn a_dropped_run_a_spiked_last_row_and_a_re_zeroed_probe_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let sine = ["--freq-hz", "50", "--duration-s", "0.5", "--bias", "0.5", "--noise-um", "0.05"];
+    let good = simulate(dir.path(), "good.csv", &sine);
+    let y = column(&good, "displacement_um");
+    compare(&["--model", "ja+mech", &good]).unwrap();
+    let all = rows(&good);
+    let crest = (1000..all.len() - 10).max_by(|a, b| all[*a][y].total_cmp(&all[*b][y])).unwrap();
+    let last = all.len() - 1;
+    let run = edited(dir.path(), &good, "run.csv", None, |k, c| {
+        if (crest..crest + 4).contains(&k) {
+            c[y] = "0".to_string();
+        }
+    });
+    let end = edited(dir.path(), &good, "end.csv", None, |k, c| {
+        if k == last {
+            c[y] = "9999.99".to_string();
+        }
+    });
+    // Re-zeroed a third of the way in, by a quarter of the range.
+    let span =
+        all.iter().map(|r| r[y]).fold(f64::MIN, f64::max) - all.iter().map(|r| r[y]).fold(f64::MAX, f64::min);
+    let step_at = all.len() / 3;
+    let zeroed = edited(dir.path(), &good, "zeroed.csv", None, |k, c| {
+        if k >= step_at {
+            c[y] = format!("{}", c[y].parse::<f64>().unwrap() - 0.25 * span);
+        }
+    });
+    let at = |k: usize| format!("time_s = {}", all[k][0]);
+    for cmd in [&["compare", "--model", "ja"][..], &["fit", "--model", "ja"]] {
+        let with = |f: &str| {
+            let mut args = cmd.to_vec();
+            args.push(f);
+            gma(&args)
+        };
+        refused(&with(&run), &["run.csv: ", "the 4 rows from", &at(crest), "dropped samples"], cmd[0]);
+        refused(&with(&end), &["end.csv: ", "= 9999.99 in the last row", "spike or dropout"], cmd[0]);
+        refused(
+            &with(&zeroed),
+            &["zeroed.csv: ", "steps from", &at(step_at), "re-zeroed", "split the file"],
+            cmd[0],
+        );
+    }
+}
+
+/// A probe clipped at its range (the displacement held at one value over the top of each
+/// period) and a file whose current and displacement both read the other way round (with a
+/// bias, the strain's curvature tells) are said as warnings that name the cause; a current a
+/// thousand times too small (read as mA when it was A) is said with the units to check.
+#[test]
+fn a_clipped_probe_both_channels_negated_and_a_tiny_current_are_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = simulate(
+        dir.path(),
+        "good.csv",
+        &["--freq-hz", "20", "--duration-s", "0.5", "--bias", "0.5", "--noise-um", "0.02"],
+    );
+    let (i, y) = (column(&good, "current_A"), column(&good, "displacement_um"));
+    let all = rows(&good);
+    let top = all.iter().map(|r| r[y]).fold(f64::MIN, f64::max);
+    let bottom = all.iter().map(|r| r[y]).fold(f64::MAX, f64::min);
+    let clip = top - 0.2 * (top - bottom);
+    let clipped = edited(dir.path(), &good, "clipped.csv", None, |_, c| {
+        if c[y].parse::<f64>().unwrap() > clip {
+            c[y] = format!("{clip}");
+        }
+    });
+    let both = edited(dir.path(), &good, "both.csv", None, |_, c| {
+        c[i] = scaled(&c[i], -1.0);
+        c[y] = scaled(&c[y], -1.0);
+    });
+    let tiny = edited(dir.path(), &good, "tiny.csv", None, |_, c| c[i] = scaled(&c[i], 1e-3));
+    let said = |file: &str| warnings(&compare(&["--model", "ja+mech", file]).unwrap()).join("\n");
+    let clean = said(&good);
+    for needle in ["stays at exactly", "both negated", "the model's"] {
+        assert!(!clean.contains(needle), "{needle} on the good file: {clean}");
+    }
+    let w = said(&clipped);
+    assert!(
+        w.contains("clipped.csv: `displacement_um` stays at exactly") && w.contains("clipped at its range"),
+        "{w}"
+    );
+    let w = said(&both);
+    assert!(
+        w.contains("both.csv: ") && w.contains("both negated") && w.contains("--column current_A=-current_A"),
+        "{w}"
+    );
+    let w = said(&tiny);
+    assert!(
+        w.contains("tiny.csv: the displacement's rms spread") && w.contains("more than the model's"),
+        "{w}"
+    );
+}

@@ -14,6 +14,7 @@ use crate::fit::{self, FitOptions};
 use crate::loops::{self, LoopFile};
 use crate::params::{self, ParamSource};
 use crate::recording::Recording;
+use crate::same_samples;
 use crate::search::SearchOptions;
 use crate::warning::{warn, Warning};
 
@@ -237,7 +238,7 @@ impl ModelFiles {
         let (data, mut input_warnings) = read_inputs(fit_in, val_in, self.read.max_samples, &read_opts)?;
         if let Data::Recordings(fit_files, val_files) = &data {
             fit::check_files(spec, &init, fit_files.iter().chain(val_files))?;
-            input_warnings.extend(fit::started_mid_run_all(spec, &init, fit_files.iter().chain(val_files))?);
+            input_warnings.extend(fit::data_doubts(spec, &init, fit_files.iter().chain(val_files))?);
             input_warnings.extend(fit::preisach_plane_advice(spec, &init, fit_files));
             if let Some((other, _)) = also {
                 input_warnings.extend(fit::preisach_plane_advice(other, &init, fit_files));
@@ -296,10 +297,33 @@ pub fn read_inputs(
     warnings.extend(repeated_inputs(&fit_sha, "the fit's cost and its mean NRMSE"));
     let val_sha: Vec<(String, String)> = val_digests.into_iter().map(|(n, d)| (n, d.sha256())).collect();
     warnings.extend(repeated_inputs(&val_sha, "the validation files' mean NRMSE"));
-    warnings.extend(val_sha.into_iter().filter_map(|(val, sha)| {
-        let (fit, _) = fit_sha.iter().find(|(_, s)| *s == sha)?;
-        Some(Warning::ValidationIsFitFile { val, fit: fit.clone() })
-    }));
+    let same_bytes: Vec<Warning> = val_sha
+        .into_iter()
+        .filter_map(|(val, sha)| {
+            let (fit, _) = fit_sha.iter().find(|(_, s)| *s == sha)?;
+            Some(Warning::ValidationIsFitFile { val, fit: fit.clone() })
+        })
+        .collect();
+    // Other bytes, the same samples: a fit file reprinted, shifted in time or cut.
+    if let Data::Recordings(fit, val) = &data {
+        for v in val {
+            let said = |f: &Recording| {
+                same_bytes.iter().any(|w| matches!(w, Warning::ValidationIsFitFile { val, fit } if *val == v.name && *fit == f.name))
+            };
+            let shared = fit.iter().filter(|f| !said(f)).find_map(|f| Some((f, same_samples::shared(v, f)?)));
+            if let Some((f, s)) = shared {
+                warnings.push(Warning::ValidationSharesFitSamples {
+                    val: v.name.clone(),
+                    fit: f.name.clone(),
+                    samples: s.samples,
+                    val_samples: v.len(),
+                    val_from_s: v.time_s[s.first_at],
+                    fit_from_s: f.time_s[s.second_at],
+                });
+            }
+        }
+    }
+    warnings.extend(same_bytes);
     Ok((data, warnings))
 }
 

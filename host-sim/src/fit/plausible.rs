@@ -8,6 +8,7 @@
 use anyhow::Result;
 use model_core::{ActuatorParams, Effect, ModelSpec};
 
+use super::bad_samples::{check_samples, stuck_channels};
 use super::{drive_for, run_model, InitialState, Prepared, Simulation, MU0};
 use crate::analysis::correlation;
 use crate::error::InRecording;
@@ -15,7 +16,7 @@ use crate::recording::Recording;
 use crate::warning::Warning;
 
 /// The checks of `files` before any work: each drives `spec` ([`drive_for`]), has no isolated
-/// bad sample ([`isolated_samples`]) and agrees with the physics of `params`
+/// bad sample ([`check_samples`]) and agrees with the physics of `params`
 /// ([`check_physics`]).
 pub fn check_files<'a>(
     spec: ModelSpec,
@@ -24,108 +25,8 @@ pub fn check_files<'a>(
 ) -> Result<()> {
     for rec in files {
         drive_for(spec, rec)?;
-        isolated_samples(rec)?;
+        check_samples(rec)?;
         check_physics(spec, params, rec)?;
-    }
-    Ok(())
-}
-
-/// The channels a lone bad sample is looked for in: those a sensor measured (the command is
-/// what was sent, and a drive may step in one sample).
-const MEASURED: [&str; 4] = ["current_A", "displacement_um", "flux_density_T", "temperature_C"];
-
-/// A sample this many times the local sample-to-sample change off both its neighbours is a
-/// spike or a dropout: Gaussian noise reaches about 3 such changes, a square drive's step is
-/// off one neighbour only, and a mode rung at a few samples a period changes as much around it.
-const SPIKE_CHANGES: f64 = 20.0;
-
-/// The samples either side whose changes give the local scale.
-const SPIKE_WINDOW: usize = 32;
-
-/// The local change is taken as at least this share of the channel's span (a noise-free channel
-/// changes by nothing between some samples, and a least-significant bit is no spike).
-const SPIKE_FLOOR_OF_SPAN: f64 = 1e-3;
-
-/// A sample far off both neighbours in a measured channel.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Spike {
-    /// Its index in the recording as read.
-    pub index: usize,
-    /// Its value.
-    pub value: f64,
-    /// The samples before and after it.
-    pub neighbours: (f64, f64),
-    /// The local sample-to-sample change it is measured against (the mean |Δ| around it).
-    pub local_change: f64,
-}
-
-/// The isolated spikes and dropouts of `x` (samples beyond both neighbours, on one side, by more
-/// than [`SPIKE_CHANGES`] local changes), first to last. The first and last samples have one
-/// neighbour, which cannot tell a spike from a step (`gma simulate`'s first sample is the rig at
-/// rest, before the drive steps on): they are not judged.
-pub fn spikes(x: &[f64]) -> Vec<Spike> {
-    let n = x.len();
-    if n < 5 {
-        return Vec::new();
-    }
-    let (lo, hi) = x.iter().fold((f64::MAX, f64::MIN), |(l, h), &v| (l.min(v), h.max(v)));
-    let floor = SPIKE_FLOOR_OF_SPAN * (hi - lo);
-    let mut window = Vec::with_capacity(2 * SPIKE_WINDOW + 1);
-    // The mean change around k, without the two into and out of the sample itself (a mean, not a
-    // median: a mode ringing after a step for a few samples amid flat ones must count).
-    let mut local_change = |k: usize| {
-        window.clear();
-        let (from, to) = (k.saturating_sub(SPIKE_WINDOW), (k + SPIKE_WINDOW).min(n - 2));
-        window.extend((from..=to).filter(|&j| j + 1 != k && j != k).map(|j| (x[j + 1] - x[j]).abs()));
-        (window.iter().sum::<f64>() / window.len().max(1) as f64).max(floor)
-    };
-    let spike = |k: usize, local_change: f64| Spike {
-        index: k,
-        value: x[k],
-        neighbours: (x[k - 1], x[k + 1]),
-        local_change,
-    };
-    let mut found = Vec::new();
-    for k in 1..n - 1 {
-        let (up, down) = (x[k] - x[k - 1], x[k] - x[k + 1]);
-        let gap = up.abs().min(down.abs());
-        if up * down <= 0.0 || gap <= SPIKE_CHANGES * floor {
-            continue;
-        }
-        let local = local_change(k);
-        if gap > SPIKE_CHANGES * local {
-            found.push(spike(k, local));
-        }
-    }
-    found
-}
-
-/// A measured channel with an isolated spike or dropout (a probe over range, a lost sample)
-/// is refused, naming the row: one such sample sets the NRMSE's range (max − min), so a wrong
-/// model would score as a right one.
-fn isolated_samples(rec: &Recording) -> Result<()> {
-    for name in MEASURED {
-        let Some(x) = rec.column(name) else { continue };
-        let found = spikes(x);
-        let Some(s) = found.first() else { continue };
-        let time = rec.time_s.get(s.index).copied().unwrap_or(f64::NAN);
-        let more = match found.len() - 1 {
-            0 => String::new(),
-            1 => " (1 more such sample in this column)".to_string(),
-            m => format!(" ({m} more such samples in this column)"),
-        };
-        let off = format!("both neighbours ({} and {})", s.neighbours.0, s.neighbours.1);
-        return Err(InRecording::error(
-            &rec.name,
-            format!(
-                "`{name}` = {} in the row at time_s = {time} (sample {} as read) stands off {off} by over \
-                 {SPIKE_CHANGES}× the local sample-to-sample change ({:.3e}): an isolated spike or dropout (a \
-                 sensor over range, a lost sample), not the actuator, and it would set the NRMSE's range \
-                 (max − min) so that a wrong model scores as a right one{more}; remove the row from the file, or \
-                 replace the value with its neighbours' mean, and run again",
-                s.value, s.index, s.local_change
-            ),
-        ));
     }
     Ok(())
 }
@@ -151,37 +52,53 @@ const CLEARLY_WORSE: f64 = 2.0;
 /// density that rises with its field and magnetization.
 pub fn check_physics(spec: ModelSpec, params: &ActuatorParams, rec: &Recording) -> Result<()> {
     if let Some(current) = rec.current_a.as_deref() {
-        current_scale(params, &rec.name, current)?;
+        current_scale(params, &rec.name, "current_A", current, 1.0)?;
+    } else if let Some(command) = rec.command_v.as_deref() {
+        current_scale(params, &rec.name, "command_V", command, params.amp.gain_a_per_v as f64)?;
     }
     channel_signs(spec, params, rec)
 }
 
-/// A current whose coil field (`coil.turns_per_m` × i) is beyond [`MAX_COIL_FIELD_PER_MS`],
-/// refused with the unit (mA, µA) that brings it within.
-fn current_scale(params: &ActuatorParams, name: &str, current: &[f64]) -> Result<()> {
+/// A drive whose coil field (`coil.turns_per_m` × i, i the current or `gain` × the command) is
+/// beyond [`MAX_COIL_FIELD_PER_MS`], refused with the unit (mA, µA; mV for a command) that
+/// brings it within.
+fn current_scale(params: &ActuatorParams, name: &str, column: &str, drive: &[f64], gain: f64) -> Result<()> {
     // f32 as the file gives it (13541.7), f64 for the products.
     let (given, turns) = (params.coil.turns_per_m, params.coil.turns_per_m as f64);
-    let peak = current.iter().fold(0.0f64, |a, i| a.max(i.abs()));
+    let peak = drive.iter().fold(0.0f64, |a, i| a.max(i.abs()));
+    let field = turns * gain * peak;
     let limit = MAX_COIL_FIELD_PER_MS * params.magnetostriction.ms_a_per_m as f64;
-    if turns * peak <= limit {
+    if field <= limit {
         return Ok(());
     }
-    let unit = [("mA", 1e-3), ("uA", 1e-6)].into_iter().find(|(_, scale)| turns * peak * scale <= limit);
+    let units: &[(&str, f64)] =
+        if column == "current_A" { &[("mA", 1e-3), ("uA", 1e-6)] } else { &[("mV", 1e-3)] };
+    let unit = units.iter().find(|(_, scale)| field * scale <= limit);
     let fix = match unit {
         Some((unit, _)) => format!(
-            "was it logged in {unit}? read it so: `--column current_A=current_A:{unit}` (a column mapped \
+            "was it logged in {unit}? read it so: `--column {column}={column}:{unit}` (a column mapped \
              with --column: give that mapping the unit `{unit}`); "
         ),
         None => String::new(),
     };
+    let (what, through) = if column == "current_A" {
+        (format!("{peak:.4e} A"), format!("`coil.turns_per_m` = {given} × the current"))
+    } else {
+        (
+            format!("{peak:.4e} V"),
+            format!(
+                "`coil.turns_per_m` = {given} × `amp.gain_a_per_v` = {} × the command",
+                params.amp.gain_a_per_v
+            ),
+        )
+    };
     Err(InRecording::error(
         name,
         format!(
-            "`current_A` reaches {peak:.4e} A, a coil field of {:.3e} A/m (`coil.turns_per_m` = {given} × the \
-             current), above {MAX_COIL_FIELD_PER_MS} M_s ({limit:.3e} A/m): no actuator's coil makes that, and \
-             the rod would be saturated throughout, so no fit can follow the file; {fix}or the parameter \
-             set's `coil.turns_per_m` is not this coil's",
-            turns * peak
+            "`{column}` reaches {what}, a coil field of {field:.3e} A/m ({through}), above \
+             {MAX_COIL_FIELD_PER_MS} M_s ({limit:.3e} A/m): no actuator's coil makes that, and the rod would be \
+             saturated throughout, so no fit can follow the file; {fix}or the parameter set's \
+             `coil.turns_per_m` is not this coil's"
         ),
     ))
 }
@@ -331,13 +248,87 @@ fn delay_at_other_rate(
     }))
 }
 
-/// [`started_mid_run`] of each of `files`.
-pub fn started_mid_run_all<'a>(
+/// The doubts about `files` the model's physics and their samples raise, none a refusal: a
+/// file started mid-run ([`started_mid_run`]), a channel stuck or clipped while the drive moved,
+/// a displacement whose scale the drive cannot make ([`displacement_scale`]), a file that reads
+/// better with its drive and its displacement both negated ([`both_negated`]).
+pub fn data_doubts<'a>(
     spec: ModelSpec,
     params: &ActuatorParams,
     files: impl IntoIterator<Item = &'a Recording>,
 ) -> Result<Vec<Warning>> {
-    files.into_iter().filter_map(|rec| started_mid_run(spec, params, rec).transpose()).collect()
+    let mut doubts = Vec::new();
+    for rec in files {
+        doubts.extend(stuck_channels(rec));
+        if let Some(sim) = demagnetised_run(spec, params, rec)? {
+            doubts.extend(displacement_scale(spec, rec, &sim)?);
+            doubts.extend(both_negated(spec, params, rec, &sim)?);
+        }
+        doubts.extend(started_mid_run(spec, params, rec)?);
+    }
+    Ok(doubts)
+}
+
+/// How many times the model's displacement spread (rms about its mean, for the start
+/// parameters, from the demagnetised rod) and the file's may differ before the scale is doubted: a start set's strain
+/// or a rig's prestress moves it by a few times, a unit by a thousand (a hundred and more where
+/// the law saturates: a small drive gives more strain per ampere than a large one).
+const SCALE_RATIO_DOUBTED: f64 = 100.0;
+
+/// A displacement spread [`SCALE_RATIO_DOUBTED`] times the model's or more, or as many times
+/// less: a drive or a displacement logged in another unit than its column says (a current in A
+/// read as mA, a displacement in mm under `displacement_um`), or a coil not the parameter set's.
+fn displacement_scale(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> Result<Option<Warning>> {
+    // Spread, not span, and past the first tenth: the model's start from the demagnetised rod
+    // to the bias's state is a transient the rig's file need not show.
+    let spread = |v: &[f64]| {
+        let v = &v[v.len() / 10..];
+        let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
+        (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len().max(1) as f64).sqrt()
+    };
+    let Some(y) = rec.displacement_um.as_deref() else { return Ok(None) };
+    let (measured, model) = (spread(y), spread(&sim.displacement_um));
+    if !(measured > 0.0 && model > 0.0) {
+        return Ok(None);
+    }
+    let ratio = measured / model;
+    if (1.0 / SCALE_RATIO_DOUBTED..=SCALE_RATIO_DOUBTED).contains(&ratio) {
+        return Ok(None);
+    }
+    Ok(Some(Warning::DisplacementScale {
+        file: rec.name.clone(),
+        drive: super::model_input(spec, rec)?.column(),
+        measured_um: measured,
+        model_um: model,
+    }))
+}
+
+/// The file's displacement and drive both read the other way round: the strain is even in the
+/// field, so with a bias a negated current puts the operating point on the field's other side,
+/// where the strain curves the other way, and the displacement negated too follows that model
+/// about as well as the right reading by correlation; the curvature tells them apart. Said when
+/// both negated leave a quarter of the variance (1 − ρ²) the file as read leaves, or less, and
+/// the file as read leaves more than 1 %.
+fn both_negated(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    rec: &Recording,
+    sim: &Simulation,
+) -> Result<Option<Warning>> {
+    let Some(y) = rec.displacement_um.as_deref() else { return Ok(None) };
+    let Some(negated) = demagnetised_run(spec, params, &drive_negated(rec))? else { return Ok(None) };
+    let unexplained = |r: f64| if r > 0.0 { 1.0 - r * r } else { 1.0 };
+    let as_read = unexplained(correlation(y, &sim.displacement_um));
+    let both = unexplained(-correlation(y, &negated.displacement_um));
+    if !(as_read > 0.01 && both * 4.0 <= as_read) {
+        return Ok(None);
+    }
+    Ok(Some(Warning::BothNegated {
+        file: rec.name.clone(),
+        drive: super::model_input(spec, rec)?.column(),
+        as_read,
+        both,
+    }))
 }
 
 /// Samples the drive is held at its first value before a file to settle the model there (a
@@ -409,56 +400,4 @@ pub fn started_mid_run(spec: ModelSpec, params: &ActuatorParams, rec: &Recording
         from_rest: rest,
         settled,
     }))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A noisy sine with an odd value somewhere (from a small deterministic generator).
-    fn noisy_sine(n: usize, samples_per_period: f64, noise: f64) -> Vec<f64> {
-        let mut state = 12345u64;
-        let mut uniform = move || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
-        (0..n)
-            .map(|k| {
-                let t = k as f64 / samples_per_period;
-                20.0 + 15.0 * (2.0 * std::f64::consts::PI * t).sin()
-                    + noise * (uniform() + uniform() + uniform())
-            })
-            .collect()
-    }
-
-    /// One over-range sample or one dropout to 0 in 10 000 is found at its index; the noisy
-    /// recording without it, a sine sampled at a few samples a period, and a square wave whose
-    /// steps are a sample long or ring for several samples are not.
-    #[test]
-    fn a_lone_spike_or_dropout_is_found_and_steps_and_noise_are_not() {
-        let clean = noisy_sine(10_000, 50.0, 0.05);
-        assert!(spikes(&clean).is_empty());
-        // The dropout near a crest, where the signal is far from 0 and changes slowly.
-        for (at, bad) in [(5000, 9999.99), (5012, 0.0)] {
-            let mut x = clean.clone();
-            x[at] = bad;
-            let found = spikes(&x);
-            assert_eq!(found.iter().map(|s| s.index).collect::<Vec<_>>(), vec![at], "{bad}");
-            assert_eq!(found[0].value, bad);
-        }
-        assert!(spikes(&noisy_sine(10_000, 4.0, 0.5)).is_empty());
-        // A square drive: exact steps, then a displacement that rings after each (a mode at a
-        // fifth of the sample rate, decaying over ~15 samples).
-        let square: Vec<f64> = (0..4000).map(|k| if (k / 100) % 2 == 0 { 0.0 } else { 2.0 }).collect();
-        assert!(spikes(&square).is_empty());
-        let ringing: Vec<f64> = (0..4000)
-            .map(|k| {
-                let (level, since) = ((k / 100) % 2, (k % 100) as f64);
-                let step = if level == 0 { -1.0 } else { 1.0 };
-                let decay = (-since / 15.0).exp() * (2.0 * std::f64::consts::PI * since / 5.0).cos();
-                10.0 * step * (1.0 - decay)
-            })
-            .collect();
-        assert!(spikes(&ringing).is_empty(), "{:?}", spikes(&ringing).first());
-    }
 }
