@@ -9,6 +9,7 @@ pub mod cases;
 pub mod cell_text;
 pub mod cli;
 pub mod columns;
+pub mod data_doubts;
 pub mod diagnose;
 pub mod error;
 pub mod excitation;

@@ -390,13 +390,16 @@ impl Recording {
         Ok(ReadOutcome { recording: r, rows: eligible, kept, doubts })
     }
 
-    /// The recording linearly interpolated onto a uniform grid at its median step, from its
-    /// first sample to its last (at most `max_samples` points); every channel alike.
+    /// The recording linearly interpolated onto a uniform grid from its first sample to its last
+    /// (at most `max_samples` points), at the step nearest its median step that lands on both:
+    /// the median's whole number of steps over the span, rounded (floored, a median a little
+    /// above the mean step of jittered stamps dropped the last sample); every channel alike.
     pub fn resampled_linear(&self, max_samples: usize) -> Result<Recording> {
-        let dt = self.dt_s();
+        let median = self.dt_s();
         let (t0, t_end) = (self.time_s[0], self.time_s[self.len() - 1]);
-        // The last grid point may fall a rounding error beyond the last sample: allow 1e-9 steps.
-        let n = (((t_end - t0) / dt + 1e-9).floor() as usize + 1).min(max_samples);
+        let steps = ((t_end - t0) / median).round().max(1.0);
+        let dt = (t_end - t0) / steps;
+        let n = (steps as usize + 1).min(max_samples);
         if n < 3 {
             located!(self.name; "resampled at the median step {dt:.3e} s, the recording has {n} samples; at least 3 are needed");
         }
@@ -820,7 +823,7 @@ mod tests {
     }
 
     #[test]
-    fn resampling_interpolates_every_channel_at_the_median_step() {
+    fn resampling_interpolates_every_channel_at_about_the_median_step() {
         // Steps of 1.03, 0.94, 1.05, 0.98, 0.99 ms; channels linear in time, so the grid values
         // are known exactly.
         let mut text = String::from("time_s,current_A,displacement_um\n");
@@ -832,12 +835,24 @@ mod tests {
         let opts = ReadOptions { resample: Some(Resample::Linear), ..Default::default() };
         let r = with(&text, &opts).unwrap();
         assert_eq!(r.len(), 6);
+        // Five steps of the median (0.99 ms) span the file: the grid's step lands on its last
+        // sample.
         for k in 0..6 {
-            let t = k as f64 * 0.00099;
+            let t = k as f64 * 0.00499 / 5.0;
             assert!((r.time_s[k] - t).abs() < 1e-15);
             assert!((r.current_a.as_ref().unwrap()[k] - (1.0 + 100.0 * t)).abs() < 1e-12);
             assert!((r.displacement_um.as_ref().unwrap()[k] - (5.0 - 1000.0 * t)).abs() < 1e-12);
         }
+        // A median (1.01 ms) above the mean step: the last sample is kept, not dropped.
+        let mut text = String::from("time_s,current_A\n");
+        for t in [0.0, 0.00101, 0.00202, 0.00303, 0.00398] {
+            text += &format!("{t},{}\n", 1.0 + 100.0 * t);
+        }
+        let r = with(&text, &opts).unwrap();
+        assert_eq!(r.len(), 5);
+        assert!(
+            (r.time_s[4] - 0.00398).abs() < 1e-15 && (r.current_a.as_ref().unwrap()[4] - 1.398).abs() < 1e-12
+        );
         // A gap of more than 5 median steps is refused all the same.
         let gap = "time_s,current_A\n0,1\n0.001,2\n0.002,3\n0.008,4\n0.009,5\n";
         let e = format!("{:#}", with(gap, &opts).unwrap_err());

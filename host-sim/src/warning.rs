@@ -162,22 +162,6 @@ pub enum Warning {
         /// The fit file with the same bytes.
         fit: String,
     },
-    /// A validation file shares a stretch of samples with a fit file though its bytes differ (the
-    /// fit file reprinted, shifted in time, cut: [`crate::same_samples`]).
-    ValidationSharesFitSamples {
-        /// The `--val` file.
-        val: String,
-        /// The fit file.
-        fit: String,
-        /// How many samples they share.
-        samples: usize,
-        /// The validation file's samples in all.
-        val_samples: usize,
-        /// Where the shared stretch begins in the validation file [s].
-        val_from_s: f64,
-        /// And in the fit file [s].
-        fit_from_s: f64,
-    },
     /// Two inputs of one command with the same content (the same file given twice, or a copy):
     /// it counts twice in a mean over the files.
     SameInputTwice {
@@ -301,51 +285,6 @@ pub enum Warning {
         /// The same with the model settled at the first drive value.
         settled: f64,
     },
-    /// A channel that follows the drive stays at one exact value while the drive crosses a
-    /// quarter of its span and more ([`crate::fit::data_doubts`]): a sensor clipped at its range
-    /// or a frozen converter.
-    StuckChannel {
-        /// The recording.
-        file: String,
-        /// The channel.
-        column: &'static str,
-        /// The drive column it is judged against.
-        drive: &'static str,
-        /// The value it stays at (in its first such run).
-        value: f64,
-        /// Where its first such run begins [s].
-        time_s: f64,
-        /// How many such runs.
-        runs: usize,
-        /// Their samples in all.
-        samples: usize,
-        /// The value is the channel's largest or smallest (clipped, not frozen).
-        at_range_end: bool,
-    },
-    /// The displacement spreads a hundred times more or less than the model's strain for the
-    /// file's drive ([`crate::fit::data_doubts`]): a unit, a coil or a rod not the parameter set's.
-    DisplacementScale {
-        /// The recording.
-        file: String,
-        /// The drive column.
-        drive: &'static str,
-        /// The file's displacement spread (rms about its mean, past its first tenth) [µm].
-        measured_um: f64,
-        /// The model's, for the start parameters [µm].
-        model_um: f64,
-    },
-    /// The file follows the model far better with its drive and its displacement both negated
-    /// ([`crate::fit::data_doubts`]).
-    BothNegated {
-        /// The recording.
-        file: String,
-        /// The drive column.
-        drive: &'static str,
-        /// The displacement's variance share the model leaves unexplained as read (1 − ρ²).
-        as_read: f64,
-        /// The same with both columns negated.
-        both: f64,
-    },
     /// A loop driven symmetrically whose magnetization is not centred on zero.
     LoopOffCentre {
         /// The loop file.
@@ -357,6 +296,8 @@ pub enum Warning {
         /// The file gives B (the offset is then μ0 × the centre in B).
         flux_density: bool,
     },
+    /// A doubt about a recording's samples or physics that needs no refusal.
+    Data(crate::data_doubts::DataDoubt),
     /// How a measurement file was read: columns not used, a name that looks like a recognised
     /// column, time stamps rebased, an implausible time axis.
     Read(crate::read_doubts::ReadDoubt),
@@ -391,7 +332,6 @@ impl Warning {
             | Warning::LoopClockwise { .. }
             | Warning::LoopOffCentre { .. }
             | Warning::ValidationIsFitFile { .. }
-            | Warning::ValidationSharesFitSamples { .. }
             | Warning::SameInputTwice { .. }
             | Warning::FitFileAfterVal { .. }
             | Warning::Truncated { .. }
@@ -399,9 +339,7 @@ impl Warning {
             | Warning::FluxScaleAtBound { .. }
             | Warning::UnfittedGain { .. }
             | Warning::StartedMidRun { .. }
-            | Warning::StuckChannel { .. }
-            | Warning::DisplacementScale { .. }
-            | Warning::BothNegated { .. } => Weight::Data,
+            | Warning::Data(_) => Weight::Data,
             Warning::AtEdge { .. }
             | Warning::SquarerThanJa { .. }
             | Warning::StartKept { .. }
@@ -507,14 +445,6 @@ impl fmt::Display for Warning {
             Warning::ValidationIsFitFile { val, fit } => write!(
                 f,
                 "{val} is also a fit file (same content as {fit}): its validation figure is not independent"
-            ),
-            Warning::ValidationSharesFitSamples { val, fit, samples, val_samples, val_from_s, fit_from_s } => write!(
-                f,
-                "{val} shares {samples} of its {val_samples} samples with the fit file {fit} (the drive and the \
-                 displacement sample for sample, from time_s = {val_from_s} there and {fit_from_s} in {fit}): \
-                 the fit file reprinted, shifted in time or cut, so its validation figure is {}a fit figure; \
-                 validate on a recording the fit has not seen",
-                if samples == val_samples { "" } else { "in part " }
             ),
             Warning::SameInputTwice { first, again, counts_in } => {
                 write!(f, "{again} has the same content as {first}: it counts twice in {counts_in}")
@@ -649,59 +579,6 @@ impl fmt::Display for Warning {
                 settled * 100.0,
                 from_rest * 100.0
             ),
-            Warning::StuckChannel { file, column, drive, value, time_s, runs, samples, at_range_end } => {
-                let what = if *at_range_end {
-                    "a sensor clipped at its range"
-                } else {
-                    "a frozen sensor or converter"
-                };
-                write!(
-                    f,
-                    "{file}: `{column}` stays at exactly {value} for {samples} samples in {runs} run(s) (the first \
-                     from time_s = {time_s}) while `{drive}` crosses a quarter of its span and more: {what}, not \
-                     the actuator; a fit follows those samples as if the rod stood still; record within the \
-                     sensor's range, or cut those rows out (one file per part)"
-                )
-            }
-            Warning::DisplacementScale { file, drive, measured_um, model_um } => {
-                let (ratio, more) = if measured_um > model_um {
-                    (measured_um / model_um, true)
-                } else {
-                    (model_um / measured_um, false)
-                };
-                // The readings a factor near a thousand or a million points at.
-                let unit = if *drive == "current_A" { "A" } else { "V" };
-                let hint = match (more, (ratio.log10() / 3.0).round() as i32) {
-                    (true, k) if k >= 1 => format!(
-                        ": is `{drive}` read in {unit} (a column read with `:m{unit}` reads 1000× small) and \
-                         `displacement_um` in µm (a file in nm reads 1000× large; `--column \
-                         displacement_um=HEADER:nm` converts)"
-                    ),
-                    (false, k) if k >= 1 => format!(
-                        ": is `displacement_um` read in µm (a file in mm or m, or a column read with `:nm`, reads \
-                         1000× small or more; `--column displacement_um=HEADER:mm` converts mm) and `{drive}` in \
-                         {unit}"
-                    ),
-                    _ => String::new(),
-                };
-                write!(
-                    f,
-                    "{file}: the displacement's rms spread is {measured_um:.4e} µm, {ratio:.0}× {} the model's \
-                     {model_um:.4e} µm for this `{drive}` and the start parameters{hint}; are `coil.turns_per_m` \
-                     and `rod_length_m` this rig's?",
-                    if more { "more than" } else { "less than" }
-                )
-            }
-            Warning::BothNegated { file, drive, as_read, both } => write!(
-                f,
-                "{file}: the displacement follows the model far better with it and `{drive}` both negated ({:.2} % \
-                 of its variance unexplained, against {:.2} % as read): with a bias field the strain curves one \
-                 way on the bias's side, and a probe and a current clamp both on backwards read like this; check \
-                 both, and read them negated: `--column displacement_um=-displacement_um --column \
-                 {drive}=-{drive}` (a column mapped with --column: put `-` before its HEADER)",
-                100.0 * both,
-                100.0 * as_read
-            ),
             Warning::StrainScaleUnlikely { lambda_s, lo, hi } => write!(
                 f,
                 "`magnetostriction.lambda_s` = {lambda_s:.2e} is outside [{lo:.0e}, {hi:.0e}], the range of \
@@ -709,6 +586,7 @@ impl fmt::Display for Warning {
                  displacement_um=NAME:mm` converts mm, `:nm` nm) and `rod_length_m` the rod's active length?"
             ),
             Warning::Read(doubt) => write!(f, "{doubt}"),
+            Warning::Data(doubt) => write!(f, "{doubt}"),
         }
     }
 }

@@ -350,3 +350,50 @@ fn a_clipped_probe_both_channels_negated_and_a_tiny_current_are_said() {
         "{w}"
     );
 }
+
+/// The same delay five times too long at 50 Hz leaves the displacement rising with the model's
+/// (no refusal), 20 % off: the delay counted at another rate is said as a warning naming `dt_s`;
+/// with the recording's own `dt_s` it is not.
+#[test]
+fn a_delay_counted_at_another_dt_s_that_still_correlates_is_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = "ja+mech+delay";
+    let rec = simulate(dir.path(), "rec.csv", &["--model", model, "--freq-hz", "50", "--noise-um", "0.02"]);
+    let demo = toml::to_string(&model_core::ActuatorParams::TERFENOL_DEMO).unwrap();
+    let p = dir.path().join("p.toml");
+    std::fs::write(&p, demo.replace("dt_s = 0.0001\n", "dt_s = 0.0005\n")).unwrap();
+    let w = warnings(&compare(&["--model", model, "--params", &p.display().to_string(), &rec]).unwrap())
+        .join("\n");
+    assert!(
+        w.contains("rec.csv: `delay_samples` = 3 counts periods") && w.contains("set `dt_s = 1e-4`"),
+        "{w}"
+    );
+    let w = warnings(&compare(&["--model", model, &rec]).unwrap()).join("\n");
+    assert!(!w.contains("counts periods"), "{w}");
+}
+
+/// A file whose samples are reversed under its rising time column: the displacement's loop
+/// runs the other way round from the model's, said as a warning; the file as recorded is not.
+#[test]
+fn a_file_in_reverse_time_order_is_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = simulate(
+        dir.path(),
+        "good.csv",
+        &["--freq-hz", "20", "--duration-s", "0.5", "--bias", "0.5", "--noise-um", "0.02"],
+    );
+    let all = rows(&good);
+    let n = all.len();
+    let reversed = edited(dir.path(), &good, "reversed.csv", None, |k, c| {
+        for (j, cell) in c.iter_mut().enumerate().skip(1) {
+            *cell = format!("{}", all[n - 1 - k][j]);
+        }
+    });
+    let said = |file: &str| warnings(&compare(&["--model", "ja+mech", file]).unwrap()).join("\n");
+    assert!(!said(&good).contains("runs the other way round"), "{}", said(&good));
+    let w = said(&reversed);
+    assert!(
+        w.contains("reversed.csv: the displacement's loop against `current_A` runs the other way round"),
+        "{w}"
+    );
+}

@@ -9,6 +9,7 @@ use clap::Args;
 use model_core::{ActuatorParams, ModelSpec};
 
 use crate::columns::ReadOptions;
+use crate::data_doubts::DataDoubt;
 use crate::files::{check_outputs, open_all, Input, InputId};
 use crate::fit::{self, FitOptions};
 use crate::loops::{self, LoopFile};
@@ -312,14 +313,14 @@ pub fn read_inputs(
             };
             let shared = fit.iter().filter(|f| !said(f)).find_map(|f| Some((f, same_samples::shared(v, f)?)));
             if let Some((f, s)) = shared {
-                warnings.push(Warning::ValidationSharesFitSamples {
+                warnings.push(Warning::Data(DataDoubt::ValidationSharesFitSamples {
                     val: v.name.clone(),
                     fit: f.name.clone(),
                     samples: s.samples,
                     val_samples: v.len(),
                     val_from_s: v.time_s[s.first_at],
                     fit_from_s: f.time_s[s.second_at],
-                });
+                }));
             }
         }
     }

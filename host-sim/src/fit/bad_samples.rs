@@ -6,6 +6,7 @@
 
 use anyhow::Result;
 
+use crate::data_doubts::DataDoubt;
 use crate::error::InRecording;
 use crate::recording::Recording;
 use crate::warning::Warning;
@@ -282,7 +283,7 @@ pub fn stuck_channels(rec: &Recording) -> Vec<Warning> {
             start = k;
         }
         if let Some((at, value)) = first {
-            warnings.push(Warning::StuckChannel {
+            warnings.push(Warning::Data(DataDoubt::StuckChannel {
                 file: rec.name.clone(),
                 column: name,
                 drive: drive_name,
@@ -291,7 +292,7 @@ pub fn stuck_channels(rec: &Recording) -> Vec<Warning> {
                 runs,
                 samples,
                 at_range_end: value == lo || value == hi,
-            });
+            }));
         }
     }
     warnings

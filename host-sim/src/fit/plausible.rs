@@ -11,6 +11,7 @@ use model_core::{ActuatorParams, Effect, ModelSpec};
 use super::bad_samples::{check_samples, stuck_channels};
 use super::{drive_for, run_model, InitialState, Prepared, Simulation, MU0};
 use crate::analysis::correlation;
+use crate::data_doubts::DataDoubt;
 use crate::error::InRecording;
 use crate::recording::Recording;
 use crate::warning::Warning;
@@ -251,7 +252,9 @@ fn delay_at_other_rate(
 /// The doubts about `files` the model's physics and their samples raise, none a refusal: a
 /// file started mid-run ([`started_mid_run`]), a channel stuck or clipped while the drive moved,
 /// a displacement whose scale the drive cannot make ([`displacement_scale`]), a file that reads
-/// better with its drive and its displacement both negated ([`both_negated`]).
+/// better with its drive and its displacement both negated ([`both_negated`]), a loop run the
+/// other way round ([`loop_direction`]), a sensor delay that follows the file better counted in
+/// its own samples ([`delay_rate_doubt`]).
 pub fn data_doubts<'a>(
     spec: ModelSpec,
     params: &ActuatorParams,
@@ -263,6 +266,8 @@ pub fn data_doubts<'a>(
         if let Some(sim) = demagnetised_run(spec, params, rec)? {
             doubts.extend(displacement_scale(spec, rec, &sim)?);
             doubts.extend(both_negated(spec, params, rec, &sim)?);
+            doubts.extend(loop_direction(spec, params, rec, &sim)?);
+            doubts.extend(delay_rate_doubt(spec, params, rec, &sim)?);
         }
         doubts.extend(started_mid_run(spec, params, rec)?);
     }
@@ -295,12 +300,12 @@ fn displacement_scale(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> Res
     if (1.0 / SCALE_RATIO_DOUBTED..=SCALE_RATIO_DOUBTED).contains(&ratio) {
         return Ok(None);
     }
-    Ok(Some(Warning::DisplacementScale {
+    Ok(Some(Warning::Data(DataDoubt::DisplacementScale {
         file: rec.name.clone(),
         drive: super::model_input(spec, rec)?.column(),
         measured_um: measured,
         model_um: model,
-    }))
+    })))
 }
 
 /// The file's displacement and drive both read the other way round: the strain is even in the
@@ -323,11 +328,120 @@ fn both_negated(
     if !(as_read > 0.01 && both * 4.0 <= as_read) {
         return Ok(None);
     }
-    Ok(Some(Warning::BothNegated {
+    Ok(Some(Warning::Data(DataDoubt::BothNegated {
         file: rec.name.clone(),
         drive: super::model_input(spec, rec)?.column(),
         as_read,
         both,
+    })))
+}
+
+/// The loop's signed area ∮ y di as a share of its box (the spans of i and y) per cycle (the
+/// drive's travel Σ|Δi| over twice its span counts the cycles): positive where y lags i, as a
+/// hysteresis law's and a mechanical lag's do on a rising bias side.
+fn loop_area(i: &[f64], y: &[f64]) -> f64 {
+    let (y_lo, y_hi) = y.iter().fold((f64::MAX, f64::MIN), |(l, h), &x| (l.min(x), h.max(x)));
+    let travel: f64 = i.windows(2).map(|i| (i[1] - i[0]).abs()).sum();
+    let area: f64 = i.windows(2).zip(y.windows(2)).map(|(i, y)| (i[1] - i[0]) * (y[1] + y[0]) / 2.0).sum();
+    // ∮ y di runs clockwise-positive: a lagging y makes it negative, so the sign is turned. Per
+    // cycle of travel 2 × span(i), the box is span(i) × span(y): the share is area / (travel/2 × span(y)).
+    -area / (travel / 2.0 * (y_hi - y_lo)).max(f64::MIN_POSITIVE)
+}
+
+/// The drive's frequency from its crossings of its mean (with a tenth of its span of
+/// hysteresis, so noise does not count): crossings / (2 × duration).
+fn drive_frequency_hz(i: &[f64], dt_s: f64) -> f64 {
+    let mean = i.iter().sum::<f64>() / i.len().max(1) as f64;
+    let (lo, hi) = i.iter().fold((f64::MAX, f64::MIN), |(l, h), &x| (l.min(x), h.max(x)));
+    let band = 0.1 * (hi - lo);
+    let (mut above, mut crossings) = (None, 0usize);
+    for &x in i {
+        let side = if x > mean + band {
+            Some(true)
+        } else if x < mean - band {
+            Some(false)
+        } else {
+            None
+        };
+        if let Some(side) = side {
+            crossings += usize::from(above.is_some_and(|a| a != side));
+            above = Some(side);
+        }
+    }
+    crossings as f64 / (2.0 * i.len() as f64 * dt_s)
+}
+
+/// Smallest loop area, as a share of its box, whose direction is judged (a loop thinner than
+/// that is a line whose noise sets its sign).
+const LOOP_AREA_JUDGED: f64 = 0.02;
+
+/// A file whose displacement loop against its drive runs the other way round from the model's,
+/// both open enough to tell: the displacement leads the drive where every law and lag makes it
+/// follow, as a file in reverse time order (its samples reversed under a rising time column) or
+/// a drive column taken from another file reads.
+fn loop_direction(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    rec: &Recording,
+    sim: &Simulation,
+) -> Result<Option<Warning>> {
+    let drive = super::model_input(spec, rec)?.column();
+    let (Some(i), Some(y)) = (rec.column(drive), rec.displacement_um.as_deref()) else { return Ok(None) };
+    // Past a mode (or a delay of half a period) the lag passes 180° and a loop turns round
+    // honestly: judged only on drives well below both.
+    let f = drive_frequency_hz(i, rec.dt_s());
+    let mode = spec.has(Effect::MechanicalDynamics).then_some(params.mech.natural_frequency_hz as f64);
+    let delay_s = spec.has(Effect::SensorDelay).then_some(params.delay_samples as f64 * params.dt_s as f64);
+    if mode.is_some_and(|f_n| f > f_n / 4.0) || delay_s.is_some_and(|d| f * d > 0.125) {
+        return Ok(None);
+    }
+    let (file, model) = (loop_area(i, y), loop_area(i, &sim.displacement_um));
+    let judged = file.abs() > LOOP_AREA_JUDGED && model.abs() > LOOP_AREA_JUDGED;
+    Ok((judged && file * model < 0.0).then(|| {
+        Warning::Data(DataDoubt::LoopReversed {
+            file: rec.name.clone(),
+            drive,
+            area: file,
+            model_area: model,
+        })
+    }))
+}
+
+/// With a sensor delay and a parameter set whose `dt_s` is not the file's step: the delay
+/// counted in this file's samples follows the file with at most a quarter of the variance left
+/// unexplained as given, and the file as given leaves more than 1 % (the refusal of
+/// [`channel_signs`] covers a displacement that then falls against the model).
+fn delay_rate_doubt(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    rec: &Recording,
+    sim: &Simulation,
+) -> Result<Option<Warning>> {
+    let step = rec.dt_s();
+    if !spec.has(Effect::SensorDelay)
+        || params.delay_samples <= 0.0
+        || (params.dt_s as f64 / step - 1.0).abs() <= 1e-5
+    {
+        return Ok(None);
+    }
+    let Some(y) = rec.displacement_um.as_deref() else { return Ok(None) };
+    let here = ActuatorParams { dt_s: step as f32, ..*params };
+    let Some(counted_here) = demagnetised_run(spec, &here, rec)? else { return Ok(None) };
+    let unexplained = |r: f64| if r > 0.0 { 1.0 - r * r } else { 1.0 };
+    let (given, at_step) = (
+        unexplained(correlation(y, &sim.displacement_um)),
+        unexplained(correlation(y, &counted_here.displacement_um)),
+    );
+    Ok((given > 0.01 && 4.0 * at_step <= given).then(|| {
+        Warning::Data(DataDoubt::DelayAtOtherRate {
+            file: rec.name.clone(),
+            delay_samples: params.delay_samples as f64,
+            params_dt_s: params.dt_s,
+            // Six significant digits: a step read off a time column is 9.99999999999994e-5 s.
+            step_s: format!("{step:.5e}").parse::<f64>().unwrap_or(step),
+            given,
+            at_step,
+        })
     }))
 }
 
