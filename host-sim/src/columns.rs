@@ -9,7 +9,7 @@ use anyhow::{bail, Result};
 use crate::recording::COLUMNS;
 
 /// A unit a column may be given in, and how it converts to the column's canonical unit:
-/// value × 10^`pow10` + `offset`.
+/// value × 10^`pow10` × `ratio` + `offset`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Unit {
     /// The unit's name as written in `--column` (case-sensitive).
@@ -18,10 +18,12 @@ pub struct Unit {
     pub pow10: i32,
     /// Offset added after scaling (K → °C: −273.15).
     pub offset: f64,
+    /// A factor that is not a power of ten (°F → °C: 5/9), 1 for the others.
+    pub ratio: f64,
 }
 
 const fn unit(name: &'static str, pow10: i32) -> Unit {
-    Unit { name, pow10, offset: 0.0 }
+    Unit { name, pow10, offset: 0.0, ratio: 1.0 }
 }
 
 /// The units accepted per canonical column (same order as [`COLUMNS`]); the first is the
@@ -32,9 +34,18 @@ pub const UNITS: [&[Unit]; COLUMNS.len()] = [
     &[unit("A", 0), unit("mA", -3), unit("uA", -6), unit("µA", -6)],
     &[unit("um", 0), unit("µm", 0), unit("m", 6), unit("mm", 3), unit("nm", -3)],
     &[unit("N", 0), unit("kN", 3)],
-    &[unit("°C", 0), unit("C", 0), Unit { name: "K", pow10: 0, offset: -273.15 }],
+    &[
+        unit("°C", 0),
+        unit("C", 0),
+        Unit { name: "K", pow10: 0, offset: -273.15, ratio: 1.0 },
+        FAHRENHEIT,
+        Unit { name: "F", ..FAHRENHEIT },
+    ],
     &[unit("T", 0), unit("mT", -3), unit("G", -4)],
 ];
+
+/// °F → °C: (v − 32) × 5/9.
+const FAHRENHEIT: Unit = Unit { name: "°F", pow10: 0, offset: -32.0 * 5.0 / 9.0, ratio: 5.0 / 9.0 };
 
 /// The canonical unit of each column, as messages print it.
 const CANONICAL_UNIT: [&str; COLUMNS.len()] = ["s", "V", "A", "µm", "N", "°C", "T"];
@@ -42,7 +53,7 @@ const CANONICAL_UNIT: [&str; COLUMNS.len()] = ["s", "V", "A", "µm", "N", "°C",
 impl Unit {
     /// Whether this unit is the column's canonical unit (no conversion).
     pub fn is_identity(&self) -> bool {
-        self.pow10 == 0 && self.offset == 0.0
+        self.pow10 == 0 && self.offset == 0.0 && self.ratio == 1.0
     }
 
     /// Converts a cell: `raw` is its text, `v` the number it parsed to. A power of ten shifts the
@@ -50,7 +61,7 @@ impl Unit {
     /// the number `500` in µm would (no second rounding from a multiplication).
     pub fn convert(&self, raw: &str, v: f64) -> f64 {
         if self.pow10 == 0 {
-            return v + self.offset;
+            return v * self.ratio + self.offset;
         }
         let (mantissa, exp) = match raw.find(['e', 'E']) {
             Some(i) => (&raw[..i], raw[i + 1..].parse::<i64>().ok()),

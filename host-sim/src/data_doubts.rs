@@ -97,6 +97,14 @@ pub enum DataDoubt {
         /// The same with the delay counted in the file's step.
         at_step: f64,
     },
+    /// A coil temperature that starts where a room's temperature in °F would
+    /// ([`crate::fit::data_doubts`]).
+    TemperatureLikeFahrenheit {
+        /// The recording.
+        file: String,
+        /// `temperature_C`'s first value.
+        first: f64,
+    },
 }
 
 impl fmt::Display for DataDoubt {
@@ -180,6 +188,14 @@ impl fmt::Display for DataDoubt {
                 delay_samples * *params_dt_s as f64 / step_s,
                 100.0 * at_step,
                 100.0 * given
+            ),
+            DataDoubt::TemperatureLikeFahrenheit { file, first } => write!(
+                f,
+                "{file}: `temperature_C` starts at {first} °C, a hot coil before any drive, or a room at {:.1} °C \
+                 logged in °F; if the column is in °F, read it so: `--column temperature_C=temperature_C:°F` \
+                 (a column mapped with --column: give that mapping the unit `°F`); the coil heating's \
+                 thermal resistance would otherwise come out 1.8× too large",
+                (first - 32.0) * 5.0 / 9.0
             ),
         }
     }

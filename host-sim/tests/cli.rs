@@ -1337,6 +1337,9 @@ fn a_refused_option_value_exits_one_whoever_reads_it() {
     ] {
         let o = gma(args);
         assert_eq!(o.status.code(), Some(1), "{args:?}: {}", common::err(&o));
+        if args.contains(&"--seed") {
+            assert!(common::err(&o).contains("a seed is a whole number from 0"), "{}", common::err(&o));
+        }
         let mut json = args.to_vec();
         json.push("--json");
         let o = gma(&json);

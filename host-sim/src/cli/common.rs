@@ -44,7 +44,7 @@ pub struct ModelFiles {
     pub params: Option<PathBuf>,
     /// Seed of the global search (same seed and inputs, same result, unless `--time-limit` cuts
     /// the search short).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = seed)]
     pub seed: u64,
     /// Search effort in (0, 20] (1 = default; 2 doubles the swarm iterations, simplex steps and
     /// least-squares Jacobians).
@@ -73,7 +73,7 @@ pub struct ReadArgs {
     /// Read the file's column HEADER as the recognised column CANONICAL, converting from UNIT,
     /// e.g. `--column time_s=time_ms:ms`, `--column displacement_um=x_mm:mm`, `--column
     /// current_A=I:mA`. Units: time_s s|ms|us|µs; displacement_um m|mm|um|µm|nm; current_A
-    /// A|mA|uA|µA; command_V V|mV; force_N N|kN; temperature_C °C|C|K; flux_density_T T|mT|G
+    /// A|mA|uA|µA; command_V V|mV; force_N N|kN; temperature_C °C|C|K|°F|F; flux_density_T T|mT|G
     /// (e.g. `--column flux_density_T=B:mT`). No UNIT: the canonical unit (a rename); `-HEADER`
     /// negates the column (`--column displacement_um=-displacement_um`). Repeat for several
     /// columns. Unmapped columns are read by their exact names, or from a header that names
@@ -270,6 +270,12 @@ pub fn time_limit(seconds: f64) -> Result<Duration> {
         bail!("--time-limit must be in (0, {MAX_TIME_LIMIT_S}] s, got {seconds}");
     }
     Ok(Duration::from_secs_f64(seconds))
+}
+
+/// A `--seed`: a whole number from 0 (clap's own parse said only "invalid digit found in
+/// string" for `-1`).
+pub fn seed(s: &str) -> std::result::Result<u64, String> {
+    s.trim().parse().map_err(|_| format!("a seed is a whole number from 0 to {}, got `{s}`", u64::MAX))
 }
 
 /// `--max-samples` must leave a recording (3 samples) and a loop (5 points).

@@ -112,7 +112,7 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = 0.0, requires = "search_coil")]
     pub flux_noise_mt: f64,
     /// Seed of the noise generator.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = super::common::seed)]
     pub seed: u64,
     /// Output CSV (written atomically: temporary file, then rename); `-` writes it to standard
     /// output (not with `--json`, whose object stdout carries).

@@ -254,7 +254,8 @@ fn delay_at_other_rate(
 /// a displacement whose scale the drive cannot make ([`displacement_scale`]), a file that reads
 /// better with its drive and its displacement both negated ([`both_negated`]), a loop run the
 /// other way round ([`loop_direction`]), a sensor delay that follows the file better counted in
-/// its own samples ([`delay_rate_doubt`]).
+/// its own samples ([`delay_rate_doubt`]), a coil temperature that reads like °F
+/// ([`temperature_unit`]).
 pub fn data_doubts<'a>(
     spec: ModelSpec,
     params: &ActuatorParams,
@@ -263,6 +264,7 @@ pub fn data_doubts<'a>(
     let mut doubts = Vec::new();
     for rec in files {
         doubts.extend(stuck_channels(rec));
+        doubts.extend(temperature_unit(rec));
         if let Some(sim) = demagnetised_run(spec, params, rec)? {
             doubts.extend(displacement_scale(spec, rec, &sim)?);
             doubts.extend(both_negated(spec, params, rec, &sim)?);
@@ -272,6 +274,19 @@ pub fn data_doubts<'a>(
         doubts.extend(started_mid_run(spec, params, rec)?);
     }
     Ok(doubts)
+}
+
+/// A coil's temperature at a file's start above which, read in °C, it is doubted [°C]: a coil
+/// before its drive is near its room (10–40 °C), which in °F reads 50–104.
+const WARM_START_C: f64 = 45.0;
+
+/// A `temperature_C` whose first value is above [`WARM_START_C`] and, read as °F, a room's
+/// temperature (10–40 °C).
+fn temperature_unit(rec: &Recording) -> Option<Warning> {
+    let first = *rec.temperature_c.as_ref()?.first()?;
+    let as_fahrenheit = (first - 32.0) * 5.0 / 9.0;
+    (first > WARM_START_C && (10.0..=40.0).contains(&as_fahrenheit))
+        .then(|| Warning::Data(DataDoubt::TemperatureLikeFahrenheit { file: rec.name.clone(), first }))
 }
 
 /// How many times the model's displacement spread (rms about its mean, for the start
