@@ -1,9 +1,10 @@
-//! The physics and the samples a recording must agree with before a model is fitted to it or
-//! scored on it, as the loop reader checks a loop's: no isolated spike or dropout in a measured
-//! channel, a coil field an actuator's coil can make, a displacement that rises where the model's
-//! strain does and a flux density that follows the model's. A file that fails is refused with
-//! the fix (the `--column` that reads it right, the row to clean, the parameter to set); nothing
-//! here changes the data.
+//! The physics a recording must agree with before a model is fitted to it or scored on it, as
+//! the loop reader checks a loop's: samples a sensor got right ([`super::bad_samples`]), a coil
+//! field an actuator's coil can make, a displacement that rises where the model's strain does
+//! and a flux density that follows the model's. A file that fails is refused with the fix (the
+//! `--column` that reads it right, the row to clean, the parameter to set); what only casts
+//! doubt (a scale, both signs, a loop's direction, a delay's rate, a start mid-run) is a warning
+//! ([`data_doubts`]). Nothing here changes the data.
 
 use anyhow::Result;
 use model_core::{ActuatorParams, Effect, ModelSpec};
