@@ -25,14 +25,15 @@ pub enum DataDoubt {
         fit_from_s: f64,
     },
     /// A channel that follows the drive stays at one exact value while the drive crosses a
-    /// quarter of its span and more ([`crate::fit::data_doubts`]): a sensor clipped at its range
+    /// quarter of its span and more (or the measured current, clipped, while the displacement
+    /// does) ([`crate::fit::data_doubts`]): a sensor clipped at its range
     /// or a frozen converter.
     StuckChannel {
         /// The recording.
         file: String,
         /// The channel.
         column: &'static str,
-        /// The drive column it is judged against.
+        /// The column it is judged against (the drive; the displacement for the current).
         drive: &'static str,
         /// The value it stays at (in its first such run).
         value: f64,
@@ -128,8 +129,9 @@ impl fmt::Display for DataDoubt {
                     f,
                     "{file}: `{column}` stays at exactly {value} for {samples} samples in {runs} run(s) (the first \
                      from time_s = {time_s}) while `{drive}` crosses a quarter of its span and more: {what}, not \
-                     the actuator; a fit follows those samples as if the rod stood still; record within the \
-                     sensor's range, or cut those rows out (one file per part)"
+                     the actuator; a fit follows those samples as if {}; record within the sensor's range, or \
+                     cut those rows out (one file per part)",
+                    if *column == "current_A" { "the coil's current stood still" } else { "the rod stood still" }
                 )
             }
             DataDoubt::DisplacementScale { file, drive, measured_um, model_um } => {

@@ -303,7 +303,7 @@ fn a_dropped_run_a_spiked_last_row_and_a_re_zeroed_probe_are_refused() {
 }
 
 /// A probe clipped at its range (the displacement held at one value over the top of each
-/// period) and a file whose current and displacement both read the other way round (with a
+/// period), a current clamp clipped so (the current held while the rod moves) and a file whose current and displacement both read the other way round (with a
 /// bias, the strain's curvature tells) are said as warnings that name the cause; a current a
 /// thousand times too small (read as mA when it was A) is said with the units to check.
 #[test]
@@ -329,6 +329,15 @@ fn a_clipped_probe_both_channels_negated_and_a_tiny_current_are_said() {
         c[y] = scaled(&c[y], -1.0);
     });
     let tiny = edited(dir.path(), &good, "tiny.csv", None, |_, c| c[i] = scaled(&c[i], 1e-3));
+    // A current clamp saturating at 80 % of the current's span: the current flat, the rod moving.
+    let i_top = all.iter().map(|r| r[i]).fold(f64::MIN, f64::max);
+    let i_bottom = all.iter().map(|r| r[i]).fold(f64::MAX, f64::min);
+    let i_clip = i_bottom + 0.8 * (i_top - i_bottom);
+    let clamp = edited(dir.path(), &good, "clamp.csv", None, |_, c| {
+        if c[i].parse::<f64>().unwrap() > i_clip {
+            c[i] = format!("{i_clip}");
+        }
+    });
     let said = |file: &str| warnings(&compare(&["--model", "ja+mech", file]).unwrap()).join("\n");
     let clean = said(&good);
     for needle in ["stays at exactly", "both negated", "the model's"] {
@@ -337,6 +346,11 @@ fn a_clipped_probe_both_channels_negated_and_a_tiny_current_are_said() {
     let w = said(&clipped);
     assert!(
         w.contains("clipped.csv: `displacement_um` stays at exactly") && w.contains("clipped at its range"),
+        "{w}"
+    );
+    let w = said(&clamp);
+    assert!(
+        w.contains("clamp.csv: `current_A` stays at exactly") && w.contains("current stood still"),
         "{w}"
     );
     let w = said(&both);

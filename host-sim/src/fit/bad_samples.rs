@@ -255,38 +255,63 @@ fn level_steps(rec: &Recording) -> Result<()> {
     Ok(())
 }
 
+/// The runs of `x` at one exact value for [`STUCK_RUN`] samples and more while `reference`
+/// crossed [`STUCK_DRIVE_SHARE`] of its span, or a tenth with `clip_only` (first run's index
+/// and value, runs, samples).
+/// `clip_only`: only runs at `x`'s range end that `x` reached by a change under a twentieth of
+/// its span (a clamp saturating; a square drive's level, reached by a step, is no clip).
+fn stuck_runs(x: &[f64], reference: &[f64], clip_only: bool) -> Option<(usize, f64, usize, usize)> {
+    let (lo, hi) = bounds(x);
+    let (ref_lo, ref_hi) = bounds(reference);
+    let (mut runs, mut samples, mut first) = (0usize, 0usize, None);
+    let mut start = 0;
+    for k in 1..=x.len() {
+        if k < x.len() && x[k] == x[start] {
+            continue;
+        }
+        let (r_lo, r_hi) = bounds(&reference[start..k]);
+        // A clip's run, at a range end reached smoothly, needs only a tenth.
+        let share = if clip_only { STUCK_DRIVE_SHARE / 2.5 } else { STUCK_DRIVE_SHARE };
+        let moved = r_hi - r_lo > share * (ref_hi - ref_lo);
+        let clipped = (x[start] == lo || x[start] == hi)
+            && start > 0
+            && (x[start] - x[start - 1]).abs() < 0.05 * (hi - lo);
+        if k - start >= STUCK_RUN && moved && (!clip_only || clipped) {
+            runs += 1;
+            samples += k - start;
+            first.get_or_insert((start, x[start]));
+        }
+        start = k;
+    }
+    first.map(|(at, value)| (at, value, runs, samples))
+}
+
 /// The runs of a follower at one exact value for [`STUCK_RUN`] samples and more while the drive
-/// crossed [`STUCK_DRIVE_SHARE`] of its span: a sensor clipped at its range or a frozen
+/// crossed [`STUCK_DRIVE_SHARE`] of its span, and of a measured current clipped at its range
+/// end while the displacement crossed as much: a sensor clipped at its range or a frozen
 /// converter. Said as a warning (the file may still be worth fitting where the channel moved).
 pub fn stuck_channels(rec: &Recording) -> Vec<Warning> {
     let Some((drive_name, drive)) = drive_of(rec) else { return Vec::new() };
-    let (drive_lo, drive_hi) = bounds(drive);
+    // (channel, its values, the column it is judged against, that column's values, clip only)
+    type Pair<'a> = (&'static str, &'a [f64], &'static str, &'a [f64], bool);
+    let mut pairs: Vec<Pair> = FOLLOWERS
+        .iter()
+        .filter_map(|&name| rec.column(name).map(|x| (name, x.as_slice(), drive_name, drive, false)))
+        .collect();
+    if let (Some(i), Some(y)) = (rec.current_a.as_deref(), rec.displacement_um.as_deref()) {
+        pairs.push(("current_A", i, "displacement_um", y, true));
+    }
     let mut warnings = Vec::new();
-    for name in FOLLOWERS {
-        let Some(x) = rec.column(name) else { continue };
-        if x.len() != drive.len() {
+    for (name, x, reference_name, reference, clip_only) in pairs {
+        if x.len() != reference.len() || x.is_empty() {
             continue;
         }
         let (lo, hi) = bounds(x);
-        let (mut runs, mut samples, mut first) = (0usize, 0usize, None);
-        let mut start = 0;
-        for k in 1..=x.len() {
-            if k < x.len() && x[k] == x[start] {
-                continue;
-            }
-            let (d_lo, d_hi) = bounds(&drive[start..k]);
-            if k - start >= STUCK_RUN && d_hi - d_lo > STUCK_DRIVE_SHARE * (drive_hi - drive_lo) {
-                runs += 1;
-                samples += k - start;
-                first.get_or_insert((start, x[start]));
-            }
-            start = k;
-        }
-        if let Some((at, value)) = first {
+        if let Some((at, value, runs, samples)) = stuck_runs(x, reference, clip_only) {
             warnings.push(Warning::Data(DataDoubt::StuckChannel {
                 file: rec.name.clone(),
                 column: name,
-                drive: drive_name,
+                drive: reference_name,
                 value,
                 time_s: rec.time_s[at],
                 runs,
