@@ -172,7 +172,6 @@ fn channel_signs(spec: ModelSpec, params: &ActuatorParams, rec: &Recording) -> R
     let drive_rho = demagnetised_run(spec, params, &drive_negated(rec))?
         .map_or(f64::NAN, |s| correlation(y, &s.displacement_um));
     let probe_rho = -rho;
-    let unexplained = |r: f64| if r > 0.0 { 1.0 - r * r } else { 1.0 };
     let (drive_left, probe_left) = (unexplained(drive_rho), unexplained(probe_rho));
     let message = if probe_left > CLEARLY_WORSE * drive_left {
         format!(
@@ -338,7 +337,6 @@ fn both_negated(
 ) -> Result<Option<Warning>> {
     let Some(y) = rec.displacement_um.as_deref() else { return Ok(None) };
     let Some(negated) = demagnetised_run(spec, params, &drive_negated(rec))? else { return Ok(None) };
-    let unexplained = |r: f64| if r > 0.0 { 1.0 - r * r } else { 1.0 };
     let as_read = unexplained(correlation(y, &sim.displacement_um));
     let both = unexplained(-correlation(y, &negated.displacement_um));
     if !(as_read > 0.01 && both * 4.0 <= as_read) {
@@ -443,7 +441,6 @@ fn delay_rate_doubt(
     let Some(y) = rec.displacement_um.as_deref() else { return Ok(None) };
     let here = ActuatorParams { dt_s: step as f32, ..*params };
     let Some(counted_here) = demagnetised_run(spec, &here, rec)? else { return Ok(None) };
-    let unexplained = |r: f64| if r > 0.0 { 1.0 - r * r } else { 1.0 };
     let (given, at_step) = (
         unexplained(correlation(y, &sim.displacement_um)),
         unexplained(correlation(y, &counted_here.displacement_um)),
@@ -459,6 +456,16 @@ fn delay_rate_doubt(
             at_step,
         })
     }))
+}
+
+/// The share of a channel's variance a model leaves unexplained at correlation `r` (1 − r²),
+/// all of it when the model runs against it (r ≤ 0).
+fn unexplained(r: f64) -> f64 {
+    if r > 0.0 {
+        1.0 - r * r
+    } else {
+        1.0
+    }
 }
 
 /// Samples the drive is held at its first value before a file to settle the model there (a
