@@ -29,6 +29,7 @@ use crate::warning::Warning;
 
 mod bad_samples;
 mod magnetic_memo;
+pub mod noisy_drive;
 mod plausible;
 mod run;
 pub use bad_samples::{spikes, Spike};
@@ -184,25 +185,32 @@ pub struct Prepared<'a> {
     pub initial: InitialState,
     /// Where the magnetic stages' recent runs on it are kept (within one fit), if anywhere.
     pub memo: Option<&'a MagneticMemo>,
+    /// The logged current's white-noise rms [A] (0 for a command drive): its turns within
+    /// [`noisy_drive::REVERSAL_IN_NOISE_RMS`] of it are not reversals of the field.
+    pub drive_noise_a: f64,
 }
 
 impl<'a> Prepared<'a> {
     /// Checks that `spec` can be simulated on `rec` and works out its period and drive.
     /// The initial state is estimated from the displacement.
     pub fn new(spec: ModelSpec, rec: &'a Recording) -> Result<Self> {
-        Ok(Self {
-            rec,
-            dt_s: rec.dt_s(),
-            drive: drive_for(spec, rec)?,
-            initial: InitialState::Estimated,
-            memo: None,
-        })
+        let drive = drive_for(spec, rec)?;
+        Ok(Self::with(rec, drive, InitialState::Estimated))
+    }
+
+    /// `rec` driving through `drive` from `initial`, without a memo.
+    fn with(rec: &'a Recording, drive: Drive, initial: InitialState) -> Self {
+        let drive_noise_a = match (drive, &rec.current_a) {
+            (Drive::Current, Some(i)) => noisy_drive::white_noise_rms(i),
+            _ => 0.0,
+        };
+        Self { rec, dt_s: rec.dt_s(), drive, initial, memo: None, drive_noise_a }
     }
 
     /// `head` (the first samples of this recording), with this one's drive (and no memo: the
     /// runs on the whole recording are not the head's).
     fn head_of<'b>(&self, head: &'b Recording) -> Prepared<'b> {
-        Prepared { rec: head, dt_s: head.dt_s(), drive: self.drive, initial: self.initial, memo: None }
+        Prepared { rec: head, dt_s: head.dt_s(), memo: None, ..*self }
     }
 
     /// This recording started from `initial`.
@@ -233,7 +241,7 @@ pub fn simulate_drive(
 ) -> Result<(Simulation, Drive)> {
     // Nothing measured to estimate a pre-history from: the state given (compare's estimate), or
     // the model's own rest state.
-    let prep = Prepared { rec, dt_s: rec.dt_s(), drive: model_input(spec, rec)?, initial, memo: None };
+    let prep = Prepared::with(rec, model_input(spec, rec)?, initial);
     // Every channel: `gma simulate` writes the field and magnetization as a search coil's flux.
     Ok((run_model(spec, params, &prep, true)?, prep.drive))
 }

@@ -15,8 +15,8 @@ use crate::effects::{Effect, MagnetizationLaw};
 use crate::error::{check, ParamError};
 use crate::field::{CoilField, FirstOrderLag, LagState};
 use crate::magnetization::{
-    Anhysteretic, AnhystereticParams, JaParams, JaState, JilesAtherton, LinearMagnetization, Preisach,
-    PreisachParams, PreisachState, ValidPreisachParams,
+    Anhysteretic, AnhystereticParams, JaBranch, JaParams, JaState, JilesAtherton, LinearMagnetization,
+    Preisach, PreisachParams, PreisachState, ValidPreisachParams,
 };
 use crate::magnetostriction::{QuadraticMagnetostriction, QuadraticParams};
 use crate::mechanics::{MassSpringDamper, MechState, SecondOrderZoh};
@@ -530,6 +530,32 @@ impl Actuator {
         let (current, h) = self.step_rod_field(s, input, rod_field)?;
         let m = self.step_magnetization(s, h);
         Ok(self.observed(s, current, h, m))
+    }
+
+    /// [`Actuator::step_magnetic`] with a Jiles–Atherton law kept on branch `b` of direction
+    /// `dir` ([`JilesAtherton::step_on_branch`]): for a measured drive whose noise is not to
+    /// open minor loops. The other laws step as in `step_magnetic`.
+    #[inline]
+    pub fn step_magnetic_on_branch(
+        &self,
+        s: &mut ActuatorState,
+        b: &mut JaBranch,
+        input: f32,
+        dir: f32,
+    ) -> Result<MagneticOutput, StepError> {
+        let (current, h) = self.step_rod_field(s, input, |h| h)?;
+        let m = match &self.magnetization {
+            Magnetization::JilesAtherton(j) => j.step_on_branch(&mut s.ja, b, h, dir),
+            _ => self.step_magnetization(s, h),
+        };
+        Ok(self.observed(s, current, h, m))
+    }
+
+    /// The stages before the magnetization alone: the coil current [A] and the rod's field
+    /// [A/m] one step of `input` gives (they touch only the amplifier and eddy parts of `s`).
+    #[inline]
+    pub fn step_field(&self, s: &mut ActuatorState, input: f32) -> Result<(f32, f32), StepError> {
+        self.step_rod_field(s, input, |h| h)
     }
 
     /// [`Actuator::step_magnetic`] of this actuator and of `other` (each with its own state and

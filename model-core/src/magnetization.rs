@@ -6,7 +6,7 @@ mod linear;
 mod preisach;
 
 pub use anhysteretic::{Anhysteretic, AnhystereticParams};
-pub use jiles_atherton::{JaParams, JaState, JaVariant, JilesAtherton, MAX_SUBSTEPS};
+pub use jiles_atherton::{JaBranch, JaParams, JaState, JaVariant, JilesAtherton, MAX_SUBSTEPS};
 pub use linear::LinearMagnetization;
 pub(crate) use preisach::ValidPreisachParams;
 pub use preisach::{

@@ -11,9 +11,13 @@ use std::borrow::Cow;
 use std::sync::Arc;
 
 use anyhow::Result;
-use model_core::{Actuator, ActuatorParams, ActuatorState, Effect, MagneticOutput, ModelSpec};
+use model_core::magnetization::JaBranch;
+use model_core::{
+    Actuator, ActuatorParams, ActuatorState, Effect, MagneticOutput, MagnetizationLaw, ModelSpec,
+};
 use rayon::prelude::*;
 
+use super::noisy_drive::{branch_directions, REVERSAL_IN_NOISE_RMS};
 use super::{at_rate_of, estimate_excursion, Drive, InitialState, MagneticMemo, Prepared, Simulation};
 use crate::error::InRecording;
 
@@ -79,6 +83,8 @@ struct Run<'a> {
     n: usize,
     /// The magnetic stages' outputs, kept from an earlier run with the same upstream parameters.
     kept: Option<Arc<[MagneticOutput]>>,
+    /// A noisy current's J–A branch and each step's direction (its noise taken as no reversal).
+    branch: Option<(JaBranch, Vec<f32>)>,
     /// Where this run's magnetic stages are to be kept, under which key, and what they gave.
     to_keep: Option<(&'a MagneticMemo, String, Vec<MagneticOutput>)>,
     out: Simulation,
@@ -149,6 +155,10 @@ impl<'a> Run<'a> {
                 to_keep = Some((memo, key, Vec::with_capacity(n)));
             }
         }
+        let branch = match kept {
+            None => noise_free_branches(spec, &p, &model, s, &input, prep)?,
+            Some(_) => None,
+        };
         let heating = spec.has(Effect::ThermalDrift);
         let out = Simulation {
             displacement_um: Vec::with_capacity(n),
@@ -168,6 +178,7 @@ impl<'a> Run<'a> {
             input,
             n,
             kept,
+            branch,
             to_keep,
             out,
             all_channels,
@@ -191,12 +202,11 @@ impl<'a> Run<'a> {
     #[inline(always)]
     fn step(&mut self) {
         self.record();
-        let magnetic = match &self.kept {
-            Some(run) => Ok(run[self.k]),
-            None => {
-                let u = self.drive();
-                self.model.step_magnetic(&mut self.s, u, |h| h)
-            }
+        let u = self.drive();
+        let magnetic = match (&self.kept, &mut self.branch) {
+            (Some(run), _) => Ok(run[self.k]),
+            (None, Some((b, dirs))) => self.model.step_magnetic_on_branch(&mut self.s, b, u, dirs[self.k]),
+            (None, None) => self.model.step_magnetic(&mut self.s, u, |h| h),
         };
         self.advance(magnetic);
     }
@@ -205,7 +215,8 @@ impl<'a> Run<'a> {
     /// ([`Actuator::step_magnetic_beside`]) unless either has them kept.
     #[inline(always)]
     fn step_beside(&mut self, other: &mut Run) {
-        if self.kept.is_some() || other.kept.is_some() {
+        let plain = |r: &Run| r.kept.is_none() && r.branch.is_none();
+        if !(plain(self) && plain(other)) {
             self.step();
             other.step();
             return;
@@ -234,12 +245,10 @@ impl<'a> Run<'a> {
         }
     }
 
-    /// The drive from sample k to k + 1. It is known only at their ends: their mean is held
-    /// (an O(dt²) hold, where a plain zero-order hold of u_k would lag by half a sample).
+    /// The drive from sample k to k + 1 ([`held_drive`]).
     #[inline(always)]
     fn drive(&self) -> f32 {
-        let k = self.k;
-        (0.5 * (self.input[k] + self.input[(k + 1).min(self.n - 1)])) as f32
+        held_drive(&self.input, self.k)
     }
 
     /// The mechanical stages from the magnetic ones' output (kept, or just stepped and then
@@ -283,6 +292,43 @@ impl<'a> Run<'a> {
         }
         Ok(out)
     }
+}
+
+/// The drive from sample k to k + 1 of `input`. It is known only at their ends: their mean is
+/// held (an O(dt²) hold, where a plain zero-order hold of u_k would lag by half a sample).
+#[inline(always)]
+fn held_drive(input: &[f64], k: usize) -> f32 {
+    (0.5 * (input[k] + input[(k + 1).min(input.len() - 1)])) as f32
+}
+
+/// The J–A branch and step directions of a logged current whose noise turns the field back
+/// ([`branch_directions`] on the field this run's drive gives, from state `s`), or `None`: a
+/// command drive, another law, or no turn within the noise (the plain run is then the same).
+fn noise_free_branches(
+    spec: ModelSpec,
+    p: &ActuatorParams,
+    model: &Actuator,
+    mut s: ActuatorState,
+    input: &[f64],
+    prep: &Prepared,
+) -> Result<Option<(JaBranch, Vec<f32>)>> {
+    if prep.drive != Drive::Current
+        || prep.drive_noise_a <= 0.0
+        || spec.law() != MagnetizationLaw::JilesAtherton
+    {
+        return Ok(None);
+    }
+    let threshold = (REVERSAL_IN_NOISE_RMS * prep.drive_noise_a) as f32 * p.coil.turns_per_m;
+    let start = JaBranch::from(s.ja);
+    let mut field = Vec::with_capacity(input.len() + 1);
+    field.push(s.ja.h_a_per_m);
+    for k in 0..input.len() {
+        let (_, h) = model
+            .step_field(&mut s, held_drive(input, k))
+            .map_err(|e| InRecording::error(&prep.rec.name, format!("sample {k}: {e}")))?;
+        field.push(h);
+    }
+    Ok(branch_directions(&field, threshold).map(|dirs| (start, dirs)))
 }
 
 /// What decides a run's magnetic stages on one file ([`MagneticMemo`]'s key): the spec, the
