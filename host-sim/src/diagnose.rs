@@ -139,6 +139,12 @@ pub struct Candidate {
     pub files_showing: usize,
     /// Of [`Candidate::files_showing`], those on which the refit is lower than the baseline.
     pub files_improved_showing: usize,
+    /// Of [`Candidate::files_showing`], those on which the refit's prediction differs from the
+    /// baseline's by more than the noise: the sign test's votes (a file that moves by less than
+    /// its own noise is a tie, no evidence either way).
+    pub files_deciding: usize,
+    /// Of [`Candidate::files_deciding`], those on which the refit is lower: the sign test's wins.
+    pub files_improved_deciding: usize,
     /// The scored files are validation files (held out from every fit).
     pub held_out: bool,
     /// BIC gain of the refit on the scored (validation, else fit) files with the effective
@@ -190,7 +196,8 @@ impl Candidate {
     }
 
     /// The decision rule: the refit cuts the error at least [`MIN_CUT`]×, is lower on enough
-    /// scored files ([`required_wins`]) and has positive ΔBIC with the effective sample size.
+    /// of the scored files it shows and decides in ([`required_wins`] of
+    /// [`Candidate::files_deciding`]) and has positive ΔBIC with the effective sample size.
     /// Scored on the fit files (no validation files), where any added flexibility gains, its
     /// signature must also be significant (N_eff·R² > χ²₁(95 %)) or its cut decisive; on held-out
     /// files the gain is itself the evidence (the first-order signature is a poor proxy where the
@@ -199,8 +206,8 @@ impl Candidate {
         let indicated =
             self.held_out || self.n_eff * self.evidence_r2 > CHI2_1_95 || self.cut() >= DECISIVE_CUT;
         self.cut() >= MIN_CUT
-            && self.files_showing > 0
-            && self.files_improved_showing >= required_wins(self.files_showing)
+            && self.files_deciding > 0
+            && self.files_improved_deciding >= required_wins(self.files_deciding)
             && self.delta_bic > 0.0
             && indicated
     }
@@ -1344,7 +1351,7 @@ fn decide(candidates: &mut Vec<Candidate>, findings: &mut Vec<String>) -> (Optio
         }
     } else if let Some(best) = candidates.iter().max_by(|a, b| a.cut().total_cmp(&b.cut())) {
         findings.push(format!(
-            "no candidate passes (cut ≥ {MIN_CUT}×, lower on enough scored files it shows in (all of up to {}: a one-sided sign test at 5 %), ΔBIC > 0{}); the best, `{}`, takes {:.2} % to {:.2} % on {} (lower on {} of {}, on {} of the {} it shows in, ΔBIC {:+.1}, R² {:.1} %)",
+            "no candidate passes (cut ≥ {MIN_CUT}×, lower on enough scored files it shows and moves beyond the noise in (all of up to {}: a one-sided sign test at 5 %), ΔBIC > 0{}); the best, `{}`, takes {:.2} % to {:.2} % on {} (lower on {} of {}, on {} of the {} it shows in, on {} of the {} it moves beyond the noise, ΔBIC {:+.1}, R² {:.1} %)",
             all_must_improve_up_to(),
             if best.held_out { String::new() } else { format!(", signature significant or cut ≥ {DECISIVE_CUT}×") },
             best.effect,
@@ -1355,6 +1362,8 @@ fn decide(candidates: &mut Vec<Candidate>, findings: &mut Vec<String>) -> (Optio
             best.files_scored,
             best.files_improved_showing,
             best.files_showing,
+            best.files_improved_deciding,
+            best.files_deciding,
             best.delta_bic,
             best.evidence_r2 * 100.0
         ));
@@ -1618,6 +1627,8 @@ mod tests {
             files_scored: 4,
             files_showing: 4,
             files_improved_showing: 4,
+            files_deciding: 4,
+            files_improved_deciding: 4,
             held_out: true,
             delta_bic,
             n_eff,
@@ -1654,6 +1665,21 @@ mod tests {
             let (k, by_signature) = choose_among_tied(&tied);
             assert_eq!((tied[k].effect, by_signature), (Effect::EddyCurrent, true), "order {order:?}");
         }
+    }
+
+    /// Issue 61: an aftereffect refit lower on 4 of 5 validation files was refused, its fifth
+    /// file worse by less than its own noise. Such a file is a tie and does not vote; a fifth
+    /// file worse beyond the noise still refuses it.
+    #[test]
+    fn a_file_that_moves_by_less_than_its_noise_does_not_vote() {
+        let mut c = candidate(Effect::MagneticAftereffect, 2.0, 0.3, 120.0, 1000.0);
+        (c.files_scored, c.files_showing, c.files_improved_showing) = (5, 5, 4);
+        (c.files_deciding, c.files_improved_deciding) = (4, 4);
+        assert!(c.passes());
+        (c.files_deciding, c.files_improved_deciding) = (5, 4);
+        assert!(!c.passes());
+        (c.files_deciding, c.files_improved_deciding) = (0, 0);
+        assert!(!c.passes(), "a refit that moves no file beyond its noise shows nothing");
     }
 
     /// An exact refit of a noise-free recording is the strongest evidence there is: it passes

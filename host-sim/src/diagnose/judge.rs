@@ -125,6 +125,17 @@ impl Baseline<'_> {
             _ => vec![true; after_score_s.len()],
         };
         let files_showing = showing.iter().filter(|&&v| v).count();
+        // The sign test's votes: files it shows in where the refit's prediction moved from the
+        // baseline's by more than the noise (a smaller move, better or worse, is a tie).
+        let deciding: Vec<bool> = base_score_s
+            .iter()
+            .zip(&after_score_s)
+            .zip(&showing)
+            .filter(|((b, a), &shows)| shows && super::effect_shows(&b.residual, &a.residual))
+            .map(|((b, a), _)| a.nrmse < b.nrmse)
+            .collect();
+        let files_deciding = deciding.len();
+        let files_improved_deciding = deciding.iter().filter(|&&lower| lower).count();
         let files_improved_showing = base_score_s
             .iter()
             .zip(&after_score_s)
@@ -166,7 +177,8 @@ impl Baseline<'_> {
         let evidence = format!(
             "{} explains {:.0} % of the residual variance ({}); adding it and \
              refitting takes the {} {channel} NRMSE from {:.2} % to {:.2} % ({}), lower on {files_improved} of {} \
-             files ({files_improved_showing} of the {files_showing} it shows in); ΔBIC {:+.1}",
+             files ({files_improved_showing} of the {files_showing} it shows in, {files_improved_deciding} of the \
+             {files_deciding} it moves beyond the noise); ΔBIC {:+.1}",
             match channel {
                 Channel::Current => "the amplifier lag −di/dt of command → current",
                 Channel::FluxDensity => flux_signature_words(e.info().signature),
@@ -201,6 +213,8 @@ impl Baseline<'_> {
             files_scored: after_score_s.len(),
             files_showing,
             files_improved_showing,
+            files_deciding,
+            files_improved_deciding,
             held_out: self.held_out,
             delta_bic,
             n_eff,
