@@ -188,6 +188,10 @@ pub struct Prepared<'a> {
     /// The logged current's white-noise rms [A] (0 for a command drive): its turns within
     /// [`noisy_drive::REVERSAL_IN_NOISE_RMS`] of it are not reversals of the field.
     pub drive_noise_a: f64,
+    /// The held current turns back within that noise somewhere (else, without an eddy lag
+    /// between, the field does not either and a run needs no branches: decided once per file,
+    /// not at every evaluation).
+    pub drive_turns_in_noise: bool,
 }
 
 impl<'a> Prepared<'a> {
@@ -200,11 +204,14 @@ impl<'a> Prepared<'a> {
 
     /// `rec` driving through `drive` from `initial`, without a memo.
     fn with(rec: &'a Recording, drive: Drive, initial: InitialState) -> Self {
-        let drive_noise_a = match (drive, &rec.current_a) {
-            (Drive::Current, Some(i)) => noisy_drive::white_noise_rms(i),
-            _ => 0.0,
+        let (drive_noise_a, drive_turns_in_noise) = match (drive, &rec.current_a) {
+            (Drive::Current, Some(i)) => {
+                let sigma = noisy_drive::white_noise_rms(i);
+                (sigma, run::turns_within(i, noisy_drive::REVERSAL_IN_NOISE_RMS * sigma))
+            }
+            _ => (0.0, false),
         };
-        Self { rec, dt_s: rec.dt_s(), drive, initial, memo: None, drive_noise_a }
+        Self { rec, dt_s: rec.dt_s(), drive, initial, memo: None, drive_noise_a, drive_turns_in_noise }
     }
 
     /// `head` (the first samples of this recording), with this one's drive (and no memo: the

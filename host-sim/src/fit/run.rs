@@ -315,6 +315,7 @@ fn noise_free_branches(
     if prep.drive != Drive::Current
         || prep.drive_noise_a <= 0.0
         || spec.law() != MagnetizationLaw::JilesAtherton
+        || !(prep.drive_turns_in_noise || spec.has(Effect::EddyCurrent))
     {
         return Ok(None);
     }
@@ -329,6 +330,14 @@ fn noise_free_branches(
         field.push(h);
     }
     Ok(branch_directions(&field, threshold).map(|dirs| (start, dirs)))
+}
+
+/// Whether the held current `input` (from rest at 0 A, as a run starts) turns back by no more
+/// than `threshold` [A] somewhere: [`branch_directions`] on the current a run's field follows
+/// through the coil alone.
+pub(super) fn turns_within(input: &[f64], threshold: f64) -> bool {
+    let held: Vec<f32> = std::iter::once(0.0).chain((0..input.len()).map(|k| held_drive(input, k))).collect();
+    branch_directions(&held, threshold as f32).is_some()
 }
 
 /// What decides a run's magnetic stages on one file ([`MagneticMemo`]'s key): the spec, the
