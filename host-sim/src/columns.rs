@@ -261,7 +261,10 @@ impl ReadOptions {
         }
         if let Some(t) = trim_start_s {
             if !(t.is_finite() && t >= 0.0) {
-                bail!("--trim-start must be a finite number of seconds ≥ 0, got {t}");
+                bail!(
+                    "--trim-start must be a finite number of seconds ≥ 0, got {}",
+                    crate::files::short_number(t)
+                );
             }
         }
         Ok(Self { columns: maps, resample: resample.map(Resample::parse).transpose()?, trim_start_s })

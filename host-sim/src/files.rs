@@ -264,6 +264,17 @@ fn looks_like_another(c: char) -> bool {
     matches!(c, '\u{ad}' | '\u{200b}'..='\u{200f}' | '\u{2060}'..='\u{2064}' | '\u{feff}' | '\u{370}'..='\u{4ff}')
 }
 
+/// A number as a person typed it when that is short (`0.5`, `12`), else in six-digit
+/// scientific form: `1e308` must not come back as 309 digits.
+pub fn short_number(x: f64) -> String {
+    let plain = x.to_string();
+    if plain.len() <= 16 {
+        plain
+    } else {
+        format!("{x:.6e}")
+    }
+}
+
 /// A cell from an input as a message quotes it: control characters and look-alikes escaped, cut
 /// to [`MAX_ECHO_CHARS`].
 pub fn echo(cell: &str) -> String {

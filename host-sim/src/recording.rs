@@ -373,8 +373,9 @@ impl Recording {
         };
         if r.len() < 3 {
             located!(file;
-                "--trim-start {trim} s leaves {} of the file's {rows} samples (the file spans {:.6e} s); at \
+                "--trim-start {} s leaves {} of the file's {rows} samples (the file spans {:.6e} s); at \
                  least 3 are needed",
+                crate::files::short_number(trim),
                 r.len(),
                 t_last - t0.unwrap_or(0.0)
             );

@@ -353,6 +353,18 @@ fn trim_start_drops_the_start_as_cutting_the_rows_would() {
 }
 
 #[test]
+fn a_trim_past_the_end_is_refused_with_the_number_as_typed() {
+    let dir = tempfile::tempdir().unwrap();
+    let si = simulated(dir.path());
+    for (typed, shown) in [("1e308", "1.000000e308 s leaves 0"), ("5", "--trim-start 5 s leaves 0")] {
+        let o = gma(&["compare", "--model", "ja", "--trim-start", typed, path(&si)]);
+        assert_eq!(o.status.code(), Some(1), "{}", err(&o));
+        let e = err(&o);
+        assert!(e.contains(shown) && e.lines().all(|l| l.len() < 400), "{e}");
+    }
+}
+
+#[test]
 fn bad_options_are_refused_with_the_option_named_on_every_command() {
     let dir = tempfile::tempdir().unwrap();
     let si = simulated(dir.path());
