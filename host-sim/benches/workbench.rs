@@ -93,15 +93,16 @@ fn main() {
 
     // A J–A major loop of 300 points (Terfenol-D, 0.2 % noise), all five parameters.
     {
-        use host_sim::loops::{self, LoopChannel, LoopFile, LoopModel};
+        use host_sim::loop_fit::{self, LoopModel};
+        use host_sim::loops::{LoopChannel, LoopFile};
         let truth = [6.0e5, 6512.0, -0.035, 4000.0, 0.2];
         let h: Vec<f64> =
             (0..=300).map(|k| 1.2e5 * (2.0 * std::f64::consts::PI * k as f64 / 300.0).cos()).collect();
         let model = LoopModel::JilesAtherton(model_core::magnetization::JaVariant::Bulk);
-        let m = loops::run(model, &truth, &h, 1.2e5).unwrap();
+        let m = loop_fit::run(model, &truth, &h, 1.2e5).unwrap();
         let f = LoopFile { name: "bench".into(), h, value: m, channel: LoopChannel::Magnetization };
         let t = Instant::now();
-        let r = loops::fit(
+        let r = loop_fit::fit(
             model,
             &[f],
             &ActuatorParams::TERFENOL_DEMO,

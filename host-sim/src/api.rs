@@ -17,11 +17,13 @@ use crate::cli::simulate::SimulateArgs;
 use crate::columns::ReadOptions;
 use crate::diagnose::Diagnosis;
 use crate::files::{names, open_all, Input};
-use crate::fit::{self, FitOptions, Simulation};
+use crate::fit::{self, FitOptions};
+use crate::loop_fit;
 use crate::loops::{self, LoopFile};
 use crate::params::ParamSource;
 use crate::recording::{self, Recording, COLUMNS};
 use crate::results::{CompareSummary, FileScoreRow, FitSummary};
+use crate::simulated::Simulation;
 use crate::warning::Warning;
 
 /// Largest deviation of one time step from the median step (fraction), as the CSV reader allows.
@@ -496,8 +498,8 @@ pub fn compare(
             warnings.extend(fit::unfitted_gain(spec, &p, &source, &recs).map(|w| w.to_string()));
             warnings.extend(fit::data_doubts(spec, &p, &recs)?.iter().map(|w| w.to_string()));
             for rec in &recs {
-                let mut sim = fit::simulate(spec, &p, rec)?;
-                let sc = fit::score(spec, rec, &sim);
+                let mut sim = crate::simulation::simulate(spec, &p, rec)?;
+                let sc = crate::score::score(spec, rec, &sim);
                 warnings.extend(
                     fit::flux_scale_doubts(std::slice::from_ref(rec), &[sc]).iter().map(|w| w.to_string()),
                 );
@@ -512,14 +514,14 @@ pub fn compare(
             }
         }
         Data::Loops(files, _) => {
-            let lm = loops::LoopModel::from_spec(spec, &p)?;
+            let lm = loop_fit::LoopModel::from_spec(spec, &p)?;
             let values = lm.values_of(&p);
             for f in &files {
                 let h_max = f.h.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-                let m = loops::run(lm, &values, &f.h, h_max)
+                let m = loop_fit::run(lm, &values, &f.h, h_max)
                     .map_err(|e| anyhow::anyhow!("{}: {}", f.name, e.0))?;
                 let model_value = f.channel_from_m(&m);
-                let e = fit::nrmse(&f.value, &model_value);
+                let e = crate::score::nrmse(&f.value, &model_value);
                 total += e;
                 rows.push(FileScoreRow {
                     measured: Some(loops::features(&f.h, &f.magnetization())),
@@ -564,11 +566,11 @@ pub fn model_response(
     let spec = crate::params::parse_spec(model)?;
     let (p, _) = params.load(spec)?;
     let initial = match initial_excursion_a_per_m {
-        Some(x) if x.is_finite() => fit::InitialState::Excursion(x),
+        Some(x) if x.is_finite() => crate::simulation::InitialState::Excursion(x),
         Some(x) => bail!("initial_excursion_a_per_m must be finite, got {x}"),
-        None => fit::InitialState::Demagnetized,
+        None => crate::simulation::InitialState::Demagnetized,
     };
-    Ok(fit::simulate_drive(spec, &p, drive, initial)?.0)
+    Ok(crate::simulation::simulate_drive(spec, &p, drive, initial)?.0)
 }
 
 /// `gma simulate` with `options` as on its command line (`("--freq-hz", Some("80"))`,

@@ -6,7 +6,9 @@
 
 use anyhow::{bail, Result};
 
-use crate::recording::COLUMNS;
+/// The recognised columns, in the order the workbench writes them.
+pub const COLUMNS: [&str; 7] =
+    ["time_s", "command_V", "current_A", "displacement_um", "force_N", "temperature_C", "flux_density_T"];
 
 /// A unit a column may be given in, and how it converts to the column's canonical unit:
 /// value × 10^`pow10` × `ratio` + `offset`.
@@ -315,6 +317,38 @@ impl ReadOptions {
     }
 }
 
+/// The separator a loop file's first line uses: a tab, a comma, or (refused by `loops::parse` with a
+/// hint, but still a loop file) a semicolon when the line has no comma.
+pub(crate) fn loop_separator(first: &str) -> char {
+    if first.contains('\t') {
+        '\t'
+    } else if first.contains(';') && !first.contains(',') {
+        ';'
+    } else {
+        ','
+    }
+}
+
+/// Whether `text` looks like a loop file (named loop columns, or two columns with an H/B header
+/// or none; separated by a semicolon too, so that such a file is told what is wrong with it).
+pub fn looks_like_loop(text: &str) -> bool {
+    let first = text.lines().next().unwrap_or("").to_ascii_lowercase();
+    // A recording may log the field too: its displacement makes it a recording.
+    if first.contains("displacement_um") {
+        return false;
+    }
+    if first.contains("field_a_per_m") {
+        return true;
+    }
+    if first.contains("time_s") {
+        return false;
+    }
+    let sep = loop_separator(&first);
+    let fields: Vec<&str> = first.split(sep).collect();
+    fields.len() == 2
+        && (fields.iter().all(|f| f.trim().parse::<f64>().is_ok()) || first.trim_start().starts_with('h'))
+}
+
 /// Whether a file whose first line is `first` is a magnetization-loop file rather than a
 /// recording, decided on its header as the recording reader maps it (`--column`, and headers
 /// that name their quantity and unit such as `Displacement (um)`): a time axis, a drive and a
@@ -322,7 +356,7 @@ impl ReadOptions {
 /// columns, a time axis and a drive whose only displacement is a column of another name
 /// (`x_um`) could be either, and is refused naming both readings.
 pub fn is_loop_file(name: &str, first: &str, opts: &ReadOptions) -> Result<bool> {
-    if !crate::loops::looks_like_loop(first) {
+    if !looks_like_loop(first) {
         return Ok(false);
     }
     let sep = if !first.contains(',') && first.contains(';') {
@@ -345,8 +379,7 @@ pub fn is_loop_file(name: &str, first: &str, opts: &ReadOptions) -> Result<bool>
     if time && drive && displacement {
         return Ok(false);
     }
-    let named_like_displacement =
-        headers.iter().find(|h| !named.claims(h) && crate::read_doubts::suggested(h) == Some(3));
+    let named_like_displacement = headers.iter().find(|h| !named.claims(h) && suggested(h) == Some(3));
     if let (true, true, Some(x)) = (time, drive, named_like_displacement) {
         let loop_columns: Vec<String> = headers
             .iter()
@@ -357,7 +390,7 @@ pub fn is_loop_file(name: &str, first: &str, opts: &ReadOptions) -> Result<bool>
             "the header reads two ways: as a magnetization loop ({}), or as a recording with a time axis and a              drive whose displacement is `{}`; to read it as the recording, give `--column {}`; to fit its loop,              write the loop columns to a file of their own",
             loop_columns.join(", "),
             crate::files::echo(x),
-            crate::read_doubts::column_option(3, x)
+            column_option(3, x)
         );
     }
     Ok(true)
@@ -395,6 +428,63 @@ fn named_quantity(header: &str) -> Option<(usize, Unit)> {
         .position(|words| words.contains(&quantity.as_str()))
         .or_else(|| COLUMNS.iter().position(|c| c.to_lowercase() == quantity))?;
     UNITS[k].iter().find(|u| u.name == unit.trim()).map(|u| (k, *u))
+}
+
+/// The recognised column a header's name suggests (by its words, case ignored), if any:
+/// `T_coil (°C)`, `coil_temp_C`, `Temperature [K]` a temperature, `I_coil` a current, `x_um` a
+/// displacement, `B_search` a flux density, `cmd` a command.
+pub(crate) fn suggested(header: &str) -> Option<usize> {
+    let lower = header.trim().to_lowercase();
+    let words: Vec<&str> = lower.split(|c: char| !c.is_alphanumeric()).filter(|w| !w.is_empty()).collect();
+    let first = words.first().copied().unwrap_or("");
+    let any = |p: &dyn Fn(&str) -> bool| words.iter().any(|w| p(w));
+    if any(&|w| w.starts_with("time"))
+        || (first == "t" && words.get(1).is_some_and(|u| ["s", "ms", "us", "µs"].contains(u)))
+    {
+        Some(0)
+    } else if any(&|w| w.starts_with("temp")) || lower.contains("°c") || (first == "t" && words.len() > 1) {
+        Some(5)
+    } else if any(&|w| w.starts_with("curr")) || first == "i" {
+        Some(2)
+    } else if any(&|w| w.starts_with("disp") || w.starts_with("stroke") || w.starts_with("position"))
+        || first == "x"
+    {
+        Some(3)
+    } else if any(&|w| w.starts_with("flux")) || first == "b" {
+        Some(6)
+    } else if any(&|w| w.starts_with("command") || w.starts_with("cmd") || w.starts_with("volt"))
+        || first == "u"
+    {
+        Some(1)
+    } else if any(&|w| w.starts_with("force")) {
+        Some(4)
+    } else {
+        None
+    }
+}
+
+/// A `--column` argument that reads `header` as column `k`: with the unit its name ends in
+/// (`x_mm` → `:mm`, `T (kelvin)` → `:K`), or `:UNIT` to be filled in when it ends in a unit in
+/// brackets that is not one of the column's; quoted where a shell would split it.
+pub(crate) fn column_option(k: usize, header: &str) -> String {
+    let ends_in = |u: &str| {
+        ["_", " ", "/"].iter().any(|sep| header.ends_with(&format!("{sep}{u}")))
+            || header.ends_with(&format!("[{u}]"))
+            || header.ends_with(&format!("({u})"))
+    };
+    let bracketed = header.ends_with([')', ']']);
+    let unit = match UNITS[k].iter().find(|u| ends_in(u.name)) {
+        Some(u) if u.is_identity() => None,
+        Some(u) => Some(u.name),
+        None if k == 5 && header.to_lowercase().contains("kelvin") => Some("K"),
+        None if bracketed => Some("UNIT"),
+        None => None,
+    };
+    let arg = match unit {
+        Some(u) => format!("{}={header}:{u}", COLUMNS[k]),
+        None => format!("{}={header}", COLUMNS[k]),
+    };
+    crate::files::shell_word(std::path::Path::new(&arg))
 }
 
 #[cfg(test)]

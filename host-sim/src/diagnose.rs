@@ -40,7 +40,9 @@ use model_core::{Effect, ModelSpec};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::fit::{self, evaluate, simulate, FitOptions, FitResult, Simulation};
+use crate::fit::{self, evaluate, FitOptions, FitResult};
+use crate::simulated::Simulation;
+use crate::simulation::simulate;
 
 mod alternatives;
 mod judge;
@@ -48,6 +50,7 @@ mod searches;
 use crate::error::InRecording;
 use crate::progress;
 use crate::recording::Recording;
+use crate::signal::{correlation, reversal_positions, reversals};
 pub(crate) use crate::spectral::effective_samples;
 use crate::warning::Warning;
 pub use alternatives::{check_ja_variants, other_law_structure, LawScore, VariantScore};
@@ -450,13 +453,13 @@ fn lowpass(x: &[f64], dt: f64, tau: f64) -> Vec<f64> {
 }
 
 /// The signatures on the displacement (`flux: false`: the baseline's residual with its offset) or
-/// on the search coil's flux density (the model's flux fitted to it, [`fit::flux_fit`]).
+/// on the search coil's flux density (the model's flux fitted to it, [`crate::score::flux_fit`]).
 fn signals(rec: &Recording, sim: &Simulation, offset: f64, flux: bool) -> Signals {
     let dt = rec.dt_s();
     // The model's output on the channel, and the measured one.
     let (y, measured): (Vec<f64>, &[f64]) = if flux {
         let b = rec.flux_density_t.as_deref().unwrap_or_default();
-        (fit::flux_fit(b, &sim.field_a_per_m, &sim.magnetization_a_per_m).1, b)
+        (crate::score::flux_fit(b, &sim.field_a_per_m, &sim.magnetization_a_per_m).1, b)
     } else {
         let y = sim.displacement_um.iter().map(|y| y + offset).collect();
         (y, rec.displacement_um.as_deref().unwrap_or_default())
@@ -492,7 +495,7 @@ fn joule_heat(current: &[f64], dt: f64) -> Vec<f64> {
 
 /// R² of the least-squares fit of `r` by `a·f + b` (one regressor and a constant).
 fn r2(r: &[f64], f: &[f64]) -> f64 {
-    crate::analysis::correlation(r, f).powi(2)
+    correlation(r, f).powi(2)
 }
 
 /// Pooled evidence R² of `effect`'s signature over the files (variance-weighted mean).
@@ -772,14 +775,14 @@ fn channel_scores(
                     // Scale and zero fitted on the scored part, as the offset is.
                     let b = &rec.flux_density_t.as_deref().unwrap_or_default()[k..];
                     let (_, model) =
-                        fit::flux_fit(b, &sim.field_a_per_m[k..], &sim.magnetization_a_per_m[k..]);
+                        crate::score::flux_fit(b, &sim.field_a_per_m[k..], &sim.magnetization_a_per_m[k..]);
                     scored(b, &model, 0)
                 }
                 Channel::Temperature => {
                     // The ambient fitted on the scored part, as the offset is.
                     let t = &rec.temperature_c.as_deref().unwrap_or_default()[k..];
                     let rise = sim.temperature_rise_c.get(k..).unwrap_or_default();
-                    scored(t, &fit::temperature_fit(t, rise).1, 0)
+                    scored(t, &crate::score::temperature_fit(t, rise).1, 0)
                 }
             })
         })
@@ -812,7 +815,7 @@ fn effect_shows(off: &[f64], on: &[f64]) -> bool {
 }
 
 /// Parameters fitted on the scored files themselves: a law with a memory starts each file
-/// from an estimated pre-history ([`fit::InitialState::Estimated`], one excursion per file,
+/// from an estimated pre-history ([`crate::simulation::InitialState::Estimated`], one excursion per file,
 /// judged on the file's start), a law without none. A refit that adds a memory gains one
 /// such parameter per scored file, and the information criterion counts it.
 pub(crate) fn estimated_states(spec: ModelSpec, files: usize) -> usize {
@@ -892,34 +895,6 @@ impl StaticGain {
             0.0
         }
     }
-}
-
-/// Direction reversals of `x`, ignoring wiggles below 10 % of its span (noise).
-pub fn reversals(x: &[f64]) -> usize {
-    reversal_positions(x).len()
-}
-
-/// Where [`reversals`] finds each reversal (the sample that confirms it).
-fn reversal_positions(x: &[f64]) -> Vec<usize> {
-    let (lo, hi) = x.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
-    let band = 0.1 * (hi - lo);
-    let (mut found, mut dir, mut extreme) = (Vec::new(), 0.0, x.first().copied().unwrap_or(0.0));
-    for (k, &v) in x.iter().enumerate() {
-        let d = v - extreme;
-        if dir == 0.0 {
-            if d.abs() > band {
-                dir = d.signum();
-                extreme = v;
-            }
-        } else if d * dir > 0.0 {
-            extreme = v;
-        } else if -d * dir > band {
-            found.push(k);
-            dir = -dir;
-            extreme = v;
-        }
-    }
-    found
 }
 
 /// Diagnoses `spec` on `fit_files` (scored on `val_files` when given).
@@ -1553,7 +1528,13 @@ mod tests {
             let mut rec = Recording::with_time(name, n, dt);
             let w = 2.0 * std::f64::consts::PI * f_hz * dt;
             rec.current_a = Some((0..n).map(|k| 0.3 + amp_a * (w * k as f64).sin()).collect());
-            let (sim, _) = fit::simulate_drive(heating, &p, &rec, fit::InitialState::Demagnetized).unwrap();
+            let (sim, _) = crate::simulation::simulate_drive(
+                heating,
+                &p,
+                &rec,
+                crate::simulation::InitialState::Demagnetized,
+            )
+            .unwrap();
             // Uniform noise: 0.01 µm and 0.02 °C rms.
             let mut noisy = |v: f64, rms: f64| v + rng.random_range(-1.0..1.0) * rms * 3f64.sqrt();
             rec.displacement_um = Some(sim.displacement_um.iter().map(|y| noisy(y + 5.0, 0.01)).collect());

@@ -50,7 +50,7 @@ pub struct Input {
     /// Identity of a regular file (device, inode), to refuse writing over an input.
     pub identity: Option<(u64, u64)>,
     /// The digest of its bytes as they are read.
-    digest: crate::provenance::Digest,
+    digest: crate::digests::Digest,
 }
 
 impl Input {
@@ -72,7 +72,7 @@ impl Input {
         };
         // Hashed as it streams (provenance), the first line (with its newline) bounded like
         // every other line.
-        let hashing = crate::provenance::hashing(&name, reader);
+        let hashing = crate::digests::hashing(&name, reader);
         let digest = hashing.digest();
         let reader: Box<dyn Read + Send> = Box::new(hashing);
         let mut rest = std::io::BufReader::with_capacity(1 << 16, LineBounded::new(reader));
@@ -82,7 +82,7 @@ impl Input {
     }
 
     /// Its digest, kept after the input is read (final once it has been read to its end).
-    pub fn digest(&self) -> crate::provenance::Digest {
+    pub fn digest(&self) -> crate::digests::Digest {
         self.digest.clone()
     }
 

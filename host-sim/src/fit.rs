@@ -16,529 +16,30 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Result};
 use model_core::effects::{Param, Signature, ROD_THERMAL_LAG, STRAIN_SCALE};
-use model_core::{Actuator, ActuatorParams, Effect, MagnetizationLaw, ModelSpec};
+use model_core::{Actuator, ActuatorParams, Effect, ModelSpec};
 use rayon::prelude::*;
 
-use crate::error::InRecording;
-use crate::params::{free_params, logs_coil_temperature, FreeParam, Given};
+use crate::channels::FLUX_SCALE_RANGE;
+use crate::params::multivalued_ja;
 use crate::progress::{self, Progress};
 use crate::recording::Recording;
-use crate::results::StartScore;
+use crate::score::{nrmse, score, score_with_models, FileScore};
 use crate::search::{minimize, Bound, Fidelity, Found, Local, Plan, SearchOptions, Start};
+use crate::simulated::Simulation;
+use crate::simulation::{
+    at_rate_of, estimate_excursion, excursion_range, model_input, prepare, run_models, simulate,
+    starting_from, Drive, MagneticMemo, Prepared,
+};
 use crate::warning::Warning;
 
 mod bad_samples;
-mod magnetic_memo;
-pub mod noisy_drive;
+mod free_params;
 mod plausible;
-mod run;
+mod start;
 pub use bad_samples::{spikes, Spike};
-pub use magnetic_memo::MagneticMemo;
+pub use free_params::{free_params, logs_coil_temperature, FreeParam, Given};
 pub use plausible::{check_files, check_physics, data_doubts, started_mid_run};
-pub use run::{run_model, run_models};
-
-/// How a file drives the model.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Drive {
-    /// The measured coil current is the input.
-    Current,
-    /// The command [V] through an ideal amplifier (gain `amp.gain_a_per_v`).
-    CommandIdeal,
-    /// The command [V] through the modelled amplifier dynamics.
-    CommandDynamic,
-}
-
-/// Smallest displacement span worth fitting [µm] (1 pm: below the best capacitive probes).
-pub const MIN_DISPLACEMENT_SPAN_UM: f64 = 1e-6;
-
-/// The drive `spec` uses for `rec`, or why it cannot be simulated.
-pub fn drive_for(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
-    let Some(y) = rec.displacement_um.as_deref() else {
-        return Err(rec.no_displacement_error());
-    };
-    let span =
-        |v: &[f64]| v.iter().fold(f64::MIN, |a, &b| a.max(b)) - v.iter().fold(f64::MAX, |a, &b| a.min(b));
-    if span(y) <= 0.0 {
-        return Err(InRecording::error(
-            &rec.name,
-            "the displacement never changes: there is nothing to fit (sensor unplugged or stuck?)",
-        ));
-    }
-    if span(y) < MIN_DISPLACEMENT_SPAN_UM {
-        return Err(InRecording::error(
-            &rec.name,
-            format!(
-                "the displacement spans only {:.3e} µm, below any sensor's resolution ({MIN_DISPLACEMENT_SPAN_UM:e} µm): \
-                 is `displacement_um` in micrometres?",
-                span(y)
-            ),
-        ));
-    }
-    // The column the model is driven by (`command_V` with an amplifier model, though the file
-    // has `current_A`), then those it is scored on: a constant one has no span for its NRMSE.
-    let drive = model_input(spec, rec)?;
-    let input = match drive {
-        Drive::Current => rec.current_a.as_deref(),
-        Drive::CommandIdeal | Drive::CommandDynamic => rec.command_v.as_deref(),
-    };
-    if span(input.unwrap_or_default()) <= 0.0 {
-        return Err(InRecording::error(
-            &rec.name,
-            format!(
-                "the drive column `{}` never changes: the model's response cannot be identified",
-                drive.column()
-            ),
-        ));
-    }
-    let scored = [
-        ("current_A", rec.current_a.as_deref().filter(|_| drive == Drive::CommandDynamic)),
-        ("flux_density_T", rec.flux_density_t.as_deref()),
-        ("temperature_C", rec.temperature_c.as_deref().filter(|_| spec.has(Effect::ThermalDrift))),
-    ];
-    if let Some((column, _)) = scored.iter().find(|(_, v)| v.is_some_and(|v| span(v) <= 0.0)) {
-        return Err(InRecording::error(
-            &rec.name,
-            format!(
-                "`{column}` never changes, and the model is scored on it: a constant channel has no span for \
-                 its NRMSE (sensor unplugged or stuck?); leave the column out of the file if it carries nothing"
-            ),
-        ));
-    }
-    Ok(drive)
-}
-
-/// Which of `rec`'s columns drives `spec`: `command_V` through the amplifier dynamics when the
-/// model has `amp`; otherwise the measured `current_A`, or, without it, `command_V` through the
-/// ideal amplifier (gain `amp.gain_a_per_v`).
-pub fn model_input(spec: ModelSpec, rec: &Recording) -> Result<Drive> {
-    if spec.has(Effect::AmplifierDynamics) {
-        if rec.command_v.is_none() {
-            return Err(InRecording::error(
-                &rec.name,
-                "the model has amplifier_dynamics, which needs a `command_V` column",
-            ));
-        }
-        Ok(Drive::CommandDynamic)
-    } else if rec.current_a.is_some() {
-        Ok(Drive::Current)
-    } else if rec.command_v.is_some() {
-        Ok(Drive::CommandIdeal)
-    } else {
-        Err(InRecording::error(&rec.name, "no drive column: the model needs `current_A` or `command_V`"))
-    }
-}
-
-impl Drive {
-    /// The column that carries this drive.
-    pub fn column(self) -> &'static str {
-        match self {
-            Drive::Current => "current_A",
-            Drive::CommandIdeal | Drive::CommandDynamic => "command_V",
-        }
-    }
-}
-
-/// A model run over one recording (same length; displacement in µm without offset).
-#[derive(Debug, Clone)]
-pub struct Simulation {
-    /// Model displacement [µm] (add `offset_um` to compare with the file).
-    pub displacement_um: Vec<f64>,
-    /// Model coil current [A].
-    pub current_a: Vec<f64>,
-    /// Field in the rod [A/m] (every run of a file with `flux_density_T`; otherwise only
-    /// [`simulate`]'s).
-    pub field_a_per_m: Vec<f64>,
-    /// Model magnetization [A/m] (as the field).
-    pub magnetization_a_per_m: Vec<f64>,
-    /// Model temperature rise of the coil heating [°C] (runs of a model with `thermal_drift`;
-    /// empty otherwise: no rise).
-    pub temperature_rise_c: Vec<f64>,
-    /// The pre-history the run started from: the field excursion above the bias [A/m] (0:
-    /// demagnetised, then the bias), estimated for the file unless given.
-    pub initial_excursion_a_per_m: f64,
-}
-
-/// The rod's magnetic state when a recording starts. A rod on a rig has a history the file does
-/// not show; with a hysteretic law it shifts the whole record (minor loops never wipe it out),
-/// so it is estimated per file, like the displacement offset.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum InitialState {
-    /// Demagnetised, then the bias field (the state the model boots with).
-    Demagnetized,
-    /// After a field excursion to bias + this [A/m] and back ([`Actuator::rest_state_after`]).
-    Excursion(f64),
-    /// The excursion that best explains the file's displacement (laws without memory: none).
-    Estimated,
-}
-
-/// A recording ready to be simulated: its sample period and drive worked out once (a fit
-/// evaluates the model thousands of times on the same files).
-#[derive(Debug, Clone, Copy)]
-pub struct Prepared<'a> {
-    /// The recording.
-    pub rec: &'a Recording,
-    /// Its sample period [s] (median step).
-    pub dt_s: f64,
-    /// How it drives the model.
-    pub drive: Drive,
-    /// The magnetic state it starts from.
-    pub initial: InitialState,
-    /// Where the magnetic stages' recent runs on it are kept (within one fit), if anywhere.
-    pub memo: Option<&'a MagneticMemo>,
-    /// The logged current's white-noise rms [A] (0 for a command drive): its turns within
-    /// [`noisy_drive::REVERSAL_IN_NOISE_RMS`] of it are not reversals of the field.
-    pub drive_noise_a: f64,
-    /// The held current turns back within that noise somewhere (else, without an eddy lag
-    /// between, the field does not either and a run needs no branches: decided once per file,
-    /// not at every evaluation).
-    pub drive_turns_in_noise: bool,
-}
-
-impl<'a> Prepared<'a> {
-    /// Checks that `spec` can be simulated on `rec` and works out its period and drive.
-    /// The initial state is estimated from the displacement.
-    pub fn new(spec: ModelSpec, rec: &'a Recording) -> Result<Self> {
-        let drive = drive_for(spec, rec)?;
-        Ok(Self::with(rec, drive, InitialState::Estimated))
-    }
-
-    /// `rec` driving through `drive` from `initial`, without a memo.
-    fn with(rec: &'a Recording, drive: Drive, initial: InitialState) -> Self {
-        let (drive_noise_a, drive_turns_in_noise) = match (drive, &rec.current_a) {
-            (Drive::Current, Some(i)) => {
-                let sigma = noisy_drive::white_noise_rms(i);
-                (sigma, run::turns_within(i, noisy_drive::REVERSAL_IN_NOISE_RMS * sigma))
-            }
-            _ => (0.0, false),
-        };
-        Self { rec, dt_s: rec.dt_s(), drive, initial, memo: None, drive_noise_a, drive_turns_in_noise }
-    }
-
-    /// `head` (the first samples of this recording), with this one's drive (and no memo: the
-    /// runs on the whole recording are not the head's).
-    fn head_of<'b>(&self, head: &'b Recording) -> Prepared<'b> {
-        Prepared { rec: head, dt_s: head.dt_s(), memo: None, ..*self }
-    }
-
-    /// This recording started from `initial`.
-    pub fn starting(self, initial: InitialState) -> Self {
-        Self { initial, ..self }
-    }
-}
-
-/// Prepares every file.
-pub fn prepare(spec: ModelSpec, files: &[Recording]) -> Result<Vec<Prepared<'_>>> {
-    files.iter().map(|r| Prepared::new(spec, r)).collect()
-}
-
-/// Runs `spec` with `params` over `rec`. Simultaneous sampling, as a rig records: row k holds
-/// the drive and the displacement at the same instant t_k, so the model output at k is its state
-/// after integrating the drive up to t_k.
-pub fn simulate(spec: ModelSpec, params: &ActuatorParams, rec: &Recording) -> Result<Simulation> {
-    run_model(spec, params, &Prepared::new(spec, rec)?, true)
-}
-
-/// Runs `spec` with `params` over the drive of `rec` (which needs no displacement column; the
-/// drive column as [`model_input`] picks it), at the file's own sample period.
-pub fn simulate_drive(
-    spec: ModelSpec,
-    params: &ActuatorParams,
-    rec: &Recording,
-    initial: InitialState,
-) -> Result<(Simulation, Drive)> {
-    // Nothing measured to estimate a pre-history from: the state given (compare's estimate), or
-    // the model's own rest state.
-    let prep = Prepared::with(rec, model_input(spec, rec)?, initial);
-    // Every channel: `gma simulate` writes the field and magnetization as a search coil's flux.
-    Ok((run_model(spec, params, &prep, true)?, prep.drive))
-}
-
-/// `params` stepped at `prep`'s sample period. Every stage is stated in seconds or hertz except
-/// the sensor delay, which `delay_samples` counts in periods of the parameter set's own `dt_s`:
-/// a recording at another rate gets the same delay in seconds, in its own samples (a probe's
-/// delay is a time, whatever rate the file was logged at). Periods equal to f32 precision leave
-/// the parameter as it is.
-fn at_rate_of(spec: ModelSpec, params: &ActuatorParams, prep: &Prepared) -> Result<ActuatorParams> {
-    let mut p = *params;
-    p.dt_s = prep.dt_s as f32;
-    let ratio = params.dt_s as f64 / prep.dt_s;
-    if spec.has(Effect::SensorDelay) && (ratio - 1.0).abs() > 1e-5 {
-        let samples = params.delay_samples as f64 * ratio;
-        let line = model_core::chain::MAX_DELAY_SAMPLES as f64;
-        if samples >= line {
-            return Err(InRecording::error(
-                &prep.rec.name,
-                format!(
-                    "the sensor delay, delay_samples = {} at the parameters' dt_s ({:.4} ms), is {:.3} ms: \
-                     {samples:.1} samples of this recording ({:.4} ms per sample); the delay line holds fewer \
-                     than {line}",
-                    params.delay_samples,
-                    params.dt_s as f64 * 1e3,
-                    params.delay_samples as f64 * params.dt_s as f64 * 1e3,
-                    prep.dt_s * 1e3
-                ),
-            ));
-        }
-        p.delay_samples = samples as f32;
-    }
-    Ok(p)
-}
-
-/// Whether `spec`'s magnetization law carries a history (J–A, Preisach), so that each file
-/// starts from an initial state of its own (the spec-level twin of
-/// [`Actuator::has_magnetic_memory`]).
-fn has_memory(spec: ModelSpec) -> bool {
-    matches!(spec.law(), MagnetizationLaw::JilesAtherton | MagnetizationLaw::Preisach)
-}
-
-/// The range of pre-history excursions searched [A/m]: ± ten times the J–A field scales
-/// (a + k; saturated beyond), ± the Preisach plane's extent.
-pub fn excursion_range(spec: ModelSpec, params: &ActuatorParams) -> f64 {
-    match spec.law() {
-        model_core::MagnetizationLaw::Preisach => params.preisach.h_max_a_per_m as f64,
-        _ => 10.0 * (params.ja.a_a_per_m + params.ja.k_a_per_m) as f64,
-    }
-    .max(1000.0)
-}
-
-/// The largest field the recordings drive the rod to [A/m]: |bias + n·i| over every sample, i
-/// the measured current, else the command through the amplifier's gain (`None` without either).
-pub fn field_reach(params: &ActuatorParams, files: &[Recording]) -> Option<f64> {
-    let (n, bias) = (params.coil.turns_per_m as f64, params.coil.bias_a_per_m as f64);
-    let gain = params.amp.gain_a_per_v as f64;
-    let fields = files.iter().flat_map(|r| match (&r.current_a, &r.command_v) {
-        (Some(i), _) => i.iter().map(|&i| bias + n * i).collect::<Vec<_>>(),
-        (None, Some(u)) => u.iter().map(|&u| bias + n * gain * u).collect(),
-        (None, None) => Vec::new(),
-    });
-    fields.map(f64::abs).fold(None, |m: Option<f64>, h| Some(m.map_or(h, |m| m.max(h))))
-}
-
-/// A Preisach plane wider than this many times the fields reached is said to waste its levels.
-const PLANE_WIDE: f64 = 1.5;
-/// The plane extent advised: the largest field reached, with a quarter's margin.
-pub const PLANE_MARGIN: f64 = 1.25;
-
-/// With the Preisach law, a parameter set whose relay plane (±`h_max_a_per_m`) reaches far beyond
-/// the fields the recordings drive the rod to: its 32 levels then resolve 2 H_max/31, most of it
-/// where the data never go (on both independent rigs the complete structure validated better
-/// with the plane at 1.25× the fields reached than at the demo set's 80 kA/m: 4.14 / 4.20 →
-/// 2.80 / 2.87 % and 1.02 → 0.92 %). Displacement fits hold H_max as given (searched, it moved
-/// the searches into worse basins on both rigs), so it is said, with the value to set.
-pub fn preisach_plane_advice(
-    spec: ModelSpec,
-    params: &ActuatorParams,
-    files: &[Recording],
-) -> Option<Warning> {
-    if spec.law() != MagnetizationLaw::Preisach {
-        return None;
-    }
-    let reach = field_reach(params, files)?;
-    let h_max = params.preisach.h_max_a_per_m as f64;
-    (reach > 0.0 && h_max > PLANE_WIDE * reach).then_some(Warning::PreisachPlaneWide {
-        h_max,
-        reach,
-        advised: PLANE_MARGIN * reach,
-    })
-}
-
-/// The pre-history excursion that best explains the start of `prep`'s displacement: a
-/// 13-point grid over [`excursion_range`], then golden-section refinement around the best point
-/// (31 runs).
-fn estimate_excursion(spec: ModelSpec, params: &ActuatorParams, prep: &Prepared) -> Result<f64> {
-    // Judged from the start of the file, where the state shows most (its first quarter, at
-    // least 4000 samples: long records cost no more than that).
-    let n = prep.rec.len();
-    let head = prep.rec.head(n.min(4000.max(n / 4)));
-    let head_prep = prep.head_of(&head);
-    let cost = |x: f64| -> Result<f64> {
-        let sim = run_model(spec, params, &head_prep.starting(InitialState::Excursion(x)), false)?;
-        let e = score(spec, &head, &sim).nrmse;
-        Ok(if e.is_finite() { e } else { f64::MAX })
-    };
-    let range = excursion_range(spec, params);
-    const GRID: usize = 13;
-    // The bracket shrinks to 0.618^16 ≈ 5e-4 of two grid steps (about 20 A/m for a Terfenol-D
-    // set): fine enough for the uncertainty analysis's differences around it.
-    const GOLDEN_STEPS: usize = 16;
-    let step = 2.0 * range / (GRID - 1) as f64;
-    let mut best = (f64::MAX, 0.0);
-    for j in 0..GRID {
-        let x = -range + step * j as f64;
-        let c = cost(x)?;
-        if c < best.0 {
-            best = (c, x);
-        }
-    }
-    // Golden section on [best − step, best + step].
-    let g = 0.5 * (5f64.sqrt() - 1.0);
-    let (mut lo, mut hi) = (best.1 - step, best.1 + step);
-    let (mut x1, mut x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
-    let (mut c1, mut c2) = (cost(x1)?, cost(x2)?);
-    for _ in 0..GOLDEN_STEPS {
-        if c1 < c2 {
-            (hi, x2, c2) = (x2, x1, c1);
-            x1 = hi - g * (hi - lo);
-            c1 = cost(x1)?;
-        } else {
-            (lo, x1, c1) = (x1, x2, c2);
-            x2 = lo + g * (hi - lo);
-            c2 = cost(x2)?;
-        }
-    }
-    Ok([(best.0, best.1), (c1, x1), (c2, x2)]
-        .into_iter()
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map_or(0.0, |b| b.1))
-}
-
-/// `data`, each file starting from its excursion (none given: demagnetised).
-pub fn starting_from<'a>(data: &[Prepared<'a>], excursions: &[f64]) -> Vec<Prepared<'a>> {
-    data.iter()
-        .enumerate()
-        .map(|(i, p)| match excursions.get(i) {
-            Some(&x) => p.starting(InitialState::Excursion(x)),
-            None => p.starting(InitialState::Demagnetized),
-        })
-        .collect()
-}
-
-/// How well a model matches one file.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FileScore {
-    /// NRMSE of the displacement (offset removed).
-    pub nrmse: f64,
-    /// NRMSE of the current channel, when the model predicts a measured current.
-    pub nrmse_current: Option<f64>,
-    /// The flux density's fit, when the file measured it.
-    pub flux: Option<FluxFit>,
-    /// The coil temperature's fit, when the model has coil heating and the file logged it.
-    pub temperature: Option<TemperatureFit>,
-    /// Fitted displacement offset [µm].
-    pub offset_um: f64,
-    /// The initial state's excursion [A/m] (`None`: a law without memory).
-    pub initial_excursion_a_per_m: Option<f64>,
-}
-
-/// rms(a − b) / (max − min of a).
-pub fn nrmse(measured: &[f64], model: &[f64]) -> f64 {
-    let (lo, hi) = measured.iter().fold((f64::MAX, f64::MIN), |(l, h), &v| (l.min(v), h.max(v)));
-    let mse = measured.iter().zip(model).map(|(a, b)| (a - b) * (a - b)).sum::<f64>() / measured.len() as f64;
-    mse.sqrt() / (hi - lo).max(1e-12)
-}
-
-/// Vacuum permeability μ0 [T m/A].
-pub const MU0: f64 = 1.256_637_062_12e-6;
-
-/// Widest ratio of a search coil's magnetization scale to the parameter set's M_s: beyond 10×
-/// either way the column is in the wrong unit or is not the rod's flux, not a calibration.
-pub const FLUX_SCALE_RANGE: (f64, f64) = (0.1, 10.0);
-
-/// How the model's magnetization matches a measured flux density.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FluxFit {
-    /// NRMSE of the flux density.
-    pub nrmse: f64,
-    /// The magnetization scale g of B = μ0 (H + g M) + c: how much larger the rod's
-    /// magnetization swing is than the model's (the M_s ratio where the law's normalised shape is
-    /// right; also the coil's area against the rod's).
-    pub scale: f64,
-    /// The integrator's zero c [T].
-    pub offset_t: f64,
-}
-
-/// The search coil's flux density as the model explains it: B = μ0 (H + g M) + c, the
-/// magnetization scale g and the integrator's zero c by linear least squares (variable
-/// projection, like the displacement's offset and λ_s). Displacement fits hold M_s as given
-/// (λ_s carries the strain's scale, and the strain only sees M/M_s), so the flux's magnitude is
-/// left to g and the channel judges the magnetization's shape and timing. Returns the fit and the
-/// model's flux density [T] sample by sample.
-pub fn flux_fit(measured: &[f64], field: &[f64], magnetization: &[f64]) -> (FluxFit, Vec<f64>) {
-    let n = measured.len().max(1) as f64;
-    // Regress y = B − μ0 H on x = μ0 M with an intercept.
-    let y = |k: usize| measured[k] - MU0 * field[k];
-    let x = |k: usize| MU0 * magnetization[k];
-    let (my, mx) = ((0..measured.len()).map(y).sum::<f64>() / n, (0..measured.len()).map(x).sum::<f64>() / n);
-    let (mut sxy, mut sxx) = (0.0, 0.0);
-    for k in 0..measured.len() {
-        sxy += (x(k) - mx) * (y(k) - my);
-        sxx += (x(k) - mx) * (x(k) - mx);
-    }
-    let scale = if sxx > 0.0 && sxy.is_finite() {
-        (sxy / sxx).clamp(FLUX_SCALE_RANGE.0, FLUX_SCALE_RANGE.1)
-    } else {
-        1.0
-    };
-    let offset_t = my - scale * mx;
-    let model: Vec<f64> = (0..measured.len()).map(|k| MU0 * field[k] + scale * x(k) + offset_t).collect();
-    (FluxFit { nrmse: nrmse(measured, &model), scale, offset_t }, model)
-}
-
-/// How the model's coil heating matches a logged temperature.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TemperatureFit {
-    /// NRMSE of the temperature.
-    pub nrmse: f64,
-    /// The temperature the rise is counted from [°C]: the coil's when the file starts, taken
-    /// to be in equilibrium with its surroundings (the model's rise starts at 0).
-    pub ambient_c: f64,
-}
-
-/// The logged temperature as the model explains it: T = T_amb + θ, with θ the model's rise
-/// (`rise` empty: none, a model without coil heating) and T_amb by least squares (the mean
-/// difference, like the displacement's offset). Returns the fit and the model's temperature
-/// [°C] sample by sample.
-pub fn temperature_fit(measured: &[f64], rise: &[f64]) -> (TemperatureFit, Vec<f64>) {
-    let at = |k: usize| rise.get(k).copied().unwrap_or(0.0);
-    let n = measured.len().max(1) as f64;
-    let ambient_c = measured.iter().enumerate().map(|(k, t)| t - at(k)).sum::<f64>() / n;
-    let model: Vec<f64> = (0..measured.len()).map(|k| ambient_c + at(k)).collect();
-    (TemperatureFit { nrmse: nrmse(measured, &model), ambient_c }, model)
-}
-
-/// Scores a simulation against its file.
-pub fn score(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> FileScore {
-    score_with_models(spec, rec, sim).0
-}
-
-/// [`score`], and the model's flux density and temperature where the file measured them (what
-/// their residual blocks need: fitted once).
-fn score_with_models(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> (FileScore, ChannelModels) {
-    let meas = rec.displacement_um.as_deref().unwrap_or_default();
-    let offset = meas.iter().zip(&sim.displacement_um).map(|(a, b)| a - b).sum::<f64>() / meas.len() as f64;
-    let shifted: Vec<f64> = sim.displacement_um.iter().map(|y| y + offset).collect();
-    let nrmse_current = match (&rec.current_a, spec.has(Effect::AmplifierDynamics)) {
-        (Some(i), true) => Some(nrmse(i, &sim.current_a)),
-        _ => None,
-    };
-    let (flux, flux_model) = match rec.flux_density_t.as_deref() {
-        Some(b) => {
-            let (f, model) = flux_fit(b, &sim.field_a_per_m, &sim.magnetization_a_per_m);
-            (Some(f), Some(model))
-        }
-        None => (None, None),
-    };
-    let temperature = match rec.temperature_c.as_deref() {
-        Some(t) if spec.has(Effect::ThermalDrift) => Some(temperature_fit(t, &sim.temperature_rise_c)),
-        _ => None,
-    };
-    let memory = has_memory(spec);
-    let score = FileScore {
-        nrmse: nrmse(meas, &shifted),
-        nrmse_current,
-        flux,
-        temperature: temperature.as_ref().map(|t| t.0),
-        offset_um: offset,
-        initial_excursion_a_per_m: memory.then_some(sim.initial_excursion_a_per_m),
-    };
-    (score, ChannelModels { flux: flux_model, temperature: temperature.map(|t| t.1) })
-}
-
-/// The models of the channels fitted in closed form ([`score_with_models`]).
-struct ChannelModels {
-    flux: Option<Vec<f64>>,
-    temperature: Option<Vec<f64>>,
-}
+pub use start::StartScore;
 
 /// Scores of a parameter set on a set of files, and the cost the fit minimises.
 #[derive(Debug, Clone)]
@@ -867,20 +368,6 @@ pub struct FitResult {
     pub start_moved: Vec<Warning>,
 }
 
-/// Why a parameter set cannot be a J–A fit result: α·M_s/(3a) ≥ 1 makes the anhysteretic
-/// curve multivalued, where a J–A loop is an artefact of the integration (and of the sample
-/// rate), not physics. `None` for other laws.
-pub fn multivalued_ja(spec: ModelSpec, p: &ActuatorParams) -> Option<String> {
-    let ratio = p.ja.mean_field_ratio();
-    (spec.law() == model_core::MagnetizationLaw::JilesAtherton && ratio >= 1.0).then(|| {
-        format!(
-            "J–A α·M_s/(3a) = {ratio:.2} ≥ 1 (α = {}, M_s = {} A/m, a = {} A/m): the anhysteretic curve is \
-             multivalued there and the loop an artefact of the integration",
-            p.ja.alpha, p.ja.ms_a_per_m, p.ja.a_a_per_m
-        )
-    })
-}
-
 /// `gma fit --fix/--bound`: parameters held at their start value, and narrowed search ranges.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Constraints {
@@ -902,9 +389,9 @@ fn given_by(spec: ModelSpec, files: &[Recording]) -> Result<Given> {
 }
 
 /// The parameters a fit of `spec` on `files` leaves at their start values because no file
-/// constrains them ([`crate::params::not_fitted`]), for the parameter file to mark.
+/// constrains them ([`free_params::not_fitted`]), for the parameter file to mark.
 pub fn not_fitted(spec: ModelSpec, files: &[Recording]) -> Result<Vec<&'static str>> {
-    Ok(crate::params::not_fitted(spec, given_by(spec, files)?))
+    Ok(free_params::not_fitted(spec, given_by(spec, files)?))
 }
 
 /// A command-driven recording among `files` that `params` drive through an amplifier gain their
@@ -1294,7 +781,7 @@ fn fit_searched(
     // (demagnetised) by the swarm, which then explores the physics alone (searching the states
     // there too made it lose the physics), refined by the local search; estimated anew, per file,
     // wherever a set is scored afterwards.
-    let memory = has_memory(spec);
+    let memory = spec.has_magnetic_memory();
     let n_excursions = if memory { files.len() } else { 0 };
     let excursion_bound = excursion_range(spec, &starts[0]);
     let command_driven = full.iter().any(|p| p.drive != Drive::Current);
@@ -1555,6 +1042,9 @@ fn fit_searched(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::channels::MU0;
+    use crate::score::{flux_fit, temperature_fit};
+    use crate::simulation::{field_reach, preisach_plane_advice, run_model, InitialState};
 
     /// The seen mode is written into the parameters by these names: a registry rename must not
     /// switch it off unnoticed.

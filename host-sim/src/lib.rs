@@ -4,17 +4,22 @@
 //! code takes from each, is docs/references.md.
 
 pub mod analysis;
+pub mod analysis_plots;
 pub mod api;
 pub mod cases;
 pub mod cell_text;
+pub mod channels;
 pub mod cli;
 pub mod columns;
 pub mod data_doubts;
 pub mod diagnose;
+pub mod digests;
 pub mod error;
 pub mod excitation;
 pub mod files;
 pub mod fit;
+pub mod loop_fit;
+pub mod loop_plots;
 pub mod loops;
 pub mod params;
 pub mod partials;
@@ -31,7 +36,11 @@ pub mod results;
 pub mod rig;
 pub mod rod_diffusion;
 pub mod same_samples;
+pub mod score;
 pub mod search;
+pub mod signal;
+pub mod simulated;
+pub mod simulation;
 pub mod spectral;
 pub mod uncertainty;
 pub mod warning;

@@ -1,4 +1,5 @@
-//! Which parameters a model spec identifies, their bounds and scales, and parameter files.
+//! Parameter files: reading, checking and writing a model's parameter set (which of them a
+//! fit identifies is `fit::free_params`).
 //!
 //! Scale ambiguities are removed by fixing, not fitting: the strain scale is carried by λ_s alone
 //! (magnetization is normalised by the magnetostriction's M_s, which is also the anhysteretic and
@@ -10,8 +11,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use model_core::effects::{
-    parameter_tables, spec_words, table_of, Param, Scale, AMPLIFIER_GAIN, PARAMETER_FILE_FORMAT,
-    ROD_THERMAL_LAG, STRAIN_SCALE,
+    parameter_tables, spec_words, table_of, AMPLIFIER_GAIN, PARAMETER_FILE_FORMAT, ROD_THERMAL_LAG,
 };
 use model_core::{Actuator, ActuatorParams, Effect, ModelSpec};
 use serde::Deserialize as _;
@@ -19,92 +19,6 @@ use serde::Deserialize as _;
 use crate::error::Located;
 use crate::files::{echo, Input};
 use crate::located;
-use crate::recording::Recording;
-use crate::search::Bound;
-
-/// One identified parameter: its bounds and scale ([`Bound`], named as in parameter files,
-/// e.g. `ja.k_a_per_m`) and how to read and write it in a parameter set.
-#[derive(Clone, Copy)]
-pub struct FreeParam {
-    /// Name, range and scale.
-    pub bound: Bound,
-    /// Reads it from a parameter set.
-    pub get: fn(&ActuatorParams) -> f64,
-    /// Writes it into a parameter set.
-    pub set: fn(&mut ActuatorParams, f64),
-}
-
-impl FreeParam {
-    /// Name as in parameter files.
-    pub fn name(&self) -> &'static str {
-        self.bound.name
-    }
-
-    /// Maps a value to [0, 1] (clamped; 0.5 for a value the scale cannot map).
-    pub fn to_unit(&self, v: f64) -> f64 {
-        self.bound.to_unit(v)
-    }
-
-    /// Maps [0, 1] back to a value (clamped into the bounds).
-    pub fn from_unit(&self, u: f64) -> f64 {
-        self.bound.from_unit(u)
-    }
-}
-
-impl std::fmt::Debug for FreeParam {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{:?}", self.bound)
-    }
-}
-
-impl FreeParam {
-    /// From the registry's description of a parameter.
-    pub fn of(p: &'static Param) -> Self {
-        FreeParam {
-            bound: Bound { name: p.key, lo: p.lo, hi: p.hi, log: p.scale == Scale::Log, swarm_holds: None },
-            get: p.get,
-            set: p.set,
-        }
-    }
-}
-
-/// What the recordings give, where it decides which parameters a fit can identify.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct Given {
-    /// The files give the command, not the current: the amplifier gain is identified.
-    pub command_driven: bool,
-    /// A file logs the coil's temperature: with `thermal_drift` the rod's lag behind the coil is
-    /// identified (the thermometer pins the coil's own lag).
-    pub coil_temperature: bool,
-}
-
-impl Given {
-    /// What `files` give.
-    pub fn by(files: &[Recording], command_driven: bool) -> Self {
-        Given { command_driven, coil_temperature: logs_coil_temperature(files) }
-    }
-}
-
-/// Whether any of `files` logs the coil's temperature (`temperature_C`).
-pub fn logs_coil_temperature(files: &[Recording]) -> bool {
-    files.iter().any(|r| r.temperature_c.is_some())
-}
-
-/// The continuous parameters `spec` identifies, from the effect registry: the strain scale, the
-/// magnetization law's, the amplifier gain when the files give the command, not the current,
-/// each effect's in chain order, and the rod's thermal lag when they log the coil's temperature.
-pub fn free_params(spec: ModelSpec, given: Given) -> Vec<FreeParam> {
-    let mut v: Vec<&'static Param> = vec![&STRAIN_SCALE];
-    v.extend(spec.law().params());
-    if given.command_driven {
-        v.push(&AMPLIFIER_GAIN);
-    }
-    v.extend(spec.effects().flat_map(|e| e.info().params));
-    if given.coil_temperature && spec.has(Effect::ThermalDrift) {
-        v.push(&ROD_THERMAL_LAG);
-    }
-    v.into_iter().map(FreeParam::of).collect()
-}
 
 /// Loads a parameter file (TOML as `--params-out` writes), or the built-in demo set, and checks
 /// it for `spec` (every stage the spec uses must be valid).
@@ -204,7 +118,7 @@ pub fn load_text(
         f.defaulted.extend(extra);
     }
     // Valid to model-core (it steps), but not a J–A model: said wherever the file is used.
-    if let Some(why) = crate::fit::multivalued_ja(spec, &f.params) {
+    if let Some(why) = multivalued_ja(spec, &f.params) {
         crate::warning::warn(format_args!(
             "{name}: {why}; a fit and the drive refuse it, other commands use it as given"
         ));
@@ -530,18 +444,6 @@ pub fn to_toml_for(p: &ActuatorParams, header: &str, spec: ModelSpec, not_fitted
 /// amplifier gain at its start value).
 pub const NOT_FITTED: &str = "# not fitted:";
 
-/// The parameters a fit of `spec` identifies only when the files give what they need, which
-/// `given` lacks: the amplifier gain (files that give the command alone) and the rod's thermal
-/// lag (a logged coil temperature, with `thermal_drift`).
-pub fn not_fitted(spec: ModelSpec, given: Given) -> Vec<&'static str> {
-    let free: Vec<&str> = free_params(spec, given).iter().map(FreeParam::name).collect();
-    free_params(spec, Given { command_driven: true, coil_temperature: true })
-        .iter()
-        .map(FreeParam::name)
-        .filter(|n| !free.contains(n))
-        .collect()
-}
-
 /// The parameters parameter-file `text` marks [`NOT_FITTED`].
 pub fn not_fitted_in(text: &str) -> Vec<&'static str> {
     let lines: Vec<&str> = text.lines().collect();
@@ -642,6 +544,20 @@ fn parse_spec_quietly(text: &str) -> Result<ModelSpec> {
             )
         }
         other => anyhow::anyhow!("model spec `{text}`: {other}"),
+    })
+}
+
+/// Why a parameter set cannot be a J–A fit result: α·M_s/(3a) ≥ 1 makes the anhysteretic
+/// curve multivalued, where a J–A loop is an artefact of the integration (and of the sample
+/// rate), not physics. `None` for other laws.
+pub fn multivalued_ja(spec: ModelSpec, p: &ActuatorParams) -> Option<String> {
+    let ratio = p.ja.mean_field_ratio();
+    (spec.law() == model_core::MagnetizationLaw::JilesAtherton && ratio >= 1.0).then(|| {
+        format!(
+            "J–A α·M_s/(3a) = {ratio:.2} ≥ 1 (α = {}, M_s = {} A/m, a = {} A/m): the anhysteretic curve is \
+             multivalued there and the loop an artefact of the integration",
+            p.ja.alpha, p.ja.ms_a_per_m, p.ja.a_a_per_m
+        )
     })
 }
 

@@ -193,7 +193,7 @@ impl Plant {
             disp.push(y);
             let mut log_flux = |(h, m): (f32, f32)| {
                 if let Some(sigma) = self.flux_noise_t {
-                    let b = crate::fit::MU0 * (h as f64 + m as f64);
+                    let b = crate::channels::MU0 * (h as f64 + m as f64);
                     flux.push(if sigma > 0.0 { b + b_noise.sample(&mut flux_rng) } else { b });
                 }
             };

@@ -6,9 +6,8 @@
 
 use std::fmt;
 
-use crate::columns::{unit_names, ReadOptions, UNITS};
+use crate::columns::{column_option, suggested, unit_names, ReadOptions, COLUMNS, UNITS};
 use crate::files::echo;
-use crate::recording::{Recording, COLUMNS};
 
 /// Lowest drive frequency plausible for a magnetostrictive actuator's rig [Hz]: a cycle every
 /// 100 s. A 10 Hz drive logged in ms under `time_s` lands at 0.01 Hz.
@@ -132,63 +131,6 @@ const QUANTITY: [&str; COLUMNS.len()] = [
     "the flux density",
 ];
 
-/// The recognised column a header's name suggests (by its words, case ignored), if any:
-/// `T_coil (°C)`, `coil_temp_C`, `Temperature [K]` a temperature, `I_coil` a current, `x_um` a
-/// displacement, `B_search` a flux density, `cmd` a command.
-pub(crate) fn suggested(header: &str) -> Option<usize> {
-    let lower = header.trim().to_lowercase();
-    let words: Vec<&str> = lower.split(|c: char| !c.is_alphanumeric()).filter(|w| !w.is_empty()).collect();
-    let first = words.first().copied().unwrap_or("");
-    let any = |p: &dyn Fn(&str) -> bool| words.iter().any(|w| p(w));
-    if any(&|w| w.starts_with("time"))
-        || (first == "t" && words.get(1).is_some_and(|u| ["s", "ms", "us", "µs"].contains(u)))
-    {
-        Some(0)
-    } else if any(&|w| w.starts_with("temp")) || lower.contains("°c") || (first == "t" && words.len() > 1) {
-        Some(5)
-    } else if any(&|w| w.starts_with("curr")) || first == "i" {
-        Some(2)
-    } else if any(&|w| w.starts_with("disp") || w.starts_with("stroke") || w.starts_with("position"))
-        || first == "x"
-    {
-        Some(3)
-    } else if any(&|w| w.starts_with("flux")) || first == "b" {
-        Some(6)
-    } else if any(&|w| w.starts_with("command") || w.starts_with("cmd") || w.starts_with("volt"))
-        || first == "u"
-    {
-        Some(1)
-    } else if any(&|w| w.starts_with("force")) {
-        Some(4)
-    } else {
-        None
-    }
-}
-
-/// A `--column` argument that reads `header` as column `k`: with the unit its name ends in
-/// (`x_mm` → `:mm`, `T (kelvin)` → `:K`), or `:UNIT` to be filled in when it ends in a unit in
-/// brackets that is not one of the column's; quoted where a shell would split it.
-pub(crate) fn column_option(k: usize, header: &str) -> String {
-    let ends_in = |u: &str| {
-        ["_", " ", "/"].iter().any(|sep| header.ends_with(&format!("{sep}{u}")))
-            || header.ends_with(&format!("[{u}]"))
-            || header.ends_with(&format!("({u})"))
-    };
-    let bracketed = header.ends_with([')', ']']);
-    let unit = match UNITS[k].iter().find(|u| ends_in(u.name)) {
-        Some(u) if u.is_identity() => None,
-        Some(u) => Some(u.name),
-        None if k == 5 && header.to_lowercase().contains("kelvin") => Some("K"),
-        None if bracketed => Some("UNIT"),
-        None => None,
-    };
-    let arg = match unit {
-        Some(u) => format!("{}={header}:{u}", COLUMNS[k]),
-        None => format!("{}={header}", COLUMNS[k]),
-    };
-    crate::files::shell_word(std::path::Path::new(&arg))
-}
-
 /// The doubts about a file's columns: `headers` as in the file, `used` whether each was read.
 pub fn column_doubts(file: &str, headers: &[&str], used: &[bool], opts: &ReadOptions) -> Vec<ReadDoubt> {
     let unused: Vec<&str> = headers.iter().zip(used).filter(|(_, u)| !**u).map(|(h, _)| h.trim()).collect();
@@ -220,16 +162,23 @@ pub fn column_doubts(file: &str, headers: &[&str], used: &[bool], opts: &ReadOpt
 
 /// Cycles of `x` (half its direction reversals, ignoring wiggles below 10 % of its span).
 fn cycles(x: &[f64]) -> f64 {
-    crate::diagnose::reversals(x) as f64 / 2.0
+    crate::signal::reversals(x) as f64 / 2.0
 }
 
 /// The doubt about a recording's time axis, if it is implausible for an actuator rig: the drive
 /// frequency it implies below [`MIN_DRIVE_HZ`] or above [`MAX_DRIVE_HZ`], a slow logger's step
 /// with fewer than [`MIN_SLOW_SAMPLES_PER_CYCLE`] samples per drive cycle, or the drive or the
 /// displacement going through a cycle in fewer than [`MIN_SAMPLES_PER_CYCLE`] samples.
-pub fn time_doubt(r: &Recording) -> Option<ReadDoubt> {
-    let (n, step_s, duration) = (r.len() as f64, r.dt_s(), r.duration_s());
-    let drive = r.current_a.as_deref().or(r.command_v.as_deref())?;
+/// `file` sampled at `step_s` over `duration` [s]; `drive` its current (or command), if any.
+pub fn time_doubt(
+    file: &str,
+    step_s: f64,
+    duration: f64,
+    drive: Option<&[f64]>,
+    displacement: Option<&[f64]>,
+) -> Option<ReadDoubt> {
+    let drive = drive?;
+    let n = drive.len() as f64;
     let drive_cycles = cycles(drive);
     let why = if drive_cycles >= 1.0 && duration > 0.0 {
         let (hz, per_cycle) = (drive_cycles / duration, n / drive_cycles);
@@ -251,7 +200,7 @@ pub fn time_doubt(r: &Recording) -> Option<ReadDoubt> {
         None
     };
     let why = why.or_else(|| {
-        let channels = [("drive", Some(drive)), ("displacement", r.displacement_um.as_deref())];
+        let channels = [("drive", Some(drive)), ("displacement", displacement)];
         channels.into_iter().find_map(|(what, x)| {
             let per_cycle = n / cycles(x?);
             (per_cycle < MIN_SAMPLES_PER_CYCLE).then(|| {
@@ -262,7 +211,7 @@ pub fn time_doubt(r: &Recording) -> Option<ReadDoubt> {
             })
         })
     })?;
-    Some(ReadDoubt::ImplausibleTime { file: r.name.clone(), step_s, why })
+    Some(ReadDoubt::ImplausibleTime { file: file.to_string(), step_s, why })
 }
 
 #[cfg(test)]

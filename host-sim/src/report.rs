@@ -8,11 +8,13 @@ use anyhow::Result;
 use model_core::{ActuatorParams, ModelSpec};
 
 use crate::diagnose::{diagnose, Diagnosis};
-use crate::fit::{evaluate, simulate, FitOptions, Simulation};
+use crate::fit::{evaluate, FitOptions};
 use crate::params::ParamSource;
 use crate::plots::{self, Chart, Series};
 use crate::provenance::Provenance;
 use crate::recording::Recording;
+use crate::simulated::Simulation;
+use crate::simulation::simulate;
 use crate::uncertainty::{self, Uncertainty, CORRELATION_WARNING};
 use crate::warning::{by_weight, Warning};
 
@@ -98,18 +100,18 @@ fn esc(s: &str) -> String {
 pub fn loop_chart(rec: &Recording, models: &[(ModelSpec, ActuatorParams)]) -> Result<Chart> {
     let meas = rec.displacement_um.as_deref().unwrap_or_default();
     drive_loop(rec, models, meas, "loop", "displacement [µm]", |spec, sim| {
-        let off = crate::fit::score(spec, rec, sim).offset_um;
+        let off = crate::score::score(spec, rec, sim).offset_um;
         sim.displacement_um.iter().map(|y| y + off).collect()
     })
 }
 
 /// The flux-density loop of a recording with a search coil: measured B and each model's
-/// μ0 (H + g M) + c ([`crate::fit::flux_fit`]) against the drive; `None` without the column.
+/// μ0 (H + g M) + c ([`crate::score::flux_fit`]) against the drive; `None` without the column.
 pub fn flux_loop_chart(rec: &Recording, models: &[(ModelSpec, ActuatorParams)]) -> Result<Option<Chart>> {
     let Some(b) = rec.flux_density_t.as_deref() else { return Ok(None) };
     let chart =
         drive_loop(rec, models, b, "flux-density loop", "flux density (zero arbitrary) [T]", |_, sim| {
-            crate::fit::flux_fit(b, &sim.field_a_per_m, &sim.magnetization_a_per_m).1
+            crate::score::flux_fit(b, &sim.field_a_per_m, &sim.magnetization_a_per_m).1
         })?;
     Ok(Some(chart))
 }
@@ -151,7 +153,7 @@ pub fn residual_chart(rec: &Recording, models: &[(ModelSpec, ActuatorParams)]) -
     let mut series = Vec::new();
     for (k, (spec, params)) in models.iter().enumerate() {
         let sim = simulate(*spec, params, rec)?;
-        let off = crate::fit::score(*spec, rec, &sim).offset_um;
+        let off = crate::score::score(*spec, rec, &sim).offset_um;
         let pts: Vec<(f64, f64)> = rec
             .time_s
             .iter()
@@ -534,7 +536,7 @@ fn analysis_section<'a>(
     );
     for rec in files {
         let sim = simulate(*spec, params, rec)?;
-        let off = crate::fit::score(*spec, rec, &sim).offset_um;
+        let off = crate::score::score(*spec, rec, &sim).offset_um;
         match crate::analysis::analyse(rec, &sim, off, crate::analysis::DEFAULT_MAX_LAG) {
             Ok(fa) => {
                 let _ = write!(h, "<pre>{}</pre>", esc(&fa.summary.to_string()));

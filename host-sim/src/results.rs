@@ -8,6 +8,7 @@ use std::fmt;
 use serde::Serialize;
 
 use crate::analysis::AnalysisSummary;
+use crate::fit::StartScore;
 use crate::loops::LoopFeatures;
 use crate::uncertainty::Uncertainty;
 
@@ -80,7 +81,7 @@ impl FileScoreRow {
 
     /// A recording's rows: displacement (with its offset and initial state), then the current
     /// the flux density and the temperature where the model is scored on them.
-    pub fn for_recording(file: &str, split: Option<&'static str>, s: &crate::fit::FileScore) -> Vec<Self> {
+    pub fn for_recording(file: &str, split: Option<&'static str>, s: &crate::score::FileScore) -> Vec<Self> {
         let mut rows = vec![FileScoreRow {
             offset_um: Some(s.offset_um),
             initial_excursion_a_per_m: s.initial_excursion_a_per_m,
@@ -154,23 +155,6 @@ pub struct FitSummary {
     /// For the text: the parameters in the fit's order, whether the files are loops, the time.
     #[serde(skip)]
     pub text: FitText,
-}
-
-/// The start values of a fit: every fit evaluates them, and returns them when its search ends
-/// worse (a fit never ends worse than where it started).
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-pub struct StartScore {
-    /// Mean NRMSE over the fit files at the start values; null when they cannot be used.
-    pub nrmse: Option<f64>,
-    /// The search ended worse than the start values, so the fit returned them.
-    pub kept: bool,
-    /// Why the start values cannot be used (e.g. α·M_s/(3a) ≥ 1), if so.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub refused: Option<String>,
-    /// A mechanical mode the recordings' frequency response shows (models with `mech`): the
-    /// search also starts from it.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub seen_mode: Option<crate::resonance::SeenMode>,
 }
 
 /// One parameter's estimate in a fit's JSON.

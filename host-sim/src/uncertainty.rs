@@ -35,10 +35,11 @@ use model_core::ModelSpec;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
-use crate::fit::{excursion_range, prepare, residual_blocks, starting_from, FitResult, Prepared};
-use crate::params::FreeParam;
+use crate::fit::FreeParam;
+use crate::fit::{residual_blocks, FitResult};
 use crate::recording::Recording;
 use crate::search::Bound;
+use crate::simulation::{excursion_range, prepare, starting_from, Prepared};
 use crate::warning::Warning;
 
 /// Singular values of the column-normalised Jacobian below this fraction of the largest are

@@ -254,7 +254,7 @@ pub enum Warning {
         share: f64,
     },
     /// A recording's search-coil magnetization scale g ended at an end of its range
-    /// ([`crate::fit::FLUX_SCALE_RANGE`]): the column is not the rod's flux density B in T.
+    /// ([`crate::channels::FLUX_SCALE_RANGE`]): the column is not the rod's flux density B in T.
     FluxScaleAtBound {
         /// The recording.
         file: String,
@@ -545,7 +545,7 @@ impl fmt::Display for Warning {
                 )
             }
             Warning::FluxScaleAtBound { file, scale } => {
-                let (lo, hi) = crate::fit::FLUX_SCALE_RANGE;
+                let (lo, hi) = crate::channels::FLUX_SCALE_RANGE;
                 let why = if *scale <= lo {
                     "the flux density swings far less than the model's magnetization makes it: is \
                      `flux_density_T` the rod's flux density B in T? A flux linkage N·A·B (V·s) must be divided \

@@ -836,14 +836,14 @@ fn demo_finds_the_hidden_effects_and_writes_the_report() {
 
 #[test]
 fn loop_files_fit_the_magnetization_stage_and_compare_reads_coercivity() {
-    use host_sim::loops::{self, LoopModel};
+    use host_sim::loop_fit::{self, LoopModel};
     use model_core::magnetization::JaVariant;
     let dir = tempfile::tempdir().unwrap();
     // A Terfenol-D major loop as a permeameter writes it: tab separated, H in kA/m, B in T.
     let truth = [6.0e5, 6512.0, -0.035, 4000.0, 0.2];
     let h: Vec<f64> =
         (0..=240).map(|k| 1.0e5 * (2.0 * std::f64::consts::PI * k as f64 / 240.0).cos()).collect();
-    let m = loops::run(LoopModel::JilesAtherton(JaVariant::Bulk), &truth, &h, 1.0e5).unwrap();
+    let m = loop_fit::run(LoopModel::JilesAtherton(JaVariant::Bulk), &truth, &h, 1.0e5).unwrap();
     let mut text = String::from("H(kA/m)\tB(T)\n");
     for (h, m) in h.iter().zip(&m) {
         text.push_str(&format!("{}\t{}\n", h * 1e-3, 4e-7 * std::f64::consts::PI * (h + m)));
@@ -886,7 +886,7 @@ fn loop_files_fit_the_magnetization_stage_and_compare_reads_coercivity() {
     // A minor loop of the same rod validates: scored on the page and in the JSON as `fit` scores it.
     let minor = dir.path().join("minor.csv");
     let h_minor: Vec<f64> = h.iter().map(|h| 0.3 * h).collect();
-    let m_minor = loops::run(LoopModel::JilesAtherton(JaVariant::Bulk), &truth, &h_minor, 1.0e5).unwrap();
+    let m_minor = loop_fit::run(LoopModel::JilesAtherton(JaVariant::Bulk), &truth, &h_minor, 1.0e5).unwrap();
     let mut text = String::from("H(A/m),M(A/m)\n");
     for (h, m) in h_minor.iter().zip(&m_minor) {
         text.push_str(&format!("{h},{m}\n"));

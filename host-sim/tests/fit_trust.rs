@@ -7,7 +7,8 @@ mod common;
 
 use common::{gma, refused};
 use host_sim::excitation::Excitation;
-use host_sim::loops::{self, LoopChannel, LoopFile, LoopModel};
+use host_sim::loop_fit::{self, LoopModel};
+use host_sim::loops::{LoopChannel, LoopFile};
 use host_sim::plant::Plant;
 use host_sim::search::SearchOptions;
 use model_core::magnetization::{JaParams, JaVariant};
@@ -20,7 +21,7 @@ fn exact_loop(ja: JaParams, h_max: f64) -> LoopFile {
     p.ja = ja;
     let h: Vec<f64> =
         (0..=200).map(|k| h_max * (2.0 * std::f64::consts::PI * k as f64 / 200.0).cos()).collect();
-    let m = loops::run(model, &model.values_of(&p), &h, h_max).unwrap();
+    let m = loop_fit::run(model, &model.values_of(&p), &h, h_max).unwrap();
     LoopFile { name: "exact".into(), h, value: m, channel: LoopChannel::Magnetization }
 }
 
@@ -33,7 +34,7 @@ fn a_loop_fit_returns_its_start_when_the_search_ends_worse() {
     let mut start = ActuatorParams::TERFENOL_DEMO;
     start.ja = ja;
     let model = LoopModel::JilesAtherton(JaVariant::Bulk);
-    let fit = loops::fit(model, std::slice::from_ref(&f), &start, SearchOptions::default()).unwrap();
+    let fit = loop_fit::fit(model, std::slice::from_ref(&f), &start, SearchOptions::default()).unwrap();
     assert!(fit.start.kept, "{:?}", fit.start);
     assert_eq!(fit.start.nrmse, Some(0.0));
     assert_eq!(fit.nrmse, vec![0.0]);
@@ -55,7 +56,7 @@ fn a_multivalued_start_is_refused_and_the_loop_fit_stays_single_valued() {
     start.ja = JaParams { alpha: 0.05, ..JaParams::TSMA_ROD1_002 }; // α·M_s/(3a) = 1.54
     assert!(start.ja.mean_field_ratio() > 1.0);
     let model = LoopModel::JilesAtherton(JaVariant::Bulk);
-    let fit = loops::fit(model, std::slice::from_ref(&f), &start, SearchOptions::default()).unwrap();
+    let fit = loop_fit::fit(model, std::slice::from_ref(&f), &start, SearchOptions::default()).unwrap();
     let why = fit.start.refused.as_deref().unwrap_or_default();
     assert!(why.contains("α·M_s/(3a) = 1.54"), "{:?}", fit.start);
     assert_eq!(fit.start.nrmse, None);

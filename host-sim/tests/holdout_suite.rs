@@ -212,7 +212,7 @@ fn plane_as_advised(params: &Path, fit_files: &[PathBuf]) {
     let recs: Vec<_> =
         fit_files.iter().map(|f| host_sim::recording::Recording::read(f).expect("recording")).collect();
     if let Some(host_sim::warning::Warning::PreisachPlaneWide { advised, .. }) =
-        host_sim::fit::preisach_plane_advice(spec, &p, &recs)
+        host_sim::simulation::preisach_plane_advice(spec, &p, &recs)
     {
         let mut doc: toml::Table = fs::read_to_string(params).unwrap().parse().expect("parameter TOML");
         let table = doc.get_mut("preisach").and_then(|v| v.as_table_mut()).expect("[preisach]");

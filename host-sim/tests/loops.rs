@@ -1,7 +1,8 @@
 //! Magnetization-loop fits (issue 7): loops generated from known J–A parameters of three kinds
 //! of material, full loops and single descending branches, with noise, fitted back.
 
-use host_sim::loops::{self, LoopChannel, LoopFile, LoopModel};
+use host_sim::loop_fit::{self, LoopModel};
+use host_sim::loops::{self, LoopChannel, LoopFile};
 use host_sim::search::SearchOptions;
 use model_core::magnetization::JaVariant;
 use model_core::ActuatorParams;
@@ -36,7 +37,7 @@ fn loop_file(m: &Material, branch_only: bool, seed: u64) -> LoopFile {
                 }
         })
         .collect();
-    let clean = loops::run(LoopModel::JilesAtherton(JaVariant::Bulk), &m.truth, &h, m.h_max).unwrap();
+    let clean = loop_fit::run(LoopModel::JilesAtherton(JaVariant::Bulk), &m.truth, &h, m.h_max).unwrap();
     let range = clean.iter().fold(f64::MIN, |a, &v| a.max(v)) - clean.iter().fold(f64::MAX, |a, &v| a.min(v));
     let noise = Normal::new(0.0, 0.002 * range).unwrap();
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
@@ -58,7 +59,7 @@ fn jiles_atherton_is_recovered_from_loops_of_three_materials() {
         for branch in [false, true] {
             let f = loop_file(m, branch, 5);
             let t = std::time::Instant::now();
-            let fit = loops::fit(
+            let fit = loop_fit::fit(
                 LoopModel::JilesAtherton(JaVariant::Bulk),
                 std::slice::from_ref(&f),
                 &ActuatorParams::TERFENOL_DEMO,
@@ -116,11 +117,16 @@ fn the_laws_without_hysteresis_fit_a_loop() {
     let truth = [7.6e5, 7000.0];
     let h: Vec<f64> =
         (0..=300).map(|k| 6.0e4 * (2.0 * std::f64::consts::PI * k as f64 / 300.0).cos()).collect();
-    let value = loops::run(LoopModel::Anhysteretic, &truth, &h, 6.0e4).unwrap();
+    let value = loop_fit::run(LoopModel::Anhysteretic, &truth, &h, 6.0e4).unwrap();
     let f = LoopFile { name: "langevin".into(), h, value, channel: LoopChannel::Magnetization };
     let fit = |model| {
-        loops::fit(model, std::slice::from_ref(&f), &ActuatorParams::TERFENOL_DEMO, SearchOptions::default())
-            .unwrap()
+        loop_fit::fit(
+            model,
+            std::slice::from_ref(&f),
+            &ActuatorParams::TERFENOL_DEMO,
+            SearchOptions::default(),
+        )
+        .unwrap()
     };
     let an = fit(LoopModel::Anhysteretic);
     for (got, want) in an.values().iter().zip(truth) {
@@ -144,12 +150,12 @@ fn a_loop_fit_reports_the_values_it_writes() {
     let f = loop_file(m, false, 3);
     let model = LoopModel::JilesAtherton(JaVariant::Bulk);
     let opts = SearchOptions { effort: 0.2, ..SearchOptions::default() };
-    let fit = loops::fit(model, std::slice::from_ref(&f), &ActuatorParams::TERFENOL_DEMO, opts).unwrap();
+    let fit = loop_fit::fit(model, std::slice::from_ref(&f), &ActuatorParams::TERFENOL_DEMO, opts).unwrap();
     assert!(!fit.start.kept, "{:?}", fit.start);
     let written = model.values_of(&fit.apply_to(&ActuatorParams::TERFENOL_DEMO));
     assert_eq!(fit.values(), written, "reported vs written");
-    let again = loops::run(model, &written, &f.h, m.h_max).unwrap();
-    assert_eq!(fit.nrmse[0], host_sim::fit::nrmse(&f.value, &again), "the NRMSE of the written set");
+    let again = loop_fit::run(model, &written, &f.h, m.h_max).unwrap();
+    assert_eq!(fit.nrmse[0], host_sim::score::nrmse(&f.value, &again), "the NRMSE of the written set");
 }
 
 /// A unit written after a `/`, `_` or space is read as in brackets: the same loop in Oe and T

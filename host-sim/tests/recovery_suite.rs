@@ -195,8 +195,10 @@ fn recording(case: &Case, file: &File, current_lsb: f64, seed: u64, salt: u64) -
     let floor_file = dir.join(format!("{stem}.floor"));
     if !csv.exists() || !floor_file.exists() {
         let rec = textrig::simulate(&e).unwrap_or_else(|err| panic!("{}: {}: {err}", case.label, file.label));
-        let floor =
-            fit::nrmse(&rec.displacement_um, &with_offset(&rec.displacement_um, &rec.truth.displacement_um));
+        let floor = host_sim::score::nrmse(
+            &rec.displacement_um,
+            &with_offset(&rec.displacement_um, &rec.truth.displacement_um),
+        );
         let tmp = csv.with_extension("tmp");
         rec.write_csv(std::io::BufWriter::new(std::fs::File::create(&tmp).expect("cache file")))
             .expect("write");
@@ -227,7 +229,7 @@ fn truth(case: &Case, spec: ModelSpec) -> ActuatorParams {
 
 /// The engineer's start: everything a rig's builder knows (the truth's fixed keys: coil, bias,
 /// rod, M_s, resistances, the J–A form), the demo set's values for every parameter the fit searches.
-fn engineer_start(truth: &ActuatorParams, res_free: &[params::FreeParam]) -> ActuatorParams {
+fn engineer_start(truth: &ActuatorParams, res_free: &[fit::FreeParam]) -> ActuatorParams {
     let mut p = *truth;
     for f in res_free {
         (f.set)(&mut p, (f.get)(&ActuatorParams::TERFENOL_DEMO));
@@ -279,8 +281,9 @@ fn run(case: &Case, current_lsb: f64, seed: u64) -> Outcome {
     let floor = val_recs.iter().map(|(_, f)| f).sum::<f64>() / val_recs.len() as f64;
     let val_files: Vec<Recording> = val_recs.into_iter().map(|(r, _)| r).collect();
     let truth = truth(case, spec);
-    let command_driven = fit::drive_for(spec, &fit_files[0]).expect("drive") != fit::Drive::Current;
-    let free = params::free_params(spec, params::Given::by(&fit_files, command_driven));
+    let command_driven = host_sim::simulation::drive_for(spec, &fit_files[0]).expect("drive")
+        != host_sim::simulation::Drive::Current;
+    let free = fit::free_params(spec, fit::Given::by(&fit_files, command_driven));
     let start = engineer_start(&truth, &free);
     let res: FitResult = fit::fit(spec, &start, &fit_files, FitOptions { seed, ..FitOptions::default() })
         .unwrap_or_else(|e| panic!("{}: fit: {e:#}", case.label));

@@ -24,8 +24,9 @@
 use std::path::{Path, PathBuf};
 
 use host_sim::diagnose::diagnose;
-use host_sim::fit::{preisach_plane_advice, FitOptions};
+use host_sim::fit::FitOptions;
 use host_sim::recording::Recording;
+use host_sim::simulation::preisach_plane_advice;
 use host_sim::warning::Warning;
 use model_core::{ActuatorParams, Effect, ModelSpec};
 use rayon::prelude::*;
@@ -558,14 +559,14 @@ fn error_budget_of_the_complete_structure() {
             val_exc.iter().enumerate().map(|(i, e)| run(e, 10 + i as u64)).collect();
         let f = host_sim::fit::fit(model, &init, &fit_files, FitOptions::default()).expect("fit");
         let score = |rec: &Recording| {
-            let sim = host_sim::fit::simulate(model, &f.params, rec).expect("simulate");
+            let sim = host_sim::simulation::simulate(model, &f.params, rec).expect("simulate");
             let k = host_sim::diagnose::burn_in(rec);
             let m = &rec.displacement_um.as_deref().expect("displacement")[k..];
             let y = &sim.displacement_um[k..];
             // The sensor's offset is not a model property: scored as the fit scores it.
             let off = m.iter().zip(y).map(|(a, b)| a - b).sum::<f64>() / m.len() as f64;
             let shifted: Vec<f64> = y.iter().map(|v| v + off).collect();
-            host_sim::fit::nrmse(m, &shifted) * 100.0
+            host_sim::score::nrmse(m, &shifted) * 100.0
         };
         let fit: Vec<String> = fit_files.iter().map(|r| format!("{:.2}", score(r))).collect();
         let val: Vec<String> = val_files.iter().map(|r| format!("{:.2}", score(r))).collect();
@@ -634,7 +635,7 @@ fn effect_visibility_in_the_suite_files() {
             let y = &rec.displacement_um.as_deref().expect("displacement")[k..];
             let mean = reference.iter().zip(y).map(|(a, b)| a - b).sum::<f64>() / y.len() as f64;
             let shifted: Vec<f64> = y.iter().map(|v| v + mean).collect();
-            let nrmse = host_sim::fit::nrmse(reference, &shifted);
+            let nrmse = host_sim::score::nrmse(reference, &shifted);
             assert!(nrmse.is_finite(), "{}: non-finite NRMSE", exc.label);
             format!("{:.3} %", 100.0 * nrmse)
         };

@@ -71,7 +71,7 @@ fn the_95_percent_intervals_cover_the_true_parameters() {
             u.params
                 .iter()
                 .map(|p| {
-                    let free = host_sim::params::free_params(spec, host_sim::params::Given::default());
+                    let free = host_sim::fit::free_params(spec, host_sim::fit::Given::default());
                     let true_value = (free.iter().find(|f| f.name() == p.bound.name).unwrap().get)(&t);
                     let (lo, hi) = p.ci95.expect("identifiable");
                     assert!(
@@ -227,7 +227,7 @@ fn bad_fix_and_bound_options_are_refused_by_name() {
 fn the_residual_blocks_make_up_the_cost() {
     let spec = ModelSpec::parse("ja").unwrap();
     let files = recordings(3);
-    let prep = host_sim::fit::prepare(spec, &files).unwrap();
+    let prep = host_sim::simulation::prepare(spec, &files).unwrap();
     let blocks = host_sim::fit::residual_blocks(spec, &truth(), &prep).unwrap();
     let sum: f64 = blocks.iter().flat_map(|b| &b.1).map(|x| x * x).sum();
     let cost = host_sim::fit::evaluate(spec, &truth(), &files).unwrap().cost();

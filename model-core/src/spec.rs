@@ -165,6 +165,13 @@ impl ModelSpec {
         MagnetizationLaw::of(self.effects())
     }
 
+    /// Whether the magnetization law carries a history (J–A, Preisach), so that a run starts
+    /// from an initial magnetic state of its own (the spec-level twin of
+    /// [`crate::Actuator::has_magnetic_memory`]).
+    pub fn has_magnetic_memory(self) -> bool {
+        matches!(self.law(), MagnetizationLaw::JilesAtherton | MagnetizationLaw::Preisach)
+    }
+
     /// The part of the model the drive's inverse compensator inverts (without the effects its
     /// feedback handles). A mask known at compile time, so that the firmware's optimiser sees
     /// which stages can never be built and leaves their code out.

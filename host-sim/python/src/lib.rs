@@ -553,7 +553,11 @@ fn prediction_dict<'py>(py: Python<'py>, p: &Prediction) -> PyResult<Bound<'py, 
     Ok(d)
 }
 
-fn simulation_items(py: Python<'_>, d: &Bound<'_, PyDict>, sim: &host_sim::fit::Simulation) -> PyResult<()> {
+fn simulation_items(
+    py: Python<'_>,
+    d: &Bound<'_, PyDict>,
+    sim: &host_sim::simulated::Simulation,
+) -> PyResult<()> {
     d.set_item("displacement_um", array(py, &sim.displacement_um))?;
     d.set_item("current_A", array(py, &sim.current_a))?;
     d.set_item("field_A_per_m", array(py, &sim.field_a_per_m))?;

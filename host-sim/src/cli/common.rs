@@ -240,9 +240,9 @@ impl ModelFiles {
         if let Data::Recordings(fit_files, val_files) = &data {
             fit::check_files(spec, &init, fit_files.iter().chain(val_files))?;
             input_warnings.extend(fit::data_doubts(spec, &init, fit_files.iter().chain(val_files))?);
-            input_warnings.extend(fit::preisach_plane_advice(spec, &init, fit_files));
+            input_warnings.extend(crate::simulation::preisach_plane_advice(spec, &init, fit_files));
             if let Some((other, _)) = also {
-                input_warnings.extend(fit::preisach_plane_advice(other, &init, fit_files));
+                input_warnings.extend(crate::simulation::preisach_plane_advice(other, &init, fit_files));
             }
         }
         let args: Vec<std::ffi::OsString> = std::env::args_os().collect();

@@ -13,7 +13,9 @@ use crate::files::{
     check_outputs, display, is_stdout, no_stdout, open_all, output_folder, to_stdout, unique_stems, Input,
     OutputWriter,
 };
-use crate::fit::{self, Simulation};
+use crate::fit::{self};
+use crate::loop_fit;
+use crate::loop_plots;
 use crate::loops::{self, LoopFile};
 use crate::params;
 use crate::plots::{self, Chart, XScale};
@@ -21,6 +23,7 @@ use crate::provenance::Provenance;
 use crate::recording::Recording;
 use crate::report;
 use crate::results::{CompareSummary, FileScoreRow};
+use crate::simulated::Simulation;
 use crate::warning::{by_weight, Warning};
 
 /// Options of `gma compare`.
@@ -176,8 +179,8 @@ fn compare_recordings(
         w.write_record(header)?;
     }
     for (rec, stem) in recs.iter().zip(stems) {
-        let sim = fit::simulate(spec, p, rec)?;
-        let sc = fit::score(spec, rec, &sim);
+        let sim = crate::simulation::simulate(spec, p, rec)?;
+        let sc = crate::score::score(spec, rec, &sim);
         doubts.extend(fit::flux_scale_doubts(std::slice::from_ref(rec), &[sc]));
         total += sc.nrmse;
         let time = report::time_chart(rec, &sim, sc.offset_um, &spec.to_string());
@@ -251,7 +254,7 @@ fn write_time_series(
     let flux = rec
         .flux_density_t
         .as_deref()
-        .map(|b| (b, fit::flux_fit(b, &sim.field_a_per_m, &sim.magnetization_a_per_m).1));
+        .map(|b| (b, crate::score::flux_fit(b, &sim.field_a_per_m, &sim.magnetization_a_per_m).1));
     for (k, ((t, m), y)) in rec.time_s.iter().zip(measured).zip(&sim.displacement_um).enumerate() {
         let model = y + offset_um;
         let residual = m - model;
@@ -299,16 +302,16 @@ fn compare_loops(
     files: &[LoopFile],
     stems: &[String],
 ) -> Result<CompareSummary> {
-    let model = loops::LoopModel::from_spec(spec, p)?;
+    let model = loop_fit::LoopModel::from_spec(spec, p)?;
     let values = model.values_of(p);
     let mut rows = Vec::new();
     let mut charts = Vec::new();
     let mut total = 0.0;
     for (f, stem) in files.iter().zip(stems) {
         let h_max = f.h.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let m = loops::run(model, &values, &f.h, h_max)
+        let m = loop_fit::run(model, &values, &f.h, h_max)
             .map_err(|e| crate::error::InRecording::error(&f.name, e.0))?;
-        let e = fit::nrmse(&f.value, &f.channel_from_m(&m));
+        let e = crate::score::nrmse(&f.value, &f.channel_from_m(&m));
         total += e;
         let out = plot_path(a, stem, "loop");
         rows.push(FileScoreRow {
@@ -317,7 +320,7 @@ fn compare_loops(
             model: Some(loops::features(&f.h, &m)),
             ..FileScoreRow::new(&f.name, None, f.channel.name(), e)
         });
-        charts.push((out, vec![loops::chart(f, &m, &spec.to_string())], XScale::Linear));
+        charts.push((out, vec![loop_plots::chart(f, &m, &spec.to_string())], XScale::Linear));
     }
     report_all(
         &charts,

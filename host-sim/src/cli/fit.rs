@@ -9,7 +9,8 @@ use clap::Args;
 use super::common::{Data, ModelFiles, Prepared};
 use crate::files::{display, names, to_stdout, write_atomic};
 use crate::fit;
-use crate::loops::{self, LoopFile};
+use crate::loop_fit;
+use crate::loops::LoopFile;
 use crate::params;
 use crate::provenance::Provenance;
 use crate::recording::Recording;
@@ -246,7 +247,7 @@ pub(crate) fn fit_recordings(
 
 /// The contract's per-file rows: displacement, and current and flux density where the model
 /// is scored on them.
-fn rows(split: &'static str, recs: &[Recording], scores: &[fit::FileScore]) -> Vec<FileScoreRow> {
+fn rows(split: &'static str, recs: &[Recording], scores: &[crate::score::FileScore]) -> Vec<FileScoreRow> {
     recs.iter().zip(scores).flat_map(|(r, s)| FileScoreRow::for_recording(&r.name, Some(split), s)).collect()
 }
 
@@ -257,13 +258,13 @@ pub(crate) fn fit_loops(
     val_files: &[LoopFile],
 ) -> Result<(FitSummary, model_core::ActuatorParams, Vec<Warning>)> {
     let spec = p.spec;
-    let model = loops::LoopModel::from_spec(spec, &p.init)?;
+    let model = loop_fit::LoopModel::from_spec(spec, &p.init)?;
     let t = Instant::now();
     crate::progress::phase(
         p.opts.progress,
         &format!("fitting the magnetization model `{spec}` to {} loop file(s)", fit_files.len()),
     );
-    let mut res = loops::fit_shown(model, fit_files, &p.init, p.search_options(), p.opts.progress)?;
+    let mut res = loop_fit::fit_shown(model, fit_files, &p.init, p.search_options(), p.opts.progress)?;
     res.warnings.splice(0..0, p.input_warnings.iter().cloned());
     let mut files: Vec<FileScoreRow> = fit_files
         .iter()
@@ -274,9 +275,9 @@ pub(crate) fn fit_loops(
     let h_max =
         fit_files.iter().chain(val_files).flat_map(|f| f.h.iter()).fold(0.0f64, |m, v| m.max(v.abs()));
     for f in val_files {
-        let m = loops::run(model, &res.values(), &f.h, h_max)
+        let m = loop_fit::run(model, &res.values(), &f.h, h_max)
             .map_err(|e| crate::error::InRecording::error(&f.name, e.0))?;
-        let e = fit::nrmse(&f.value, &f.channel_from_m(&m));
+        let e = crate::score::nrmse(&f.value, &f.channel_from_m(&m));
         files.push(FileScoreRow::new(&f.name, Some("val"), f.channel.name(), e));
         val_nrmse.push(e);
     }

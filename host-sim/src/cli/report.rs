@@ -14,7 +14,7 @@ use crate::progress::Phase;
 use crate::provenance::Provenance;
 use crate::recording::Recording;
 use crate::results::UncertaintyFields;
-use crate::{fit, loops, params, report};
+use crate::{fit, loop_fit, loop_plots, params, report};
 
 /// Options of `gma report`.
 #[derive(Args)]
@@ -105,14 +105,14 @@ pub fn run(a: &ReportArgs) -> Result<()> {
     let extra = super::context_json(&p.params_source, &provenance);
     match &p.data {
         Data::Loops(files, val_files) => {
-            let res = loops::fit_shown(
-                loops::LoopModel::from_spec(spec, &p.init)?,
+            let res = loop_fit::fit_shown(
+                loop_fit::LoopModel::from_spec(spec, &p.init)?,
                 files,
                 &p.init,
                 p.search_options(),
                 true,
             )?;
-            let (page, nrmse_val) = loops::html(&spec.to_string(), &res, files, val_files)?;
+            let (page, nrmse_val) = loop_plots::html(&spec.to_string(), &res, files, val_files)?;
             // The page first: it shows a failed fit too.
             write_atomic(&a.out, report::with_sections(page, &provenance_section).as_bytes())?;
             // As `gma fit` refuses to write an invalid loop model's parameters.

@@ -13,11 +13,11 @@ use serde_json::json;
 use super::common::{read_recording, ReadArgs};
 use crate::excitation::Excitation;
 use crate::files::{check_outputs, display, to_stdout, Input};
-use crate::fit::{self, Drive};
 use crate::params;
 use crate::plant::{EddyModel, Plant};
 use crate::provenance::Provenance;
 use crate::recording::Recording;
+use crate::simulation::Drive;
 
 /// Most samples one run writes (about 1 GB of CSV).
 pub const MAX_SAMPLES: f64 = 2.0e7;
@@ -252,11 +252,13 @@ fn run_on_drive(
     name: &str,
 ) -> Result<(Recording, Drive)> {
     let initial = match a.initial_excursion {
-        None => fit::InitialState::Demagnetized,
-        Some(x) if x.is_finite() && x.abs() <= MAX_EXCURSION_A_PER_M => fit::InitialState::Excursion(x),
+        None => crate::simulation::InitialState::Demagnetized,
+        Some(x) if x.is_finite() && x.abs() <= MAX_EXCURSION_A_PER_M => {
+            crate::simulation::InitialState::Excursion(x)
+        }
         Some(x) => bail!("--initial-excursion {x}: give a field in A/m within ±{MAX_EXCURSION_A_PER_M:e}"),
     };
-    let (sim, drive) = fit::simulate_drive(spec, p, measured, initial)?;
+    let (sim, drive) = crate::simulation::simulate_drive(spec, p, measured, initial)?;
     let current = match drive {
         Drive::Current => measured.current_a.clone(),
         Drive::CommandIdeal | Drive::CommandDynamic => Some(sim.current_a),
@@ -285,7 +287,8 @@ fn run_on_drive(
             .iter()
             .zip(&sim.magnetization_a_per_m)
             .map(|(h, m)| {
-                fit::MU0 * (h + m) + if a.flux_noise_mt > 0.0 { b_noise.sample(&mut flux_rng) } else { 0.0 }
+                crate::channels::MU0 * (h + m)
+                    + if a.flux_noise_mt > 0.0 { b_noise.sample(&mut flux_rng) } else { 0.0 }
             })
             .collect()
     });

@@ -544,7 +544,9 @@ mod tests {
         let mut rec = Recording::with_time("rig", n, dt);
         let w = 2.0 * std::f64::consts::PI * 50.0 * dt;
         rec.current_a = Some((0..n).map(|k| 1.5 * (w * k as f64).sin()).collect());
-        let (sim, _) = fit::simulate_drive(spec, &p, &rec, fit::InitialState::Demagnetized).unwrap();
+        let (sim, _) =
+            crate::simulation::simulate_drive(spec, &p, &rec, crate::simulation::InitialState::Demagnetized)
+                .unwrap();
         rec.displacement_um = Some(sim.displacement_um);
         let files = [rec];
         let opts = FitOptions { effort: 0.1, ..FitOptions::default() };

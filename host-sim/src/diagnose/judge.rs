@@ -11,8 +11,9 @@ use super::{
     signature_words, significance_words, where_it_shows, Candidate, Channel, Measured, Scored, Signals,
     StaticGain,
 };
-use crate::fit::{FitResult, Simulation};
+use crate::fit::FitResult;
 use crate::recording::Recording;
+use crate::simulated::Simulation;
 
 /// How far above the baseline's fit NRMSE (a fraction of it) a refit must end to count as a
 /// failed search. The refinement starts from the baseline with the effect's parameters at their

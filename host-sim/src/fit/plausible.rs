@@ -10,11 +10,13 @@ use anyhow::Result;
 use model_core::{ActuatorParams, Effect, ModelSpec};
 
 use super::bad_samples::{check_samples, stuck_channels};
-use super::{drive_for, run_model, InitialState, Prepared, Simulation, MU0};
-use crate::analysis::correlation;
+use crate::channels::MU0;
 use crate::data_doubts::DataDoubt;
 use crate::error::InRecording;
 use crate::recording::Recording;
+use crate::signal::correlation;
+use crate::simulated::Simulation;
+use crate::simulation::{drive_for, model_input, run_model, InitialState, Prepared};
 use crate::warning::Warning;
 
 /// The checks of `files` before any work: each drives `spec` ([`drive_for`]), has no isolated
@@ -153,7 +155,7 @@ fn channel_signs(spec: ModelSpec, params: &ActuatorParams, rec: &Recording) -> R
     );
     let probe_fix = "`--column displacement_um=-displacement_um` (a column mapped with --column: put `-` \
                      before its HEADER)";
-    let drive = super::model_input(spec, rec)?.column();
+    let drive = model_input(spec, rec)?.column();
     let current_fix = format!("`--column {drive}=-{drive}`");
     let bias = params.coil.bias_a_per_m;
     // Both measured channels against the model: the one they share, the drive, is reversed.
@@ -317,7 +319,7 @@ fn displacement_scale(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> Res
     }
     Ok(Some(Warning::Data(DataDoubt::DisplacementScale {
         file: rec.name.clone(),
-        drive: super::model_input(spec, rec)?.column(),
+        drive: model_input(spec, rec)?.column(),
         measured_um: measured,
         model_um: model,
     })))
@@ -344,7 +346,7 @@ fn both_negated(
     }
     Ok(Some(Warning::Data(DataDoubt::BothNegated {
         file: rec.name.clone(),
-        drive: super::model_input(spec, rec)?.column(),
+        drive: model_input(spec, rec)?.column(),
         as_read,
         both,
     })))
@@ -399,7 +401,7 @@ fn loop_direction(
     rec: &Recording,
     sim: &Simulation,
 ) -> Result<Option<Warning>> {
-    let drive = super::model_input(spec, rec)?.column();
+    let drive = model_input(spec, rec)?.column();
     let (Some(i), Some(y)) = (rec.column(drive), rec.displacement_um.as_deref()) else { return Ok(None) };
     // Past a mode (or a delay of half a period) the lag passes 180° and a loop turns round
     // honestly: judged only on drives well below both.
@@ -483,7 +485,7 @@ const START_WINDOW: usize = 200;
 /// drive value follows the file's first samples at least twice as well (for `params`).
 pub fn started_mid_run(spec: ModelSpec, params: &ActuatorParams, rec: &Recording) -> Result<Option<Warning>> {
     let steps = [Effect::MechanicalDynamics, Effect::EddyCurrent, Effect::AmplifierDynamics];
-    let drive = super::model_input(spec, rec)?;
+    let drive = model_input(spec, rec)?;
     let input = rec.column(drive.column()).map(Vec::as_slice).unwrap_or_default();
     let Some(y) = rec.displacement_um.as_deref() else { return Ok(None) };
     let (lo, hi) = input.iter().fold((f64::MAX, f64::MIN), |(l, h), &v| (l.min(v), h.max(v)));

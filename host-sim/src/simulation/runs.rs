@@ -18,8 +18,9 @@ use model_core::{
 use rayon::prelude::*;
 
 use super::noisy_drive::{branch_directions, REVERSAL_IN_NOISE_RMS};
-use super::{at_rate_of, estimate_excursion, Drive, InitialState, MagneticMemo, Prepared, Simulation};
+use super::{at_rate_of, estimate_excursion, Drive, InitialState, MagneticMemo, Prepared};
 use crate::error::InRecording;
+use crate::simulated::Simulation;
 
 /// [`super::simulate`]; `all_channels: false` keeps only the channels the file measured (the
 /// fit's inner loop: displacement and current, and field and magnetization for a measured flux
