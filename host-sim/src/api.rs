@@ -4,6 +4,10 @@
 //! result; the notes and warnings the CLI prints on stderr are said here too, through
 //! [`crate::warning`] (a binding collects them with [`crate::warning::heard`]).
 
+pub mod fitting;
+pub mod inputs;
+pub mod simulate;
+
 use std::fmt;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -12,8 +16,6 @@ use anyhow::{bail, Context, Result};
 use clap::Parser;
 use model_core::{ActuatorParams, ModelSpec};
 
-use crate::cli::common::{self, Data, Prepared};
-use crate::cli::simulate::SimulateArgs;
 use crate::columns::ReadOptions;
 use crate::diagnose::Diagnosis;
 use crate::files::{names, open_all, Input};
@@ -25,6 +27,8 @@ use crate::recording::{self, Recording, COLUMNS};
 use crate::results::{CompareSummary, FileScoreRow, FitSummary};
 use crate::simulated::Simulation;
 use crate::warning::Warning;
+use inputs::{Data, Prepared};
+use simulate::SimulateArgs;
 
 /// Largest deviation of one time step from the median step (fraction), as the CSV reader allows.
 const MAX_TIME_JITTER: f64 = 0.01;
@@ -217,7 +221,7 @@ pub struct ReadSettings {
 impl Default for ReadSettings {
     fn default() -> Self {
         Self {
-            max_samples: common::DEFAULT_MAX_SAMPLES,
+            max_samples: inputs::DEFAULT_MAX_SAMPLES,
             columns: Vec::new(),
             resample: None,
             trim_start_s: None,
@@ -241,7 +245,7 @@ impl ReadSettings {
     }
 
     fn options(&self) -> Result<ReadOptions> {
-        common::check_max_samples(self.max_samples)?;
+        inputs::check_max_samples(self.max_samples)?;
         ReadOptions::new(&self.columns, self.resample.as_deref(), self.trim_start_s)
     }
 }
@@ -250,7 +254,7 @@ impl ReadSettings {
 /// and what the reader says about its columns and time axis.
 pub fn read_recording(path: PathBuf, read: &ReadSettings) -> Result<(Recording, Vec<Warning>)> {
     let opts = read.options()?;
-    common::read_recording(Input::open(&path)?, read.max_samples, &opts)
+    inputs::read_recording(Input::open(&path)?, read.max_samples, &opts)
 }
 
 /// Reads one magnetization-loop file as the CLI does; the warning says when `max_samples` cut
@@ -287,7 +291,7 @@ fn read_sources(fit_src: &[Source], val_src: &[Source], read: &ReadSettings) -> 
         return Ok((Data::Recordings(arrays(fit_src), arrays(val_src)), Vec::new()));
     }
     let (data, warnings) =
-        common::read_inputs(open_all(&fit_paths)?, open_all(&val_paths)?, read.max_samples, &opts)?;
+        inputs::read_inputs(open_all(&fit_paths)?, open_all(&val_paths)?, read.max_samples, &opts)?;
     let has_arrays = fit_src.iter().chain(val_src).any(|s| matches!(s, Source::Arrays(_)));
     match data {
         Data::Loops(..) if has_arrays => bail!(
@@ -349,7 +353,7 @@ fn prepare(
     if !(s.effort.is_finite() && s.effort > 0.0 && s.effort <= 20.0) {
         bail!("--effort must be in (0, 20], got {}", s.effort);
     }
-    let time_limit = s.time_limit_s.map(common::time_limit).transpose()?;
+    let time_limit = s.time_limit_s.map(inputs::time_limit).transpose()?;
     let (init, params_source) = params.load(spec)?;
     let (data, mut input_warnings) = read_sources(fit_src, val_src, read)?;
     if let Data::Recordings(fit_files, val_files) = &data {
@@ -396,15 +400,15 @@ pub fn fit(
                     if s.fix.is_empty() { "bound" } else { "fix" }
                 );
             }
-            crate::cli::fit::fit_loops(&p, fit_files, val_files)?
+            fitting::fit_loops(&p, fit_files, val_files)?
         }
         Data::Recordings(fit_files, val_files) => {
             let c = fit::Constraints::parse(p.spec, fit_files, &s.fix, &s.bound, &mut p.init)?;
-            crate::cli::fit::fit_recordings(&p, fit_files, val_files, &c)?
+            fitting::fit_recordings(&p, fit_files, val_files, &c)?
         }
     };
     // Said as the CLI says them (a binding shows them: the Python package as `UserWarning`s).
-    crate::cli::fit::add_time_limit_warning(&mut summary, &mut warnings, s.time_limit_s);
+    fitting::add_time_limit_warning(&mut summary, &mut warnings, s.time_limit_s);
     for w in &warnings {
         w.say();
     }
@@ -625,7 +629,7 @@ pub fn simulate_rig(
             Some((path, name.as_str()))
         }
     };
-    let (ran, said) = crate::warning::heard(|| crate::cli::simulate::run(&args));
+    let (ran, said) = crate::warning::heard(|| simulate::run(&args).map(|_| ()));
     // The notes name the text as given, not its temporary copy.
     for s in said {
         crate::warning::say(match &temporary {
@@ -653,7 +657,7 @@ fn usage_error(e: &clap::Error) -> anyhow::Error {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::common::ModelFiles;
+    use crate::api::inputs::ModelFiles;
 
     #[derive(clap::Parser)]
     struct FitCli {

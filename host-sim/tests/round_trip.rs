@@ -8,8 +8,8 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use gma_control::telemetry::{Frame, MAX_ENCODED};
-use host_sim::cli::simulate::{run, SimulateArgs, Waveform};
-use host_sim::cli::ReadArgs;
+use host_sim::api::inputs::ReadArgs;
+use host_sim::api::simulate::{run, SimulateArgs, Waveform};
 use host_sim::plant::EddyModel;
 use host_sim::recording::Recording;
 use proptest::prelude::*;
@@ -68,7 +68,7 @@ proptest! {
                 prop_assert!(msg.contains("--") || msg.contains("plausible") || msg.contains("plant input"),
                     "unclear refusal: {msg}");
             }
-            Ok(()) => {
+            Ok(_) => {
                 let r = Recording::read(&out).map_err(|e| TestCaseError::fail(format!("{e:#}")))?;
                 prop_assert!(r.len() >= 3);
                 prop_assert_eq!(r.flux_density_t.is_some(), search_coil);

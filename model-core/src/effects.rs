@@ -11,8 +11,8 @@
 
 use core::fmt;
 
-use crate::chain::ActuatorParams;
 pub use crate::magnetization::JaVariant;
+use crate::params::ActuatorParams;
 
 /// One physical effect a model can include (serialised as its registry name).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]

@@ -12,6 +12,7 @@ pub mod magnetization;
 pub mod magnetostriction;
 pub mod math;
 pub mod mechanics;
+pub mod params;
 pub mod sinusoidal;
 pub mod slow;
 pub mod spec;

@@ -7,8 +7,8 @@ use anyhow::Result;
 use clap::Args;
 use model_core::{ActuatorParams, ModelSpec};
 
-use super::common::{check_max_samples, read_data, repeated_inputs, Data, ReadArgs};
 use crate::analysis;
+use crate::api::inputs::{check_max_samples, read_data, repeated_inputs, Data, ReadArgs};
 use crate::files::{
     check_outputs, display, is_stdout, no_stdout, open_all, output_folder, to_stdout, unique_stems, Input,
     OutputWriter,

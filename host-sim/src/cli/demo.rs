@@ -17,7 +17,7 @@ pub struct DemoArgs {
     #[arg(long, default_value = "gma-demo")]
     pub out_dir: PathBuf,
     /// Seed of the simulated rig's noise and of the fits.
-    #[arg(long, default_value_t = 1, value_parser = super::common::seed)]
+    #[arg(long, default_value_t = 1, value_parser = crate::api::inputs::seed)]
     pub seed: u64,
     /// Print exactly one JSON object on stdout (the narrative goes to stderr).
     #[arg(long)]

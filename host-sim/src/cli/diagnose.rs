@@ -3,7 +3,7 @@
 use anyhow::Result;
 use clap::Args;
 
-use super::common::{Data, ModelFiles};
+use crate::api::inputs::{Data, ModelFiles};
 use crate::diagnose::{check_ja_variants, diagnose, other_law_structure};
 use crate::provenance::Provenance;
 use crate::warning::by_weight;

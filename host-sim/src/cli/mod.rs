@@ -27,7 +27,6 @@ macro_rules! say {
     };
 }
 
-pub(crate) mod common;
 mod compare;
 mod demo;
 mod diagnose;
@@ -39,7 +38,7 @@ mod record;
 mod report;
 pub mod simulate;
 
-pub use common::ReadArgs;
+pub use crate::api::inputs::ReadArgs;
 
 /// Exit status of a command that failed (bad input, a model that cannot follow the data, …).
 const EXIT_FAILURE: u8 = 1;
@@ -80,7 +79,7 @@ enum Command {
     /// Simulate a rig (plant simulator) and write a measurement CSV, or run a parameter set on a
     /// measured drive (`--drive FILE`). SIMULATED data, for tests, demos and model checks.
     #[command(allow_negative_numbers = true)]
-    Simulate(simulate::SimulateArgs),
+    Simulate(crate::api::simulate::SimulateArgs),
     /// The physical effects a model spec can name: what each adds, where it acts, and the
     /// parameters a fit identifies for it (units, ranges, defaults).
     Effects(effects::EffectsArgs),

@@ -7,8 +7,8 @@ use clap::Args;
 use model_core::{ActuatorParams, ModelSpec};
 use serde_json::json;
 
-use super::common::{Data, ModelFiles};
 use super::fit::params_header;
+use crate::api::inputs::{Data, ModelFiles};
 use crate::files::{check_outputs, display, no_stdout, output_folder, to_stdout, write_atomic, InputId};
 use crate::progress::Phase;
 use crate::provenance::Provenance;
