@@ -1,5 +1,5 @@
-//! Plain statistics of a sampled series that every layer reads: how two series correlate, where
-//! one turns. Nothing here knows recordings or models.
+//! Plain statistics of a sampled series that every layer reads: its mean, how two series
+//! correlate, where one turns. Nothing here knows recordings or models.
 
 /// Pearson correlation of two equally long series (0 when either is constant).
 pub fn correlation(x: &[f64], y: &[f64]) -> f64 {
@@ -44,4 +44,10 @@ pub fn reversal_positions(x: &[f64]) -> Vec<usize> {
         }
     }
     found
+}
+
+/// The mean of a series (0 for an empty one).
+pub fn mean(v: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    s / n.max(1) as f64
 }

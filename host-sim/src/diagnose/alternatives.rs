@@ -19,13 +19,13 @@ use model_core::{ActuatorParams, Effect, MagnetizationLaw, ModelSpec};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::{
-    burn_in, channel_scores, effective_samples, error_cut, estimated_states, information_gain, mean,
-    required_wins, Channel, Diagnosis, Measured, Scored, DECISIVE_CUT, MIN_CUT,
-};
+use super::candidate::{error_cut, required_wins, DECISIVE_CUT, MIN_CUT};
+use super::scoring::{burn_in, channel_scores, information_gain, Channel, Measured, Scored};
+use super::{effective_samples, estimated_states, Diagnosis};
 use crate::fit::{self, FitOptions};
 use crate::progress;
 use crate::recording::Recording;
+use crate::signal::mean;
 
 /// One J–A form's score in [`Diagnosis::compare_ja_variants`].
 #[derive(Debug, Clone, Serialize)]

@@ -5,14 +5,15 @@ use anyhow::Result;
 use model_core::effects::Candidacy;
 use model_core::{Effect, ModelSpec};
 
-use super::{
-    channel_scores, cut_words, effective_samples, error_cut, estimated_states, evidence,
-    flux_signature_words, heating_evidence, information_gain, mean, not_pinned_by_the_fit_files,
-    signature_words, significance_words, where_it_shows, Candidate, Channel, Measured, Scored, Signals,
-    StaticGain,
+use super::candidate::{cut_words, error_cut, Candidate};
+use super::scoring::{channel_scores, information_gain, Channel, Measured, Scored, StaticGain};
+use super::signatures::{
+    evidence, flux_signature_words, heating_evidence, signature_words, where_it_shows, Signals,
 };
+use super::{effective_samples, estimated_states, not_pinned_by_the_fit_files, significance_words};
 use crate::fit::FitResult;
 use crate::recording::Recording;
+use crate::signal::mean;
 use crate::simulated::Simulation;
 
 /// How far above the baseline's fit NRMSE (a fraction of it) a refit must end to count as a
@@ -120,7 +121,7 @@ impl Baseline<'_> {
                 let off = channel_scores(spec, &f.params, score_files, score_skip, channel)?;
                 off.iter()
                     .zip(&after_score_s)
-                    .map(|(o, a)| super::effect_shows(&o.residual, &a.residual))
+                    .map(|(o, a)| super::scoring::effect_shows(&o.residual, &a.residual))
                     .collect()
             }
             _ => vec![true; after_score_s.len()],
@@ -132,7 +133,7 @@ impl Baseline<'_> {
             .iter()
             .zip(&after_score_s)
             .zip(&showing)
-            .filter(|((b, a), &shows)| shows && super::effect_shows(&b.residual, &a.residual))
+            .filter(|((b, a), &shows)| shows && super::scoring::effect_shows(&b.residual, &a.residual))
             .map(|((b, a), _)| a.nrmse < b.nrmse)
             .collect();
         let files_deciding = deciding.len();

@@ -1,10 +1,12 @@
 //! Which parameters a model spec identifies on given files, with the registry's bounds and scales.
 
+use anyhow::Result;
 use model_core::effects::{Param, Scale, AMPLIFIER_GAIN, ROD_THERMAL_LAG, STRAIN_SCALE};
 use model_core::{ActuatorParams, Effect, ModelSpec};
 
 use crate::recording::Recording;
 use crate::search::Bound;
+use crate::simulation::{prepare, Drive};
 
 /// One identified parameter: its bounds and scale ([`Bound`], named as in parameter files,
 /// e.g. `ja.k_a_per_m`) and how to read and write it in a parameter set.
@@ -101,3 +103,19 @@ pub fn not_fitted(spec: ModelSpec, given: Given) -> Vec<&'static str> {
         .filter(|n| !free.contains(n))
         .collect()
 }
+
+/// Every parameter `spec` identifies on these files (λ_s first), with the registry's ranges.
+pub fn identifiable(spec: ModelSpec, files: &[Recording]) -> Result<Vec<FreeParam>> {
+    Ok(free_params(spec, given_by(spec, files)?))
+}
+
+/// What `files` give a fit of `spec`.
+pub(crate) fn given_by(spec: ModelSpec, files: &[Recording]) -> Result<Given> {
+    let command_driven = prepare(spec, files)?.iter().any(|p| p.drive != Drive::Current);
+    Ok(Given::by(files, command_driven))
+}
+
+/// The mechanical mode's parameters, which a mode seen in the data starts (see `resonance`).
+pub(crate) const MODE_FREQUENCY: &str = "mech.natural_frequency_hz";
+
+pub(crate) const MODE_DAMPING: &str = "mech.damping_ratio";
