@@ -320,22 +320,7 @@ pub fn minimize<C: Clone + Send + Sync>(
         };
     }
     if d == 0 {
-        // Every continuous parameter fixed: nothing to search (argmin's solvers need at least
-        // one dimension), so the best of the given contexts as they stand.
-        let mut contexts: Vec<&C> = starts.iter().map(|s| &s.context).collect();
-        contexts.push(swarm_context);
-        let (context, cost) = contexts
-            .into_iter()
-            .map(|c| (c, unit!(c, Fidelity::Full).eval(&[])))
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .expect("the swarm context is always there");
-        return Ok(Found {
-            best: Vec::new(),
-            context: context.clone(),
-            cost,
-            evaluations: evals.load(Ordering::Relaxed),
-            time_limited: false,
-        });
+        return Ok(best_as_given(bounds, cost, swarm_context, starts, progress));
     }
     let note_time = |reason: Option<&argmin::core::TerminationReason>| {
         if matches!(reason, Some(argmin::core::TerminationReason::Timeout)) {
@@ -381,33 +366,8 @@ pub fn minimize<C: Clone + Send + Sync>(
     };
 
     // Candidates: the starts and the swarms' bests, ranked on all data.
-    let to_unit = |v: &[f64]| -> Vec<f64> { bounds.iter().zip(v).map(|(b, &x)| b.to_unit(x)).collect() };
-    let mut seeds: Vec<(Seed<C>, bool)> = starts
-        .iter()
-        .map(|s| {
-            let unit = to_unit(&s.values);
-            let cost = unit!(&s.context, Fidelity::Full).eval(&unit);
-            let seed =
-                Seed { context: s.context.clone(), unit, cost, simplex_holds: s.simplex_holds.clone() };
-            (seed, s.always_refined)
-        })
-        .collect();
-    for unit in swarm_bests {
-        let cost = unit!(swarm_context, Fidelity::Full).eval(&unit);
-        seeds.push((Seed { context: swarm_context.clone(), unit, cost, simplex_holds: Vec::new() }, false));
-    }
-    // The best always-refined start gets a local search of its own, to the end, beside the
-    // plan's best others (it never takes their places: they are refined as without it).
-    let (pinned, seeds): (Vec<_>, Vec<_>) = seeds.into_iter().partition(|s| s.1);
-    let by_cost = |mut v: Vec<Seed<C>>, keep: usize| {
-        v.sort_by(|a, b| a.cost.total_cmp(&b.cost));
-        v.truncate(keep);
-        v
-    };
-    let seeds = by_cost(seeds.into_iter().map(|s| s.0).collect(), plan.local_searches.max(1));
-    let regular = seeds.len();
-    let seeds: Vec<Seed<C>> =
-        seeds.into_iter().chain(by_cost(pinned.into_iter().map(|s| s.0).collect(), 1)).collect();
+    let eval_full = |context: &C, unit: &[f64]| unit!(context, Fidelity::Full).eval(unit);
+    let (seeds, regular) = ranked_seeds(bounds, starts, swarm_context, swarm_bests, plan, &eval_full);
 
     // Local: the plan's runs from each seed, in parallel; the last run only from the finalists.
     let nm_iters = ((plan.simplex_iters_per_dim * d as f64 * opts.effort).round() as u64).max(20);
@@ -475,6 +435,75 @@ pub fn minimize<C: Clone + Send + Sync>(
         evaluations: evals.load(Ordering::Relaxed),
         time_limited: timed_out.load(Ordering::Relaxed),
     })
+}
+
+/// Every continuous parameter fixed: nothing to search (argmin's solvers need at least one
+/// dimension), so the best of the given contexts as they stand.
+fn best_as_given<C: Clone>(
+    bounds: &[Bound],
+    cost: &Cost<'_, C>,
+    swarm_context: &C,
+    starts: &[Start<C>],
+    progress: &Progress,
+) -> Found<C> {
+    let evals = AtomicUsize::new(0);
+    let mut contexts: Vec<&C> = starts.iter().map(|s| &s.context).collect();
+    contexts.push(swarm_context);
+    let (context, cost) = contexts
+        .into_iter()
+        .map(|c| {
+            let unit = Unit { bounds, cost, context: c, fidelity: Fidelity::Full, evals: &evals, progress };
+            (c, unit.eval(&[]))
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .expect("the swarm context is always there");
+    Found {
+        best: Vec::new(),
+        context: context.clone(),
+        cost,
+        evaluations: evals.load(Ordering::Relaxed),
+        time_limited: false,
+    }
+}
+
+/// The local searches' seeds: the starts and the swarms' bests, ranked on all data by
+/// `eval_full`; the plan's best ones first (their count returned beside), then the best
+/// always-refined start, which gets a local search of its own, to the end, beside them (it
+/// never takes their places: they are refined as without it).
+fn ranked_seeds<C: Clone>(
+    bounds: &[Bound],
+    starts: &[Start<C>],
+    swarm_context: &C,
+    swarm_bests: Vec<Vec<f64>>,
+    plan: &Plan,
+    eval_full: &dyn Fn(&C, &[f64]) -> f64,
+) -> (Vec<Seed<C>>, usize) {
+    let to_unit = |v: &[f64]| -> Vec<f64> { bounds.iter().zip(v).map(|(b, &x)| b.to_unit(x)).collect() };
+    let mut seeds: Vec<(Seed<C>, bool)> = starts
+        .iter()
+        .map(|s| {
+            let unit = to_unit(&s.values);
+            let cost = eval_full(&s.context, &unit);
+            let seed =
+                Seed { context: s.context.clone(), unit, cost, simplex_holds: s.simplex_holds.clone() };
+            (seed, s.always_refined)
+        })
+        .collect();
+    for unit in swarm_bests {
+        let cost = eval_full(swarm_context, &unit);
+        seeds.push((Seed { context: swarm_context.clone(), unit, cost, simplex_holds: Vec::new() }, false));
+    }
+    let (pinned, seeds): (Vec<_>, Vec<_>) = seeds.into_iter().partition(|s| s.1);
+    let seeds = by_cost(seeds.into_iter().map(|s| s.0).collect(), plan.local_searches.max(1));
+    let regular = seeds.len();
+    (seeds.into_iter().chain(by_cost(pinned.into_iter().map(|s| s.0).collect(), 1)).collect(), regular)
+}
+
+/// The `keep` cheapest seeds, cheapest first.
+fn by_cost<C>(mut v: Vec<Seed<C>>, keep: usize) -> Vec<Seed<C>> {
+    v.sort_by(|a, b| a.cost.total_cmp(&b.cost));
+    v.truncate(keep);
+    v
 }
 
 /// Finite-difference Jacobians a Levenberg–Marquardt run may take at effort 1 (each costs a

@@ -31,7 +31,7 @@
 //! range, its physical range.
 
 use anyhow::{bail, Result};
-use model_core::ModelSpec;
+use model_core::{ActuatorParams, ModelSpec};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 
@@ -230,23 +230,7 @@ pub fn analyse(spec: ModelSpec, res: &FitResult, files: &[Recording]) -> Result<
             a.1.iter().zip(&b.1).map(|(x, y)| (x - y) / du).collect()
         })
         .collect();
-    let h = LINEAR_STEP * 2.0 * excursion_range(spec, &base);
-    let nuisance: Vec<Vec<f64>> = (0..excursions.len())
-        .into_par_iter()
-        .map(|i| {
-            let shifted = |dx: f64| -> Option<Vec<f64>> {
-                let mut x = excursions.clone();
-                x[i] += dx;
-                let r = residual_blocks(spec, &base, &starting_from(&prep, &x)).ok()?;
-                let r: Vec<f64> = r.into_iter().flat_map(|b| b.1).collect();
-                r.iter().all(|v| v.is_finite()).then_some(r)
-            };
-            match (shifted(h), shifted(-h)) {
-                (Some(a), Some(b)) => a.iter().zip(&b).map(|(x, y)| (x - y) / (2.0 * h)).collect(),
-                _ => vec![0.0; n],
-            }
-        })
-        .collect();
+    let nuisance = nuisance_columns(spec, &base, &prep, &excursions, n);
     let columns: Vec<Vec<f64>> = columns.into_iter().chain(nuisance).collect();
     // p parameters, then the nuisance columns; only the first p are reported.
     let (p_reported, p) = (p, columns.len());
@@ -329,6 +313,34 @@ pub fn analyse(spec: ModelSpec, res: &FitResult, files: &[Recording]) -> Result<
         lag1_autocorrelation: rho1,
         condition,
     })
+}
+
+/// The Jacobian's columns of each file's initial magnetic state (a nuisance parameter), by
+/// central differences of `n` residuals about `base`.
+fn nuisance_columns(
+    spec: ModelSpec,
+    base: &ActuatorParams,
+    prep: &[Prepared],
+    excursions: &[f64],
+    n: usize,
+) -> Vec<Vec<f64>> {
+    let h = LINEAR_STEP * 2.0 * excursion_range(spec, base);
+    (0..excursions.len())
+        .into_par_iter()
+        .map(|i| {
+            let shifted = |dx: f64| -> Option<Vec<f64>> {
+                let mut x = excursions.to_vec();
+                x[i] += dx;
+                let r = residual_blocks(spec, base, &starting_from(prep, &x)).ok()?;
+                let r: Vec<f64> = r.into_iter().flat_map(|b| b.1).collect();
+                r.iter().all(|v| v.is_finite()).then_some(r)
+            };
+            match (shifted(h), shifted(-h)) {
+                (Some(a), Some(b)) => a.iter().zip(&b).map(|(x, y)| (x - y) / (2.0 * h)).collect(),
+                _ => vec![0.0; n],
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]

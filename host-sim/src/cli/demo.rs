@@ -134,24 +134,7 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         t.elapsed().as_secs_f64()
     );
     if let (Some(last), Some(params_last)) = (rungs.last(), param_paths.last()) {
-        // The same steps by hand, on the files just written: what an engineer does next with
-        // recordings of their own.
-        let word = |r: &crate::recording::Recording| shell_word(&a.out_dir.join(&r.name));
-        let fit: Vec<String> = fit_files.iter().map(word).collect();
-        let val: String = val_files.iter().map(|r| format!(" --val {}", word(r))).collect();
-        let val_only: Vec<String> = val_files.iter().map(word).collect();
-        let params_last = shell_word(params_last);
-        say!(
-            j,
-            "\n  next, the same steps by hand (your own recordings in place of these; `gma <command> --help`):\n    \
-             gma diagnose --model {first} {fit}{val}\n    \
-             gma fit --model {spec} {fit}{val} --params-out fitted.toml\n    \
-             gma compare --model {spec} --params {params_last} {val_only} --format png",
-            first = case.model,
-            fit = fit.join(" "),
-            spec = last.spec,
-            val_only = val_only.join(" "),
-        );
+        say_next_steps(j, &a.out_dir, case.model, last.spec, (&fit_files, &val_files), params_last);
     }
     if j {
         let mean = |v: &[f64]| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
@@ -178,4 +161,31 @@ pub fn run(a: &DemoArgs) -> Result<()> {
     }
     folder.keep();
     Ok(())
+}
+
+/// The same steps by hand, on the files just written: what an engineer does next with
+/// recordings of their own (`first`: the demo's starting model, `last`: its final one).
+fn say_next_steps(
+    j: bool,
+    out_dir: &std::path::Path,
+    first: model_core::ModelSpec,
+    last: model_core::ModelSpec,
+    (fit_files, val_files): (&[crate::recording::Recording], &[crate::recording::Recording]),
+    params_last: &std::path::Path,
+) {
+    let word = |r: &crate::recording::Recording| shell_word(&out_dir.join(&r.name));
+    let fit: Vec<String> = fit_files.iter().map(word).collect();
+    let val: String = val_files.iter().map(|r| format!(" --val {}", word(r))).collect();
+    let val_only: Vec<String> = val_files.iter().map(word).collect();
+    let params_last = shell_word(params_last);
+    say!(
+        j,
+        "\n  next, the same steps by hand (your own recordings in place of these; `gma <command> --help`):\n    \
+         gma diagnose --model {first} {fit}{val}\n    \
+         gma fit --model {spec} {fit}{val} --params-out fitted.toml\n    \
+         gma compare --model {spec} --params {params_last} {val_only} --format png",
+        fit = fit.join(" "),
+        spec = last,
+        val_only = val_only.join(" "),
+    );
 }

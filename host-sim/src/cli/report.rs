@@ -14,6 +14,7 @@ use crate::progress::Phase;
 use crate::provenance::Provenance;
 use crate::recording::Recording;
 use crate::results::UncertaintyFields;
+use crate::uncertainty::Uncertainty;
 use crate::{fit, loop_fit, loop_plots, params, report};
 
 /// Options of `gma report`.
@@ -180,25 +181,7 @@ pub fn run(a: &ReportArgs) -> Result<()> {
                 Some((dir, _)) => {
                     let specs: Vec<ModelSpec> = rungs.iter().map(|r| r.spec).collect();
                     let paths = params_paths(dir, &specs);
-                    let sets: Vec<(ModelSpec, ActuatorParams, String)> = rungs
-                        .iter()
-                        .enumerate()
-                        .map(|(k, r)| {
-                            let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
-                            let header = params_header(
-                                &format!(
-                                    "gma report --model {spec} (seed {}), step {k}: `{}`",
-                                    a.mf.seed, r.spec
-                                ),
-                                &a.mf,
-                                mean(&r.fit_nrmse),
-                                (!r.val_nrmse.is_empty()).then(|| mean(&r.val_nrmse)),
-                                r.diagnosis.time_limited,
-                                &[],
-                            );
-                            (r.spec, r.params, header)
-                        })
-                        .collect();
+                    let sets = ladder_param_sets(a, spec, &rungs);
                     write_params(&paths, &sets, &p.inputs, fit_files)?;
                     paths.iter().map(|p| Some(display(p))).collect()
                 }
@@ -209,30 +192,7 @@ pub fn run(a: &ReportArgs) -> Result<()> {
             }
             phase.finish();
             a.mf.warn_if_time_limited(time_limited);
-            for (r, u) in rungs.iter().zip(&uncertainties) {
-                say!(j, "parameters of `{}` (± std, 95 % interval):", r.spec);
-                match u {
-                    Ok(u) => {
-                        for p in &u.params {
-                            match (p.std, p.ci95) {
-                                (Some(s), Some((lo, hi))) => {
-                                    say!(
-                                        j,
-                                        "  {:28} = {:.6e} ± {s:.2e}  [{lo:.4e}, {hi:.4e}]{}",
-                                        p.bound.name,
-                                        p.value,
-                                        p.clipped_note()
-                                    )
-                                }
-                                _ => {
-                                    say!(j, "  {:28} = {:.6e} ± ?  (not identifiable)", p.bound.name, p.value)
-                                }
-                            }
-                        }
-                    }
-                    Err(e) => say!(j, "  no uncertainty: {e}"),
-                }
-            }
+            say_uncertainties(j, &rungs, &uncertainties);
             say!(j, "report written to {written_to}");
             for f in params_files.iter().flatten() {
                 say!(j, "parameters written to {f}");
@@ -257,4 +217,60 @@ pub fn run(a: &ReportArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Each rung's parameters with their standard deviation and 95 % interval, as text.
+fn say_uncertainties(
+    j: bool,
+    rungs: &[report::Rung],
+    uncertainties: &[std::result::Result<Uncertainty, String>],
+) {
+    for (r, u) in rungs.iter().zip(uncertainties) {
+        say!(j, "parameters of `{}` (± std, 95 % interval):", r.spec);
+        match u {
+            Ok(u) => {
+                for p in &u.params {
+                    match (p.std, p.ci95) {
+                        (Some(s), Some((lo, hi))) => {
+                            say!(
+                                j,
+                                "  {:28} = {:.6e} ± {s:.2e}  [{lo:.4e}, {hi:.4e}]{}",
+                                p.bound.name,
+                                p.value,
+                                p.clipped_note()
+                            )
+                        }
+                        _ => {
+                            say!(j, "  {:28} = {:.6e} ± ?  (not identifiable)", p.bound.name, p.value)
+                        }
+                    }
+                }
+            }
+            Err(e) => say!(j, "  no uncertainty: {e}"),
+        }
+    }
+}
+
+/// Each rung's parameter set with the header its file carries.
+fn ladder_param_sets(
+    a: &ReportArgs,
+    spec: ModelSpec,
+    rungs: &[report::Rung],
+) -> Vec<(ModelSpec, ActuatorParams, String)> {
+    rungs
+        .iter()
+        .enumerate()
+        .map(|(k, r)| {
+            let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+            let header = params_header(
+                &format!("gma report --model {spec} (seed {}), step {k}: `{}`", a.mf.seed, r.spec),
+                &a.mf,
+                mean(&r.fit_nrmse),
+                (!r.val_nrmse.is_empty()).then(|| mean(&r.val_nrmse)),
+                r.diagnosis.time_limited,
+                &[],
+            );
+            (r.spec, r.params, header)
+        })
+        .collect()
 }

@@ -144,23 +144,7 @@ impl Baseline<'_> {
             .zip(&showing)
             .filter(|((b, a), &shows)| shows && a.nrmse < b.nrmse)
             .count();
-        let unpinned = refit.as_ref().filter(|_| self.held_out && channel == Channel::Displacement).and_then(|f| {
-            let fit_nrmse = (base.fit.mean_nrmse(), f.fit.mean_nrmse());
-            let scored: Vec<(f64, f64)> =
-                base_score_s.iter().zip(&after_score_s).map(|(b, a)| (b.nrmse, a.nrmse)).collect();
-            not_pinned_by_the_fit_files(fit_nrmse, &scored).then(|| {
-                format!(
-                    "`{e}` fits the fit files better ({:.2} % → {:.2} %) but every validation file worse ({:.2} % → \
-                     {:.2} %): what it adds is fitted to other model error, not determined by these fit files. It \
-                     shows in {}: without such a fit file, add one; with one, its form here is not the rig's",
-                    fit_nrmse.0 * 100.0,
-                    fit_nrmse.1 * 100.0,
-                    mean(scored.iter().map(|v| v.0)) * 100.0,
-                    mean(scored.iter().map(|v| v.1)) * 100.0,
-                    where_it_shows(e)
-                )
-            })
-        });
+        let unpinned = self.unpinned(e, refit.as_ref(), channel, &base_score_s, &after_score_s);
         let added = refit
             .as_ref()
             .map_or(0, |f| {
@@ -224,5 +208,35 @@ impl Baseline<'_> {
             refit,
         };
         Ok(Judged { candidate, failed_refit, errored_refit, unpinned })
+    }
+
+    /// With validation files: the refit fits the fit files better and every validation file
+    /// worse, so what it adds is not pinned by the fit files (said, with where the effect shows).
+    fn unpinned(
+        &self,
+        e: Effect,
+        refit: Option<&FitResult>,
+        channel: Channel,
+        base_score_s: &[Scored],
+        after_score_s: &[Scored],
+    ) -> Option<String> {
+        let base = self.base;
+        refit.filter(|_| self.held_out && channel == Channel::Displacement).and_then(|f| {
+            let fit_nrmse = (base.fit.mean_nrmse(), f.fit.mean_nrmse());
+            let scored: Vec<(f64, f64)> =
+                base_score_s.iter().zip(after_score_s).map(|(b, a)| (b.nrmse, a.nrmse)).collect();
+            not_pinned_by_the_fit_files(fit_nrmse, &scored).then(|| {
+                format!(
+                    "`{e}` fits the fit files better ({:.2} % → {:.2} %) but every validation file worse ({:.2} % → \
+                     {:.2} %): what it adds is fitted to other model error, not determined by these fit files. It \
+                     shows in {}: without such a fit file, add one; with one, its form here is not the rig's",
+                    fit_nrmse.0 * 100.0,
+                    fit_nrmse.1 * 100.0,
+                    mean(scored.iter().map(|v| v.0)) * 100.0,
+                    mean(scored.iter().map(|v| v.1)) * 100.0,
+                    where_it_shows(e)
+                )
+            })
+        })
     }
 }
