@@ -363,34 +363,7 @@ fn fit_searched(
         .collect();
     let d = free.len();
     let dims = d + n_excursions;
-    // Through no more samples than unknowns any model passes: the "fit" would report values and
-    // a tiny error that the data do not determine. λ_s and each file's offset are unknowns too.
-    let samples: usize = files.iter().map(|r| r.len()).sum();
-    let unknowns = dims + usize::from(lambda_range.is_some()) + files.len();
-    if samples <= unknowns {
-        bail!(
-            "{samples} samples in all ({}) for {unknowns} unknowns of `{spec}` ({d} free parameters{}, {} per file): \
-             a fit through no more samples than unknowns is not determined by them; record more samples (thousands: \
-             a drive cycle at the rig's rate), raise --max-samples or drop --trim-start if they cut the files, or \
-             hold parameters with --fix",
-            files.iter().map(|r| format!("{}: {}", r.name, r.len())).collect::<Vec<_>>().join(", "),
-            if lambda_range.is_some() { ", λ_s" } else { "" },
-            if memory { "an initial magnetic state and an offset" } else { "an offset" },
-        );
-    }
-    // The progress bar's length: the swarm, then per seed the plan's simplex and least-squares
-    // runs (and one more least-squares run each in the polish).
-    let swarm_iters = ((plan.swarm_iters * opts.effort).round() as u64).max(2);
-    let nm_iters = ((plan.simplex_iters_per_dim * dims as f64 * opts.effort).round() as u64).max(20);
-    let least_squares = crate::search::least_squares_evaluations(dims, opts.effort);
-    let per_seed: u64 = plan
-        .local
-        .iter()
-        .map(|run| match run {
-            Local::Simplex(..) => nm_iters,
-            Local::LeastSquares(_) => least_squares,
-        })
-        .sum();
+    check_determined(spec, files, (d, dims), lambda_range.is_some(), memory)?;
     // A lightly damped mechanical mode is a narrow valley the swarm can miss: each start also
     // with the mode the data's frequency response shows, where it shows one (see `resonance`),
     // the best of them refined by a local search of its own.
@@ -399,10 +372,7 @@ fn fit_searched(
         .any(|f| f.name() == MODE_FREQUENCY || f.name() == MODE_DAMPING)
         .then(|| crate::resonance::seen_mode(files))
         .flatten();
-    let seeds = plan.local_searches as u64 + u64::from(seen_mode.is_some());
-    let planned = plan.swarms as u64 * (plan.particles.0 + plan.particles.1 * d) as u64 * (swarm_iters + 1)
-        + seeds * per_seed
-        + if memory { POLISH.local_searches as u64 * least_squares } else { 0 };
+    let planned = planned_evaluations(plan, opts.effort, (d, dims), seen_mode.is_some(), memory);
     let bar = Progress::new(&format!("fitting {spec}"), planned, opts.progress);
     let evals = AtomicUsize::new(0);
 
@@ -439,77 +409,9 @@ fn fit_searched(
         }
         projected_residuals(spec, &p, &starting_from(data(fidelity), &values[d..]), lambda_range)
     };
-    let starts: Vec<(ActuatorParams, bool)> = match &seen_mode {
-        Some(mode) => {
-            let at_mode = starts.iter().map(|st| {
-                let mut p = *st;
-                for f in &free {
-                    match f.name() {
-                        MODE_FREQUENCY => (f.set)(&mut p, mode.natural_frequency_hz),
-                        MODE_DAMPING => (f.set)(&mut p, mode.damping_ratio),
-                        _ => {}
-                    }
-                }
-                (p, true)
-            });
-            starts.iter().map(|&st| (st, false)).chain(at_mode).collect()
-        }
-        None => starts.iter().map(|&st| (st, false)).collect(),
-    };
-    let mode_indices: Vec<usize> = free
-        .iter()
-        .enumerate()
-        .filter(|(_, f)| f.name() == MODE_FREQUENCY || f.name() == MODE_DAMPING)
-        .map(|(k, _)| k)
-        .collect();
-    // The user's start values outside the ranges, said rather than clamped in silence.
-    let start_moved: Vec<Warning> = free
-        .iter()
-        .filter_map(|f| {
-            let given = (f.get)(&starts[0].0);
-            let used = f.from_unit(f.to_unit(given));
-            ((given - used).abs() > 1e-6 * given.abs().max(f64::MIN_POSITIVE)).then_some(
-                Warning::StartMoved { param: f.name(), given, used, lo: f.bound.lo, hi: f.bound.hi },
-            )
-        })
-        .collect();
-    // Start points: the fixed parameters come from the first; each start's identified values
-    // are clamped into the bounds.
-    let bases: Vec<Start<ActuatorParams>> = starts
-        .iter()
-        .map(|&(st, always_refined)| {
-            let mut b = starts[0].0;
-            for f in &free {
-                (f.set)(&mut b, f.from_unit(f.to_unit((f.get)(&st))));
-            }
-            let excursions: Vec<f64> = if memory {
-                full.iter()
-                    .map(|prep| {
-                        Ok(estimate_excursion(spec, &b, prep)?.clamp(-excursion_bound, excursion_bound))
-                    })
-                    .collect::<Result<_>>()?
-            } else {
-                Vec::new()
-            };
-            let values = free.iter().map(|f| (f.get)(&b)).chain(excursions).collect();
-            // At the seen mode the simplex leaves the mode where the data put it.
-            let simplex_holds = if always_refined { mode_indices.clone() } else { Vec::new() };
-            Ok(Start { values, context: b, always_refined, simplex_holds })
-        })
-        .collect::<Result<Vec<_>>>()?;
-    // Each start also as the model's own rest state (every file demagnetised): an estimate made
-    // at poor start values can be further from the truth than that.
-    let bases: Vec<Start<ActuatorParams>> = if memory {
-        let rest = bases.iter().map(|b| Start {
-            values: b.values[..d].iter().copied().chain(std::iter::repeat_n(0.0, n_excursions)).collect(),
-            context: b.context,
-            always_refined: b.always_refined,
-            simplex_holds: b.simplex_holds.clone(),
-        });
-        bases.iter().cloned().chain(rest).collect()
-    } else {
-        bases
-    };
+    let starts = with_seen_mode(starts, &free, seen_mode.as_ref());
+    let start_moved = starts_moved(&free, &starts[0].0);
+    let bases = start_points(spec, &starts, &free, &full, memory.then_some(excursion_bound))?;
     let bounds: Vec<Bound> = free
         .iter()
         .map(|f| f.bound)
@@ -536,46 +438,10 @@ fn fit_searched(
     let mut params = with_values(&found.context, &found.best);
     let found_start = starting_from(&full, &found.best[d..]);
     bar.finish_and_clear();
-    let with_lambda = |mut p: ActuatorParams, data: &[Prepared]| -> Result<ActuatorParams> {
-        let lambda = match lambda_range {
-            Some(range) => evaluate_projected_in(spec, &p, data, range)?.1,
-            None => p.magnetostriction.lambda_s as f64,
-        };
-        p.magnetostriction.lambda_s = lambda as f32;
-        Ok(p)
-    };
-    params = with_lambda(params, &found_start)?;
+    params = with_lambda(spec, params, &found_start, lambda_range)?;
     // The first start, as the search began from it: scored on all files (NRMSE as reported).
-    let start_params = bases[0].context;
-    let start_score = match multivalued_ja(spec, &start_params) {
-        Some(why) => Err(why),
-        None => with_lambda(start_params, &full)
-            .and_then(|p| Ok((evaluate(spec, &p, files)?.mean_nrmse(), p)))
-            .map_err(|e| format!("the model cannot be run there: {e}")),
-    };
-    let mut kept = false;
-    if let Ok((start_nrmse, start_set)) = &start_score {
-        let found_nrmse = evaluate(spec, &params, files).map(|e| e.mean_nrmse()).unwrap_or(f64::NAN);
-        if start_nrmse.is_finite() && (found_nrmse.is_nan() || found_nrmse > *start_nrmse) {
-            kept = true;
-            params = *start_set;
-        }
-    }
-    if let Some(why) = multivalued_ja(spec, &params) {
-        bail!("the fit is refused: {why}; --fix or --bound `ja.alpha`/`ja.a_a_per_m` so that α·M_s/(3a) < 1");
-    }
-    let lambda = params.magnetostriction.lambda_s as f64;
-    // Never hand back NaN or an invalid set: say the fit failed instead.
-    model_core::Actuator::new(spec, &params).map_err(|e| {
-        anyhow::anyhow!(
-            "the fit ended on an invalid parameter set ({e}; λ_s = {lambda:e}): the model cannot follow \
-             these recordings (check the drive and displacement columns and their units)"
-        )
-    })?;
-    let fit = evaluate(spec, &params, files)?;
-    if !fit.mean_nrmse().is_finite() {
-        bail!("the fit found no parameter set whose simulation stays finite on these recordings");
-    }
+    let (start_score, kept) = score_start(spec, bases[0].context, (&full, files), lambda_range, &mut params);
+    let (fit, lambda) = checked_result(spec, &params, files)?;
     let mut identified: Vec<(&'static str, f64)> =
         if lambda_fixed { Vec::new() } else { vec![(STRAIN_SCALE.key, lambda)] };
     identified.extend(free.iter().map(|f| (f.name(), (f.get)(&params))));
@@ -602,6 +468,225 @@ fn fit_searched(
         },
         start_moved,
     })
+}
+
+/// Refuses a fit through no more samples than unknowns, which any model passes: the "fit" would
+/// report values and a tiny error that the data do not determine. The unknowns: `d` free
+/// parameters and `dims` searched dimensions in all, λ_s when `lambda`, each file's offset.
+fn check_determined(
+    spec: ModelSpec,
+    files: &[Recording],
+    (d, dims): (usize, usize),
+    lambda: bool,
+    memory: bool,
+) -> Result<()> {
+    let samples: usize = files.iter().map(|r| r.len()).sum();
+    let unknowns = dims + usize::from(lambda) + files.len();
+    if samples <= unknowns {
+        bail!(
+            "{samples} samples in all ({}) for {unknowns} unknowns of `{spec}` ({d} free parameters{}, {} per file): \
+             a fit through no more samples than unknowns is not determined by them; record more samples (thousands: \
+             a drive cycle at the rig's rate), raise --max-samples or drop --trim-start if they cut the files, or \
+             hold parameters with --fix",
+            files.iter().map(|r| format!("{}: {}", r.name, r.len())).collect::<Vec<_>>().join(", "),
+            if lambda { ", λ_s" } else { "" },
+            if memory { "an initial magnetic state and an offset" } else { "an offset" },
+        );
+    }
+    Ok(())
+}
+
+/// The progress bar's length: the swarm, then per seed the plan's simplex and least-squares runs
+/// (and one more least-squares run each in the polish, with `memory`), for `d` free parameters
+/// and `dims` searched dimensions.
+fn planned_evaluations(
+    plan: &Plan,
+    effort: f64,
+    (d, dims): (usize, usize),
+    seen_mode: bool,
+    memory: bool,
+) -> u64 {
+    let swarm_iters = ((plan.swarm_iters * effort).round() as u64).max(2);
+    let nm_iters = ((plan.simplex_iters_per_dim * dims as f64 * effort).round() as u64).max(20);
+    let least_squares = crate::search::least_squares_evaluations(dims, effort);
+    let per_seed: u64 = plan
+        .local
+        .iter()
+        .map(|run| match run {
+            Local::Simplex(..) => nm_iters,
+            Local::LeastSquares(_) => least_squares,
+        })
+        .sum();
+    let seeds = plan.local_searches as u64 + u64::from(seen_mode);
+    plan.swarms as u64 * (plan.particles.0 + plan.particles.1 * d) as u64 * (swarm_iters + 1)
+        + seeds * per_seed
+        + if memory { POLISH.local_searches as u64 * least_squares } else { 0 }
+}
+
+/// Each start as given, and (always refined) also at the mechanical mode the data show.
+fn with_seen_mode(
+    starts: &[ActuatorParams],
+    free: &[FreeParam],
+    seen_mode: Option<&crate::resonance::SeenMode>,
+) -> Vec<(ActuatorParams, bool)> {
+    match seen_mode {
+        Some(mode) => {
+            let at_mode = starts.iter().map(|st| {
+                let mut p = *st;
+                for f in free {
+                    match f.name() {
+                        MODE_FREQUENCY => (f.set)(&mut p, mode.natural_frequency_hz),
+                        MODE_DAMPING => (f.set)(&mut p, mode.damping_ratio),
+                        _ => {}
+                    }
+                }
+                (p, true)
+            });
+            starts.iter().map(|&st| (st, false)).chain(at_mode).collect()
+        }
+        None => starts.iter().map(|&st| (st, false)).collect(),
+    }
+}
+
+/// The user's start values outside the ranges, said rather than clamped in silence.
+fn starts_moved(free: &[FreeParam], start: &ActuatorParams) -> Vec<Warning> {
+    free.iter()
+        .filter_map(|f| {
+            let given = (f.get)(start);
+            let used = f.from_unit(f.to_unit(given));
+            ((given - used).abs() > 1e-6 * given.abs().max(f64::MIN_POSITIVE)).then_some(
+                Warning::StartMoved { param: f.name(), given, used, lo: f.bound.lo, hi: f.bound.hi },
+            )
+        })
+        .collect()
+}
+
+/// Each start also as the model's own rest state (every file demagnetised): an estimate made at
+/// poor start values can be further from the truth than that.
+fn with_rest_states(
+    bases: Vec<Start<ActuatorParams>>,
+    d: usize,
+    n_excursions: usize,
+) -> Vec<Start<ActuatorParams>> {
+    let rest = bases.iter().map(|b| Start {
+        values: b.values[..d].iter().copied().chain(std::iter::repeat_n(0.0, n_excursions)).collect(),
+        context: b.context,
+        always_refined: b.always_refined,
+        simplex_holds: b.simplex_holds.clone(),
+    });
+    bases.iter().cloned().chain(rest).collect()
+}
+
+/// The search's start points: the fixed parameters come from the first start; each start's
+/// identified values are clamped into the bounds, and with a hysteretic law (`excursion_bound`)
+/// each file's initial state is estimated there, and each start is also tried at the rest state.
+fn start_points(
+    spec: ModelSpec,
+    starts: &[(ActuatorParams, bool)],
+    free: &[FreeParam],
+    full: &[Prepared],
+    excursion_bound: Option<f64>,
+) -> Result<Vec<Start<ActuatorParams>>> {
+    let mode_indices: Vec<usize> = free
+        .iter()
+        .enumerate()
+        .filter(|(_, f)| f.name() == MODE_FREQUENCY || f.name() == MODE_DAMPING)
+        .map(|(k, _)| k)
+        .collect();
+    // Start points: the fixed parameters come from the first; each start's identified values
+    // are clamped into the bounds.
+    let bases: Vec<Start<ActuatorParams>> = starts
+        .iter()
+        .map(|&(st, always_refined)| {
+            let mut b = starts[0].0;
+            for f in free {
+                (f.set)(&mut b, f.from_unit(f.to_unit((f.get)(&st))));
+            }
+            let excursions: Vec<f64> = if let Some(excursion_bound) = excursion_bound {
+                full.iter()
+                    .map(|prep| {
+                        Ok(estimate_excursion(spec, &b, prep)?.clamp(-excursion_bound, excursion_bound))
+                    })
+                    .collect::<Result<_>>()?
+            } else {
+                Vec::new()
+            };
+            let values = free.iter().map(|f| (f.get)(&b)).chain(excursions).collect();
+            // At the seen mode the simplex leaves the mode where the data put it.
+            let simplex_holds = if always_refined { mode_indices.clone() } else { Vec::new() };
+            Ok(Start { values, context: b, always_refined, simplex_holds })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(match excursion_bound {
+        Some(_) => with_rest_states(bases, free.len(), full.len()),
+        None => bases,
+    })
+}
+
+/// `p` with λ_s solved in closed form on `data` (within `lambda_range`; as given when held).
+fn with_lambda(
+    spec: ModelSpec,
+    mut p: ActuatorParams,
+    data: &[Prepared],
+    lambda_range: Option<(f64, f64)>,
+) -> Result<ActuatorParams> {
+    let lambda = match lambda_range {
+        Some(range) => evaluate_projected_in(spec, &p, data, range)?.1,
+        None => p.magnetostriction.lambda_s as f64,
+    };
+    p.magnetostriction.lambda_s = lambda as f32;
+    Ok(p)
+}
+
+/// The first start scored on all files (or why it cannot be used), and whether the fit keeps it:
+/// `params`, the search's result, is replaced by it when the search ended worse.
+fn score_start(
+    spec: ModelSpec,
+    start_params: ActuatorParams,
+    (full, files): (&[Prepared], &[Recording]),
+    lambda_range: Option<(f64, f64)>,
+    params: &mut ActuatorParams,
+) -> (std::result::Result<(f64, ActuatorParams), String>, bool) {
+    let start_score = match multivalued_ja(spec, &start_params) {
+        Some(why) => Err(why),
+        None => with_lambda(spec, start_params, full, lambda_range)
+            .and_then(|p| Ok((evaluate(spec, &p, files)?.mean_nrmse(), p)))
+            .map_err(|e| format!("the model cannot be run there: {e}")),
+    };
+    let mut kept = false;
+    if let Ok((start_nrmse, start_set)) = &start_score {
+        let found_nrmse = evaluate(spec, params, files).map(|e| e.mean_nrmse()).unwrap_or(f64::NAN);
+        if start_nrmse.is_finite() && (found_nrmse.is_nan() || found_nrmse > *start_nrmse) {
+            kept = true;
+            *params = *start_set;
+        }
+    }
+    (start_score, kept)
+}
+
+/// The fit's result scored on all files, and its λ_s; never NaN or an invalid set: the fit is
+/// said to have failed instead.
+fn checked_result(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    files: &[Recording],
+) -> Result<(Evaluation, f64)> {
+    if let Some(why) = multivalued_ja(spec, params) {
+        bail!("the fit is refused: {why}; --fix or --bound `ja.alpha`/`ja.a_a_per_m` so that α·M_s/(3a) < 1");
+    }
+    let lambda = params.magnetostriction.lambda_s as f64;
+    // Never hand back NaN or an invalid set: say the fit failed instead.
+    model_core::Actuator::new(spec, params).map_err(|e| {
+        anyhow::anyhow!(
+            "the fit ended on an invalid parameter set ({e}; λ_s = {lambda:e}): the model cannot follow \
+             these recordings (check the drive and displacement columns and their units)"
+        )
+    })?;
+    let fit = evaluate(spec, params, files)?;
+    if !fit.mean_nrmse().is_finite() {
+        bail!("the fit found no parameter set whose simulation stays finite on these recordings");
+    }
+    Ok((fit, lambda))
 }
 
 #[cfg(test)]
