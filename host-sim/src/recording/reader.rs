@@ -89,18 +89,7 @@ impl Recording {
             located!(file, Some(1), None; "empty file (no header line); expected a header such as `time_s,current_A,displacement_um`");
         }
         let (named, mapped) = opts.with_named_units(&headers.iter().collect::<Vec<_>>());
-        for m in &mapped {
-            let unit = if m.unit.is_identity() {
-                String::new()
-            } else {
-                format!(", {} → {}", m.unit.name, m.unit_canonical())
-            };
-            crate::warning::note(format_args!(
-                "{file}: `{}` read as `{}`{unit} (the quantity and unit its name gives; `--column` maps it otherwise)",
-                echo(&m.header),
-                COLUMNS[m.canonical]
-            ));
-        }
+        note_named_units(file, &mapped);
         let opts = &named;
         let index = locate_columns(file, header_line, &headers, opts)?;
         let used: Vec<bool> = (0..headers.len()).map(|c| index.contains(&Some(c))).collect();
@@ -115,35 +104,7 @@ impl Recording {
         });
         let mut stamps = crate::cell_text::Stamps::default();
         let maps: [Option<&ColumnMap>; COLUMNS.len()] = std::array::from_fn(|k| opts.map_of(k));
-        if index[0].is_none() {
-            let found: Vec<&str> = headers.iter().collect();
-            let joined = found.join(", ");
-            let comment = headers.get(0).is_some_and(|h| h.trim_start().starts_with('#'));
-            let hint = case_hint(&headers, "time_s")
-                .or_else(|| {
-                    comment.then(|| {
-                        " — the first line starts with `#`: measurement files have no comment lines; the header \
-                         must be the first line (move notes into a file of their own)"
-                            .to_string()
-                    })
-                })
-                .unwrap_or_default();
-            if let Some(loop_hint) = crate::loops::loop_header_hint(&headers) {
-                located!(file, Some(header_line), None; "no `time_s` column (header has: {}){loop_hint}", echo(&joined));
-            }
-            located!(file, Some(header_line), None;
-                "no `time_s` column (header has: {}); recognised columns are {}{hint}; a time column of \
-                 another name or unit can be mapped, e.g. `--column time_s=time_ms:ms`",
-                echo(&joined),
-                COLUMNS.join(", ")
-            );
-        }
-        if index[1].is_none() && index[2].is_none() {
-            let hint = case_hint(&headers, "current_A")
-                .or_else(|| case_hint(&headers, "command_V"))
-                .unwrap_or_default();
-            located!(file, Some(header_line), None; "needs a drive column: `current_A` or `command_V` (or one mapped with `--column current_A=HEADER[:UNIT]`){hint}");
-        }
+        check_time_and_drive(file, header_line, &headers, &index)?;
         let time_col = index[0].unwrap_or(0) + 1;
         let mut cols: [Vec<f64>; COLUMNS.len()] = Default::default();
         let mut time = TimeCheck { resample: opts.resample.is_some(), ..TimeCheck::default() };
@@ -239,6 +200,60 @@ impl Recording {
         doubts.extend(r.time_doubt());
         Ok(ReadOutcome { recording: r, rows: eligible, kept, doubts })
     }
+}
+
+/// Says which headers were read by the quantity and unit their names give.
+fn note_named_units(file: &str, mapped: &[ColumnMap]) {
+    for m in mapped {
+        let unit = if m.unit.is_identity() {
+            String::new()
+        } else {
+            format!(", {} → {}", m.unit.name, m.unit_canonical())
+        };
+        crate::warning::note(format_args!(
+            "{file}: `{}` read as `{}`{unit} (the quantity and unit its name gives; `--column` maps it otherwise)",
+            echo(&m.header),
+            COLUMNS[m.canonical]
+        ));
+    }
+}
+
+/// Refuses a header without a time axis or a drive column, saying what it has and how to map one.
+fn check_time_and_drive(
+    file: &str,
+    header_line: u64,
+    headers: &csv::StringRecord,
+    index: &[Option<usize>],
+) -> Result<()> {
+    if index[0].is_none() {
+        let found: Vec<&str> = headers.iter().collect();
+        let joined = found.join(", ");
+        let comment = headers.get(0).is_some_and(|h| h.trim_start().starts_with('#'));
+        let hint = case_hint(headers, "time_s")
+            .or_else(|| {
+                comment.then(|| {
+                    " — the first line starts with `#`: measurement files have no comment lines; the header \
+                     must be the first line (move notes into a file of their own)"
+                        .to_string()
+                })
+            })
+            .unwrap_or_default();
+        if let Some(loop_hint) = crate::loops::loop_header_hint(headers) {
+            located!(file, Some(header_line), None; "no `time_s` column (header has: {}){loop_hint}", echo(&joined));
+        }
+        located!(file, Some(header_line), None;
+            "no `time_s` column (header has: {}); recognised columns are {}{hint}; a time column of \
+             another name or unit can be mapped, e.g. `--column time_s=time_ms:ms`",
+            echo(&joined),
+            COLUMNS.join(", ")
+        );
+    }
+    if index[1].is_none() && index[2].is_none() {
+        let hint =
+            case_hint(headers, "current_A").or_else(|| case_hint(headers, "command_V")).unwrap_or_default();
+        located!(file, Some(header_line), None; "needs a drive column: `current_A` or `command_V` (or one mapped with `--column current_A=HEADER[:UNIT]`){hint}");
+    }
+    Ok(())
 }
 
 /// The column separator of a measurement file, whether a first line named it, the file's first
