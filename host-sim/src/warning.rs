@@ -454,52 +454,14 @@ impl fmt::Display for Warning {
                 "{fit} follows `--val {val}` and is read as a fit file: `--val` takes one file; repeat it \
                  (`--val {val} --val {fit}`) if {fit} is for validation"
             ),
-            Warning::PreisachPlaneWide { h_max, reach, advised } => {
-                let levels = model_core::magnetization::PREISACH_LEVELS;
-                write!(
-                    f,
-                    "`preisach.h_max_a_per_m` = {h_max:.0} A/m is {:.1}× the largest field these recordings reach \
-                     ({reach:.0} A/m: coil.bias_a_per_m + coil.turns_per_m × the current): the relay plane's \
-                     {levels} levels step {:.0} A/m, most of them beyond the data; set it near {advised:.0} A/m \
-                     ({:.2}× that field) in the parameter file, or take it from a loop fit of the rod, which \
-                     identifies it",
-                    h_max / reach,
-                    2.0 * h_max / (levels - 1) as f64,
-                    advised / reach
-                )
-            }
+            Warning::PreisachPlaneWide { h_max, reach, advised } => preisach_plane_wide(f, *h_max, *reach, *advised),
             Warning::NoUncertainty { why } => write!(f, "no parameter uncertainty: {why}"),
             Warning::TimeLimit { seconds } => write!(
                 f,
                 "the time limit of {seconds} s was reached: the result is the best found so far, not a converged fit"
             ),
             Warning::ModeAboveNyquist { natural_frequency_hz, nyquist_hz, step_s, lowest_searched } => {
-                // Six significant digits: a step read off a time column is 0.10000000000000142 s.
-                let step = format!("{:.5e}", step_s).parse::<f64>().unwrap_or(*step_s);
-                let at = format!("the recordings' Nyquist frequency ({nyquist_hz:.1} Hz, a sample every {step} s)");
-                if *lowest_searched {
-                    write!(
-                        f,
-                        "every mechanical mode the search tries (`mech.natural_frequency_hz` from \
-                         {natural_frequency_hz:.0} Hz) lies above {at}: no file can show one, so mechanical \
-                         dynamics cannot be judged"
-                    )?;
-                } else {
-                    write!(
-                        f,
-                        "`mech.natural_frequency_hz` = {natural_frequency_hz:.0} Hz lies above {at}: no file can \
-                         show the mode, so the mechanics acts as a static gain and its frequency and damping are \
-                         not measured"
-                    )?;
-                }
-                if *step_s >= SLOW_STEP_S {
-                    write!(
-                        f,
-                        "; a step this long is rare in an actuator recording: if `time_s` holds milliseconds, \
-                         read it as such (`--column time_s=time_s:ms`)"
-                    )?;
-                }
-                Ok(())
+                mode_above_nyquist(f, *natural_frequency_hz, *nyquist_hz, *step_s, *lowest_searched)
             }
             Warning::Truncated { file, found, kept, kept_s, after_trim_start } => {
                 let trimmed = if *after_trim_start { " after --trim-start" } else { "" };
@@ -544,24 +506,7 @@ impl fmt::Display for Warning {
                     share.abs() * 100.0
                 )
             }
-            Warning::FluxScaleAtBound { file, scale } => {
-                let (lo, hi) = crate::channels::FLUX_SCALE_RANGE;
-                let why = if *scale <= lo {
-                    "the flux density swings far less than the model's magnetization makes it: is \
-                     `flux_density_T` the rod's flux density B in T? A flux linkage N·A·B (V·s) must be divided \
-                     by the search coil's turns × area, and a coil much wider than the rod reads a share of its \
-                     flux"
-                } else {
-                    "the flux density swings far more than the model's magnetization makes it: is \
-                     `flux_density_T` in T? A column in mT or G reads 1000× or 10 000× too large (`--column \
-                     flux_density_T=NAME:mT`, `:G` converts)"
-                };
-                write!(
-                    f,
-                    "{file}: the search coil's magnetization scale g = {scale} ended at an end of its range \
-                     [{lo}, {hi}] (B = μ0 (H + g M) + c): {why}; the other parameters may have bent to follow it"
-                )
-            }
+            Warning::FluxScaleAtBound { file, scale } => flux_scale_at_bound(f, file, *scale),
             Warning::UnfittedGain { file, params, gain } => write!(
                 f,
                 "{file} gives the command, not the current, so the model is driven through `amp.gain_a_per_v` = \
@@ -589,6 +534,78 @@ impl fmt::Display for Warning {
             Warning::Data(doubt) => write!(f, "{doubt}"),
         }
     }
+}
+
+/// [`Warning::ModeAboveNyquist`] in words.
+fn mode_above_nyquist(
+    f: &mut fmt::Formatter<'_>,
+    natural_frequency_hz: f64,
+    nyquist_hz: f64,
+    step_s: f64,
+    lowest_searched: bool,
+) -> fmt::Result {
+    // Six significant digits: a step read off a time column is 0.10000000000000142 s.
+    let step = format!("{:.5e}", step_s).parse::<f64>().unwrap_or(step_s);
+    let at = format!("the recordings' Nyquist frequency ({nyquist_hz:.1} Hz, a sample every {step} s)");
+    if lowest_searched {
+        write!(
+            f,
+            "every mechanical mode the search tries (`mech.natural_frequency_hz` from \
+             {natural_frequency_hz:.0} Hz) lies above {at}: no file can show one, so mechanical \
+             dynamics cannot be judged"
+        )?;
+    } else {
+        write!(
+            f,
+            "`mech.natural_frequency_hz` = {natural_frequency_hz:.0} Hz lies above {at}: no file can \
+             show the mode, so the mechanics acts as a static gain and its frequency and damping are \
+             not measured"
+        )?;
+    }
+    if step_s >= SLOW_STEP_S {
+        write!(
+            f,
+            "; a step this long is rare in an actuator recording: if `time_s` holds milliseconds, \
+             read it as such (`--column time_s=time_s:ms`)"
+        )?;
+    }
+    Ok(())
+}
+
+/// [`Warning::FluxScaleAtBound`] in words.
+fn flux_scale_at_bound(f: &mut fmt::Formatter<'_>, file: &str, scale: f64) -> fmt::Result {
+    let (lo, hi) = crate::channels::FLUX_SCALE_RANGE;
+    let why = if scale <= lo {
+        "the flux density swings far less than the model's magnetization makes it: is \
+         `flux_density_T` the rod's flux density B in T? A flux linkage N·A·B (V·s) must be divided \
+         by the search coil's turns × area, and a coil much wider than the rod reads a share of its \
+         flux"
+    } else {
+        "the flux density swings far more than the model's magnetization makes it: is \
+         `flux_density_T` in T? A column in mT or G reads 1000× or 10 000× too large (`--column \
+         flux_density_T=NAME:mT`, `:G` converts)"
+    };
+    write!(
+        f,
+        "{file}: the search coil's magnetization scale g = {scale} ended at an end of its range \
+         [{lo}, {hi}] (B = μ0 (H + g M) + c): {why}; the other parameters may have bent to follow it"
+    )
+}
+
+/// [`Warning::PreisachPlaneWide`] in words.
+fn preisach_plane_wide(f: &mut fmt::Formatter<'_>, h_max: f64, reach: f64, advised: f64) -> fmt::Result {
+    let levels = model_core::magnetization::PREISACH_LEVELS;
+    write!(
+        f,
+        "`preisach.h_max_a_per_m` = {h_max:.0} A/m is {:.1}× the largest field these recordings reach \
+         ({reach:.0} A/m: coil.bias_a_per_m + coil.turns_per_m × the current): the relay plane's \
+         {levels} levels step {:.0} A/m, most of them beyond the data; set it near {advised:.0} A/m \
+         ({:.2}× that field) in the parameter file, or take it from a loop fit of the rod, which \
+         identifies it",
+        h_max / reach,
+        2.0 * h_max / (levels - 1) as f64,
+        advised / reach
+    )
 }
 
 #[cfg(test)]
