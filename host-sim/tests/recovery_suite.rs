@@ -159,6 +159,18 @@ fn rig_params(case: &Case) -> textrig::Params {
 /// A recording of the rig (cached), read back as a user's file is, and the floor its logged
 /// displacement noise alone sets (the NRMSE of the rig's noise-free displacement against it).
 fn recording(case: &Case, file: &File, current_lsb: f64, seed: u64, salt: u64) -> (Recording, f64) {
+    let (rec, floor, _) = recording_and_clean(case, file, current_lsb, seed, salt);
+    (rec, floor)
+}
+
+/// As [`recording`], and the cached file of the rig's noise-free displacement.
+fn recording_and_clean(
+    case: &Case,
+    file: &File,
+    current_lsb: f64,
+    seed: u64,
+    salt: u64,
+) -> (Recording, f64, PathBuf) {
     let params = rig_params(case);
     let e = Experiment {
         structure: case.structure.to_string(),
@@ -193,7 +205,8 @@ fn recording(case: &Case, file: &File, current_lsb: f64, seed: u64, salt: u64) -
     );
     let csv = dir.join(format!("{stem}.csv"));
     let floor_file = dir.join(format!("{stem}.floor"));
-    if !csv.exists() || !floor_file.exists() {
+    let clean_file = dir.join(format!("{stem}.clean"));
+    if !csv.exists() || !floor_file.exists() || !clean_file.exists() {
         let rec = textrig::simulate(&e).unwrap_or_else(|err| panic!("{}: {}: {err}", case.label, file.label));
         let floor = host_sim::score::nrmse(
             &rec.displacement_um,
@@ -203,6 +216,8 @@ fn recording(case: &Case, file: &File, current_lsb: f64, seed: u64, salt: u64) -
         rec.write_csv(std::io::BufWriter::new(std::fs::File::create(&tmp).expect("cache file")))
             .expect("write");
         std::fs::write(&floor_file, format!("{floor:e}")).expect("floor");
+        let clean: Vec<String> = rec.truth.displacement_um.iter().map(|y| format!("{y:e}")).collect();
+        std::fs::write(&clean_file, clean.join("\n")).expect("noise-free displacement");
         std::fs::rename(&tmp, &csv).expect("cache rename");
     }
     let floor: f64 =
@@ -210,7 +225,24 @@ fn recording(case: &Case, file: &File, current_lsb: f64, seed: u64, salt: u64) -
     let mut rec = Recording::read(&csv)
         .unwrap_or_else(|err| panic!("{}: gma refuses the rig's file: {err:#}", csv.display()));
     rec.name = format!("{}-{}", case.label, file.label);
-    (rec, floor)
+    (rec, floor, clean_file)
+}
+
+/// A recording ([`recording`]), its floor, and the rig's noise-free displacement.
+fn noise_free(
+    case: &Case,
+    file: &File,
+    current_lsb: f64,
+    seed: u64,
+    salt: u64,
+) -> (Recording, f64, Vec<f64>) {
+    let (rec, floor, clean_file) = recording_and_clean(case, file, current_lsb, seed, salt);
+    let clean = std::fs::read_to_string(&clean_file)
+        .expect("noise-free displacement")
+        .lines()
+        .map(|l| l.trim().parse().expect("a number"))
+        .collect();
+    (rec, floor, clean)
 }
 
 /// `model` shifted by the mean difference to `measured` (the workbench scores with the
@@ -408,4 +440,81 @@ fn report_and_assert(outcomes: &[Outcome]) {
         }
     }
     assert!(failures.is_empty(), "recovery targets not met:\n  {}", failures.join("\n  "));
+}
+
+/// Forward fidelity, before any fit (issue 81): each structure driven by the rig's own logged
+/// drive at the rig's own parameters (each file's initial state estimated, as every run does),
+/// against the rig's noise-free displacement, in units of the file's floor (its logged noise's
+/// NRMSE). The model form alone: no search is in question. Targets: every file within 1.25× its
+/// floor with a clean current, 1.5× at 1 LSB, 2× at 3 LSB.
+///
+///   cargo test --release -p host-sim --test recovery_suite forward_fidelity -- --ignored --nocapture
+///
+/// `GMA_RECOVERY_LSB` picks the current noise levels (default 0, 1, 3), `GMA_RECOVERY_SUITE` a
+/// case's label (default every case); seed 1.
+#[test]
+#[ignore = "a minute or two of CPU: run with --ignored (see the doc comment)"]
+fn forward_fidelity_at_the_rigs_parameters() {
+    let choice = std::env::var("GMA_RECOVERY_SUITE").unwrap_or_default();
+    let noises: Vec<f64> = std::env::var("GMA_RECOVERY_LSB").map_or(vec![0.0, 1.0, 3.0], |list| {
+        list.split(',').map(|v| v.trim().parse().expect("GMA_RECOVERY_LSB: numbers, e.g. 0,1,3")).collect()
+    });
+    let cases: Vec<Case> =
+        cases().into_iter().filter(|c| choice.is_empty() || choice == "full" || c.label == choice).collect();
+    assert!(!cases.is_empty(), "GMA_RECOVERY_SUITE={choice}: not a case of the suite");
+    let limit = |lsb: f64| {
+        if lsb <= 0.0 {
+            1.25
+        } else if lsb <= 1.0 {
+            1.5
+        } else {
+            2.0
+        }
+    };
+    let files: Vec<(File, u64)> = fit_files()
+        .into_iter()
+        .enumerate()
+        .map(|(k, f)| (f, k as u64))
+        .chain(val_files().into_iter().enumerate().map(|(k, f)| (f, 100 + k as u64)))
+        .collect();
+    println!("case                 LSB  file              floor %   model error %   × floor (target)");
+    let (mut failures, mut worst) = (Vec::new(), Vec::new());
+    for case in &cases {
+        let spec = params::parse_spec(case.structure).expect("suite structure");
+        let truth = truth(case, spec);
+        for &lsb in &noises {
+            let mut case_worst: f64 = 0.0;
+            for (file, salt) in &files {
+                let (rec, floor, clean) = noise_free(case, file, lsb, 1, *salt);
+                let sim = host_sim::simulation::simulate(spec, &truth, &rec)
+                    .unwrap_or_else(|e| panic!("{}: {}: {e:#}", case.label, file.label));
+                let error = host_sim::score::nrmse(&clean, &with_offset(&clean, &sim.displacement_um));
+                let ratio = error / floor;
+                case_worst = case_worst.max(ratio);
+                println!(
+                    "{:<20} {lsb:>3}  {:<14} {:>9.3}   {:>12.3}   {ratio:>8.2} ({})",
+                    case.label,
+                    file.label,
+                    100.0 * floor,
+                    100.0 * error,
+                    limit(lsb)
+                );
+                if ratio.is_nan() || ratio > limit(lsb) {
+                    failures.push(format!("{} {lsb} LSB {}: {ratio:.2}× the floor", case.label, file.label));
+                }
+            }
+            worst.push((case.label, lsb, case_worst));
+        }
+    }
+    println!("\nworst file per case, × its floor:");
+    for (case, lsb, w) in &worst {
+        println!("  {case:<20} {lsb:>3} LSB  {w:>7.2}× (target {})", limit(*lsb));
+    }
+    assert!(
+        failures.is_empty(),
+        "forward fidelity: {} of {} (case, noise, file) runs beyond their target:\n  {}",
+        failures.len(),
+        cases.len() * noises.len() * files.len(),
+        failures.join("\n  ")
+    );
 }
