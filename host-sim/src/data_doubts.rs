@@ -106,6 +106,14 @@ pub enum DataDoubt {
         /// `temperature_C`'s first value.
         first: f64,
     },
+    /// A coil temperature that starts where a room's temperature in kelvin would
+    /// ([`crate::fit::data_doubts`]).
+    TemperatureLikeKelvin {
+        /// The recording.
+        file: String,
+        /// `temperature_C`'s first value.
+        first: f64,
+    },
 }
 
 impl fmt::Display for DataDoubt {
@@ -198,6 +206,14 @@ impl fmt::Display for DataDoubt {
                  (a column mapped with --column: give that mapping the unit `°F`); the coil heating's \
                  thermal resistance would otherwise come out 1.8× too large",
                 (first - 32.0) * 5.0 / 9.0
+            ),
+            DataDoubt::TemperatureLikeKelvin { file, first } => write!(
+                f,
+                "{file}: `temperature_C` starts at {first} °C, a coil far above boiling before any drive, or a \
+                 room at {:.1} °C logged in kelvin; if the column is in K, read it so: `--column \
+                 temperature_C=temperature_C:K` (a column mapped with --column: give that mapping the unit `K`); \
+                 the coil's ambient temperature would otherwise come out 273.15 °C too high",
+                first - 273.15
             ),
         }
     }

@@ -125,18 +125,66 @@ fn bad_commands_are_refused_on_the_host_before_sending() {
             "--out",
             o,
         ]),
-        &["out of range", "|bias| + amplitude"],
+        &["out of range: |bias| + amplitude = 60 µm is beyond the board's 50 µm"],
         "beyond the stroke",
     );
     refused(
         &gma(&["drive", "reference", "--shape", "constant", "--bias-um", "5", "--freq-hz", "10", "--out", o]),
-        &["out of range"],
+        &["out of range: a constant has amplitude and frequency 0"],
         "a constant with a frequency",
     );
     refused(
         &gma(&["drive", "reference", "--shape", "sine", "--amplitude-um", "10", "--out", o]),
-        &["--shape sine: give its frequency, --freq-hz in (0, 1666.7] Hz"],
+        &["--shape sine: give its frequency, --freq-hz in (0, 1666.6] Hz"],
         "a sine left at the default frequency",
+    );
+    // Issue 78 item 11: the bound the help and the errors say is one the board takes, and the
+    // error names the condition that failed.
+    let accepted = dir.path().join("accepted.bin");
+    let a = accepted.to_str().unwrap();
+    run_ok(&[
+        "drive",
+        "reference",
+        "--shape",
+        "sine",
+        "--amplitude-um",
+        "5",
+        "--freq-hz",
+        "1666.6",
+        "--out",
+        a,
+    ]);
+    refused(
+        &gma(&[
+            "drive",
+            "reference",
+            "--shape",
+            "sine",
+            "--amplitude-um",
+            "5",
+            "--freq-hz",
+            "1666.7",
+            "--out",
+            o,
+        ]),
+        &["out of range: the frequency 1666.7 Hz is outside (0, 1666.6] Hz"],
+        "above a sixth of the tick rate",
+    );
+    refused(
+        &gma(&[
+            "drive",
+            "reference",
+            "--shape",
+            "sine",
+            "--amplitude-um",
+            "-5",
+            "--freq-hz",
+            "10",
+            "--out",
+            o,
+        ]),
+        &["out of range: the amplitude -5 µm is negative"],
+        "a negative amplitude",
     );
     refused(
         &gma(&["drive", "load", "--params", "nonexistent.toml", "--model", "ja", "--out", o]),

@@ -151,6 +151,25 @@ fn a_start_outside_its_range_and_a_multivalued_file_are_said_not_passed_over() {
         err.contains("gma: warning:") && err.contains("≥ 1") && err.contains("a fit and the drive refuse it"),
         "{err}"
     );
+    // Issue 78 item 10: in `compare --json`'s warnings too (it was on stderr only, `[]` in JSON).
+    let o = gma(&[
+        "compare",
+        "--model",
+        "ja",
+        "--params",
+        params,
+        "--out-dir",
+        dir.path().to_str().unwrap(),
+        "--json",
+        file,
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let warned = j["warnings"].as_array().unwrap().iter().any(|w| {
+        let w = w.as_str().unwrap();
+        w.contains("α·M_s/(3a) =") && w.contains("≥ 1") && w.contains("a fit and the drive refuse it")
+    });
+    assert!(warned, "{:#}", j["warnings"]);
     // The board's feedforward inverts the set: it refuses it, so the host never sends it.
     let frame = dir.path().join("load.bin");
     let o = gma(&["drive", "load", "--params", params, "--model", "ja", "--out", frame.to_str().unwrap()]);

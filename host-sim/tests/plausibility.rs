@@ -435,3 +435,30 @@ fn a_thermometer_in_fahrenheit_is_said_with_its_unit() {
     );
     assert!(!w.join("\n").contains("°F"), "{w:?}");
 }
+
+/// Issue 78 item 4: a coil thermometer logged in kelvin under `temperature_C` (295.15 for a 22 °C
+/// room): the coil's ambient came out 295.15 °C, unsaid (°F was said). A warning names `K` and
+/// its `--column`; read with it, the file is not doubted.
+#[test]
+fn a_thermometer_in_kelvin_is_said_with_its_unit() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = simulate(dir.path(), "good.csv", &["--freq-hz", "20", "--duration-s", "0.5", "--bias", "0.5"]);
+    let text = std::fs::read_to_string(&good).unwrap();
+    let mut out = String::new();
+    for (k, line) in text.lines().enumerate() {
+        let cell = if k == 0 { "temperature_C".to_string() } else { format!("{}", 295.15 + 1e-4 * k as f64) };
+        out.push_str(&format!("{line},{cell}\n"));
+    }
+    let f = dir.path().join("kelvin.csv");
+    std::fs::write(&f, out).unwrap();
+    let f = f.display().to_string();
+    let w = warnings(&compare(&["--model", "ja+mech", &f]).unwrap()).join("\n");
+    assert!(
+        w.contains("kelvin.csv: `temperature_C` starts at 295.15") && w.contains("temperature_C:K`"),
+        "{w}"
+    );
+    assert!(w.contains("a room at 22.0 °C logged in kelvin"), "{w}");
+    let w =
+        warnings(&compare(&["--model", "ja+mech", "--column", "temperature_C=temperature_C:K", &f]).unwrap());
+    assert!(!w.join("\n").contains("kelvin"), "{w:?}");
+}

@@ -117,6 +117,13 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         }
     };
     summary.warnings = cut.iter().map(ToString::to_string).collect();
+    // A set the fit and the drive refuse, run as given: said on stderr when the file was read,
+    // and listed with the other doubts, so that `--json` carries it too.
+    if let Some(why) = params::multivalued_ja(spec, &p) {
+        summary
+            .warnings
+            .push(format!("{why}; a fit and the drive refuse it, other commands use it as given"));
+    }
     folder.keep();
     // The result first, then its doubts heaviest first, then each file's figures.
     let to_stderr = text_to_stderr(a);

@@ -87,7 +87,7 @@ pub struct ReferenceArgs {
     /// DC level [µm from rest].
     #[arg(long, default_value_t = 0.0)]
     pub bias_um: f32,
-    /// Frequency [Hz] (0 < f ≤ 1666.7 Hz, a sixth of the 10 kHz tick; 0 for a constant).
+    /// Frequency [Hz] (0 < f ≤ 1666.6 Hz, below a sixth of the 10 kHz tick; 0 for a constant).
     #[arg(long, default_value_t = 0.0)]
     pub freq_hz: f32,
     #[command(flatten)]
@@ -180,24 +180,37 @@ fn reference(r: &ReferenceArgs) -> Result<Command> {
         ReferenceCommand { shape, amplitude_um: r.amplitude_um, bias_um: r.bias_um, freq_hz: r.freq_hz };
     // The board's own check with the reference board's limits, so that a typo fails here.
     let cfg = gma_control::ControlConfig::REFERENCE;
+    let max_hz = 1.0 / (6.0 * cfg.current_loop.tick_s);
+    // The bound as a person types it: rounded down, so the figure said is one the board takes
+    // (1666.6 Hz; 1666.7 is above a sixth of the 10 kHz tick).
+    let max_hz_said = (max_hz * 10.0).floor() / 10.0;
     // The one slip the range list below hides: a waveform left at the default frequency, 0.
     if !matches!(r.shape, WaveShape::Constant) && r.freq_hz == 0.0 {
         bail!(
-            "reference --shape {}: give its frequency, --freq-hz in (0, {:.1}] Hz (the default, 0, is for `constant` only)",
-            shape_name(r.shape),
-            1.0 / (6.0 * cfg.current_loop.tick_s)
+            "reference --shape {}: give its frequency, --freq-hz in (0, {max_hz_said:.1}] Hz (the default, 0, is for `constant` only)",
+            shape_name(r.shape)
         );
     }
-    if cmd.waveform(cfg.max_reference_um, 1.0 / (6.0 * cfg.current_loop.tick_s)).is_err() {
+    if cmd.waveform(cfg.max_reference_um, max_hz).is_err() {
+        let (a, b, f) = (r.amplitude_um, r.bias_um, r.freq_hz);
+        let why = if !(a.is_finite() && b.is_finite() && f.is_finite()) {
+            "a value is not a finite number".to_string()
+        } else if a < 0.0 {
+            format!("the amplitude {a} µm is negative (a waveform's sign is its phase)")
+        } else if b.abs() + a > cfg.max_reference_um {
+            format!(
+                "|bias| + amplitude = {} µm is beyond the board's {} µm",
+                b.abs() + a,
+                cfg.max_reference_um
+            )
+        } else if matches!(r.shape, WaveShape::Constant) {
+            "a constant has amplitude and frequency 0 (use --bias-um for its level)".to_string()
+        } else {
+            format!("the frequency {f} Hz is outside (0, {max_hz_said:.1}] Hz, a sixth of the tick rate")
+        };
         bail!(
-            "reference --shape {} --amplitude-um {} --bias-um {} --freq-hz {}: out of range (finite, amplitude ≥ 0, \
-             |bias| + amplitude ≤ {} µm, 0 < frequency ≤ {:.1} Hz (a sixth of the tick rate); a constant has amplitude and frequency 0)",
-            shape_name(r.shape),
-            r.amplitude_um,
-            r.bias_um,
-            r.freq_hz,
-            cfg.max_reference_um,
-            1.0 / (6.0 * cfg.current_loop.tick_s)
+            "reference --shape {} --amplitude-um {a} --bias-um {b} --freq-hz {f}: out of range: {why}",
+            shape_name(r.shape)
         );
     }
     Ok(Command::SetReference(cmd))

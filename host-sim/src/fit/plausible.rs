@@ -256,7 +256,7 @@ fn delay_at_other_rate(
 /// a displacement whose scale the drive cannot make ([`displacement_scale`]), a file that reads
 /// better with its drive and its displacement both negated ([`both_negated`]), a loop run the
 /// other way round ([`loop_direction`]), a sensor delay that follows the file better counted in
-/// its own samples ([`delay_rate_doubt`]), a coil temperature that reads like °F
+/// its own samples ([`delay_rate_doubt`]), a coil temperature that reads like °F or K
 /// ([`temperature_unit`]).
 pub fn data_doubts<'a>(
     spec: ModelSpec,
@@ -282,13 +282,19 @@ pub fn data_doubts<'a>(
 /// before its drive is near its room (10–40 °C), which in °F reads 50–104.
 const WARM_START_C: f64 = 45.0;
 
-/// A `temperature_C` whose first value is above [`WARM_START_C`] and, read as °F, a room's
-/// temperature (10–40 °C).
+/// A `temperature_C` whose first value is above [`WARM_START_C`] and, read as °F or as K, a
+/// room's temperature (10–40 °C: 50–104 °F, 283–313 K; the two ranges do not meet).
 fn temperature_unit(rec: &Recording) -> Option<Warning> {
     let first = *rec.temperature_c.as_ref()?.first()?;
-    let as_fahrenheit = (first - 32.0) * 5.0 / 9.0;
-    (first > WARM_START_C && (10.0..=40.0).contains(&as_fahrenheit))
-        .then(|| Warning::Data(DataDoubt::TemperatureLikeFahrenheit { file: rec.name.clone(), first }))
+    let room = |c: f64| first > WARM_START_C && (10.0..=40.0).contains(&c);
+    let file = rec.name.clone();
+    if room((first - 32.0) * 5.0 / 9.0) {
+        Some(Warning::Data(DataDoubt::TemperatureLikeFahrenheit { file, first }))
+    } else if room(first - 273.15) {
+        Some(Warning::Data(DataDoubt::TemperatureLikeKelvin { file, first }))
+    } else {
+        None
+    }
 }
 
 /// How many times the model's displacement spread (rms about its mean, for the start
