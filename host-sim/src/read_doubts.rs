@@ -21,6 +21,15 @@ pub const MAX_DRIVE_HZ: f64 = 1e5;
 /// and the signal is aliased, or the time axis is not the one the samples were taken on.
 pub const MIN_SAMPLES_PER_CYCLE: f64 = 4.0;
 
+/// Longest sample period [s] of a fast recording (1 MHz): an oscilloscope's, not a rig's logger.
+pub const FAST_STEP_S: f64 = 1e-6;
+
+/// Highest drive frequency [Hz] a fast recording is taken plausible at: a magnetostrictive
+/// actuator is driven below about 20 kHz (eddy currents and the rod's modes end it). Above, at
+/// a fast step, is what a file in seconds read as milliseconds looks like (its drive 1000×
+/// faster, its samples per cycle unchanged).
+pub const FAST_DRIVE_HZ: f64 = 2e4;
+
 /// Shortest sample period [s] from which on a recording is a slow logger's: a rig recording an
 /// actuator's response samples at 1–100 kHz, and 10 ms is 100 Hz.
 pub const SLOW_STEP_S: f64 = 0.01;
@@ -61,6 +70,16 @@ pub enum ReadDoubt {
         file: String,
         /// The first stamp as written [s].
         origin: String,
+    },
+    /// A time axis far faster than a rig's, with a drive faster than an actuator takes: a file
+    /// in seconds read in ms or µs.
+    TimeTooFast {
+        /// The file.
+        file: String,
+        /// Its sample period [s].
+        step_s: f64,
+        /// The drive's cycles per second as read [Hz].
+        drive_hz: f64,
     },
     /// A time axis that no actuator rig records on.
     ImplausibleTime {
@@ -109,6 +128,15 @@ impl fmt::Display for ReadDoubt {
                 "{file}: time stamps read as offsets from the first, {} s (at that magnitude a 64-bit \
                  float does not resolve the sample period; the offsets are exact)",
                 echo(origin)
+            ),
+            ReadDoubt::TimeTooFast { file, step_s, drive_hz } => write!(
+                f,
+                "{file}: the time axis is implausible for an actuator rig: a sample rate of {:.3e} Hz with the \
+                 drive's cycles at {drive_hz:.3e} Hz (a rig samples at 1–100 kHz and drives a magnetostrictive \
+                 actuator below {FAST_DRIVE_HZ:.0e} Hz); is `time_s` read in a unit it is not in? A column in \
+                 seconds mapped with `:ms` (or `:us`) reads 1000× (10⁶×) too fast: map it without a unit \
+                 (`--column time_s=HEADER`), or drop the mapping",
+                1.0 / step_s
             ),
             ReadDoubt::ImplausibleTime { file, step_s, why } => write!(
                 f,
@@ -182,6 +210,10 @@ pub fn time_doubt(
     let drive_cycles = cycles(drive);
     let why = if drive_cycles >= 1.0 && duration > 0.0 {
         let (hz, per_cycle) = (drive_cycles / duration, n / drive_cycles);
+        if step_s <= FAST_STEP_S && hz > FAST_DRIVE_HZ {
+            let file = file.to_string();
+            return Some(ReadDoubt::TimeTooFast { file, step_s, drive_hz: hz });
+        }
         if hz < MIN_DRIVE_HZ {
             Some(format!("the drive's cycles come at {hz:.3e} Hz, below {MIN_DRIVE_HZ} Hz"))
         } else if hz > MAX_DRIVE_HZ {

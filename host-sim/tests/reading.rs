@@ -321,3 +321,22 @@ fn a_time_axis_in_ms_is_warned_about_for_every_model() {
         assert!(!w.iter().any(|w| w.contains("implausible")), "{f}: {w:?}");
     }
 }
+
+/// Issue 78 item 8: the opposite slip, a file in seconds read as milliseconds (`--column
+/// time_s=time_s:ms`: 10 MHz sampling, a 50 kHz drive), scored with no word; it is said, with
+/// the advice to drop the unit, and the file read as it is is not doubted.
+#[test]
+fn a_time_axis_in_seconds_read_as_ms_is_warned_about() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = demo(dir.path());
+    let params = d.join("params-2-eddy_ja_mech.toml");
+    let file = d.join("demo-val1.csv");
+    let o = compare(dir.path(), "ja", &params, &[&file], &["--column", "time_s=time_s:ms"]);
+    let w = warnings(&json(&o));
+    let said = format!("{}: the time axis is implausible for an actuator rig: a sample rate of", path(&file));
+    let found = w.iter().find(|w| w.starts_with(&said)).unwrap_or_else(|| panic!("{w:?}"));
+    assert!(found.contains("mapped with `:ms`") && found.contains("map it without a unit"), "{found}");
+    assert!(!found.contains("is read with `--column time_s=HEADER:ms`"), "advice that damages data: {found}");
+    let plain = compare(dir.path(), "ja", &params, &[&file], &[]);
+    assert!(!warnings(&json(&plain)).iter().any(|w| w.contains("implausible")), "the file as logged");
+}
