@@ -21,7 +21,6 @@ use model_core::{ActuatorParams, Effect, ModelSpec};
 use crate::params::multivalued_ja;
 use crate::progress::{self, Progress};
 use crate::recording::Recording;
-use crate::score::nrmse;
 use crate::search::{minimize, Bound, Fidelity, Found, Local, Plan, SearchOptions, Start};
 use crate::simulation::{
     estimate_excursion, excursion_range, prepare, starting_from, Drive, MagneticMemo, Prepared,
@@ -42,7 +41,7 @@ use cost::{evaluate_projected_in, projected_cost, projected_residuals, FAILED_CO
 pub use doubts::{flux_scale_doubts, strain_scale_doubt, unfitted_gain, unresolved_mode, unsearchable_mode};
 pub use free_params::{free_params, identifiable, logs_coil_temperature, FreeParam, Given};
 use free_params::{given_by, MODE_DAMPING, MODE_FREQUENCY};
-pub use plausible::{check_files, check_physics, data_doubts, started_mid_run};
+pub use plausible::{check_files, check_physics, data_doubts};
 pub use start::StartScore;
 
 /// Fit settings.

@@ -57,13 +57,16 @@ pub fn ladder(
 ) -> Result<Vec<Rung>> {
     let mut rungs: Vec<Rung> = Vec::new();
     let mut spec = spec;
-    let mut start = *init;
     for k in 0..MAX_RUNGS {
         crate::progress::phase(
             opts.progress,
             &format!("report: rung {} of at most {MAX_RUNGS}, model `{spec}`", k + 1),
         );
-        let d = diagnose(spec, &start, fit_files, val_files, opts)?;
+        // Every rung from the engineer's start values, as the same steps by hand run: a rung
+        // started from the last verdict's refit inherits the basin where the lower structure bent
+        // its lags to mimic what was missing (the demo's `ja+mech` fit an overdamped mode for
+        // the eddy lag, and its candidates' fresh searches, started there, never left it).
+        let d = diagnose(spec, init, fit_files, val_files, opts)?;
         let base = d.baseline.clone().expect("diagnose keeps its baseline fit");
         let val =
             if val_files.is_empty() { Vec::new() } else { evaluate(spec, &base.params, val_files)?.files };
@@ -82,12 +85,6 @@ pub fn ladder(
             break; // the next rung would start from a search cut short
         }
         spec = spec.with(v);
-        // Start the next rung from the verdict's refit.
-        if let Some(c) = d.candidates.iter().find(|c| c.effect == v) {
-            if let Some(f) = &c.refit {
-                start = f.params;
-            }
-        }
     }
     Ok(rungs)
 }

@@ -34,8 +34,9 @@ pub struct FileScoreRow {
     /// Temperature rows: the temperature the model's coil heating starts from [°C] (fitted).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ambient_c: Option<f64>,
-    /// The estimated initial magnetic state: the pre-history field excursion above the bias
-    /// [A/m] (displacement rows of hysteretic models).
+    /// The estimated initial magnetic state: the pre-history field excursion [A/m] from the
+    /// first sample's field and back, the rod demagnetised there before it (displacement rows
+    /// of hysteretic models).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub initial_excursion_a_per_m: Option<f64>,
     /// Plots written for the file (compare).

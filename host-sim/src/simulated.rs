@@ -15,7 +15,8 @@ pub struct Simulation {
     /// Model temperature rise of the coil heating [°C] (runs of a model with `thermal_drift`;
     /// empty otherwise: no rise).
     pub temperature_rise_c: Vec<f64>,
-    /// The pre-history the run started from: the field excursion above the bias [A/m] (0:
-    /// demagnetised, then the bias), estimated for the file unless given.
+    /// The pre-history the run started from: the field excursion [A/m] from the first sample's
+    /// field and back, the rod demagnetised there before it (0: no excursion), estimated for the
+    /// file unless given.
     pub initial_excursion_a_per_m: f64,
 }

@@ -3,6 +3,8 @@
 //! ([`run_model`], two files' runs interleaved on one thread in [`run_models`]). The fit, the
 //! uncertainty, the diagnosis and `gma simulate` all run models through here.
 
+use std::sync::Arc;
+
 use anyhow::Result;
 use model_core::{ActuatorParams, Effect, MagnetizationLaw, ModelSpec};
 
@@ -119,14 +121,31 @@ impl Drive {
     }
 }
 
+/// How much finer than the board the workbench integrates a hysteresis law
+/// ([`model_core::Actuator::with_finer_hysteresis`]): the board's sub-step of min(a/4, k/2)
+/// left held steps 36× their noise floor off a continuous-time rig, 4× finer 7.6× (the rest is
+/// the sampling of the jumps), 16× finer 6.4× at four times the cost.
+pub const HYSTERESIS_REFINEMENT: u32 = 4;
+
+/// The model the workbench runs for `spec` at `params` (the board's, its hysteresis law
+/// integrated [`HYSTERESIS_REFINEMENT`] times finer): one stepping for the fit, `simulate` and
+/// the plant.
+pub fn workbench_model(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+) -> Result<model_core::Actuator, model_core::ParamError> {
+    Ok(model_core::Actuator::new(spec, params)?.with_finer_hysteresis(HYSTERESIS_REFINEMENT))
+}
+
 /// The rod's magnetic state when a recording starts. A rod on a rig has a history the file does
 /// not show; with a hysteretic law it shifts the whole record (minor loops never wipe it out),
 /// so it is estimated per file, like the displacement offset.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum InitialState {
-    /// Demagnetised, then the bias field (the state the model boots with).
+    /// At rest at the first drive, the rod demagnetised at its field (no excursion).
     Demagnetized,
-    /// After a field excursion to bias + this [A/m] and back ([`Actuator::rest_state_after`]).
+    /// At rest at the first drive after a field excursion of this [A/m] from its field and
+    /// back ([`model_core::Actuator::rest_state_at`]).
     Excursion(f64),
     /// The excursion that best explains the file's displacement (laws without memory: none).
     Estimated,
@@ -134,7 +153,7 @@ pub enum InitialState {
 
 /// A recording ready to be simulated: its sample period and drive worked out once (a fit
 /// evaluates the model thousands of times on the same files).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct Prepared<'a> {
     /// The recording.
     pub rec: &'a Recording,
@@ -153,6 +172,10 @@ pub struct Prepared<'a> {
     /// between, the field does not either and a run needs no branches: decided once per file,
     /// not at every evaluation).
     pub drive_turns_in_noise: bool,
+    /// The logged current smoothed to its noise ([`noisy_drive::denoised`]): what drives the
+    /// model, the rod having seen the true current; `None` drives it with the logged current
+    /// (a command drive, no noise, or no smoothing that helps).
+    pub drive_estimate: Option<Arc<[f64]>>,
 }
 
 impl<'a> Prepared<'a> {
@@ -165,25 +188,36 @@ impl<'a> Prepared<'a> {
 
     /// `rec` driving through `drive` from `initial`, without a memo.
     fn with(rec: &'a Recording, drive: Drive, initial: InitialState) -> Self {
-        let (drive_noise_a, drive_turns_in_noise) = match (drive, &rec.current_a) {
-            (Drive::Current, Some(i)) => {
-                let sigma = noisy_drive::white_noise_rms(i);
-                (sigma, runs::turns_within(i, noisy_drive::REVERSAL_IN_NOISE_RMS * sigma))
-            }
-            _ => (0.0, false),
-        };
-        Self { rec, dt_s: rec.dt_s(), drive, initial, memo: None, drive_noise_a, drive_turns_in_noise }
+        let (mut drive_noise_a, mut drive_turns_in_noise, mut drive_estimate) = (0.0, false, None);
+        if let (Drive::Current, Some(i)) = (drive, &rec.current_a) {
+            drive_noise_a = noisy_drive::white_noise_rms(i);
+            drive_estimate =
+                noisy_drive::denoised(i, drive_noise_a).map(|(smooth, _)| Arc::<[f64]>::from(smooth));
+            let path = drive_estimate.as_deref().unwrap_or(i);
+            drive_turns_in_noise =
+                runs::turns_within(path, noisy_drive::REVERSAL_IN_NOISE_RMS * drive_noise_a);
+        }
+        Self {
+            rec,
+            dt_s: rec.dt_s(),
+            drive,
+            initial,
+            memo: None,
+            drive_noise_a,
+            drive_turns_in_noise,
+            drive_estimate,
+        }
     }
 
     /// `head` (the first samples of this recording), with this one's drive (and no memo: the
     /// runs on the whole recording are not the head's).
     pub(crate) fn head_of<'b>(&self, head: &'b Recording) -> Prepared<'b> {
-        Prepared { rec: head, dt_s: head.dt_s(), memo: None, ..*self }
+        Prepared { rec: head, dt_s: head.dt_s(), memo: None, ..self.clone() }
     }
 
     /// This recording started from `initial`.
-    pub fn starting(self, initial: InitialState) -> Self {
-        Self { initial, ..self }
+    pub fn starting(&self, initial: InitialState) -> Self {
+        Self { initial, ..self.clone() }
     }
 }
 
@@ -311,9 +345,11 @@ pub fn starting_from<'a>(data: &[Prepared<'a>], excursions: &[f64]) -> Vec<Prepa
         .collect()
 }
 
-/// The pre-history excursion that best explains the start of `prep`'s displacement: a
-/// 13-point grid over [`excursion_range`], then golden-section refinement around the best point
-/// (31 runs).
+/// The pre-history excursion that best explains the start of `prep`'s displacement: a grid
+/// over [`excursion_range`] that follows the rod's magnetization at the first field (where it
+/// changes fast with the excursion, the points lie close: the demagnetised and the anhysteretic
+/// states sit in narrow valleys of the excursion), then golden-section refinement between the
+/// best point's neighbours.
 pub(crate) fn estimate_excursion(spec: ModelSpec, params: &ActuatorParams, prep: &Prepared) -> Result<f64> {
     // Judged from the start of the file, where the state shows most (its first quarter, at
     // least 4000 samples: long records cost no more than that).
@@ -326,22 +362,22 @@ pub(crate) fn estimate_excursion(spec: ModelSpec, params: &ActuatorParams, prep:
         Ok(if e.is_finite() { e } else { f64::MAX })
     };
     let range = excursion_range(spec, params);
-    const GRID: usize = 13;
-    // The bracket shrinks to 0.618^16 ≈ 5e-4 of two grid steps (about 20 A/m for a Terfenol-D
-    // set): fine enough for the uncertainty analysis's differences around it.
+    let grid = excursion_grid(spec, params, prep, range)?;
+    // The bracket shrinks to 0.618^16 ≈ 5e-4 of its width: fine enough for the uncertainty
+    // analysis's differences around it.
     const GOLDEN_STEPS: usize = 16;
-    let step = 2.0 * range / (GRID - 1) as f64;
-    let mut best = (f64::MAX, 0.0);
-    for j in 0..GRID {
-        let x = -range + step * j as f64;
+    let mut best = (f64::MAX, 0);
+    for (j, &x) in grid.iter().enumerate() {
         let c = cost(x)?;
         if c < best.0 {
-            best = (c, x);
+            best = (c, j);
         }
     }
-    // Golden section on [best − step, best + step].
+    let (lo, hi) = (grid[best.1.saturating_sub(1)], grid[(best.1 + 1).min(grid.len() - 1)]);
+    let best = (best.0, grid[best.1]);
+    // Golden section between the best point's neighbours.
     let g = 0.5 * (5f64.sqrt() - 1.0);
-    let (mut lo, mut hi) = (best.1 - step, best.1 + step);
+    let (mut lo, mut hi) = (lo, hi);
     let (mut x1, mut x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
     let (mut c1, mut c2) = (cost(x1)?, cost(x2)?);
     for _ in 0..GOLDEN_STEPS {
@@ -360,3 +396,33 @@ pub(crate) fn estimate_excursion(spec: ModelSpec, params: &ActuatorParams, prep:
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .map_or(0.0, |b| b.1))
 }
+
+/// Points spanning ±`range` at which the estimate tries the excursion: at least every
+/// [`GRID_SPAN`]th of the range, and closer wherever the rod's magnetization at the first
+/// field moves by more than [`GRID_MAGNETIZATION`] of its span between them (read off the rest
+/// states alone, which cost far less than runs).
+fn excursion_grid(spec: ModelSpec, params: &ActuatorParams, prep: &Prepared, range: f64) -> Result<Vec<f64>> {
+    const PROBES: usize = 240;
+    let p = at_rate_of(spec, params, prep)?;
+    let model = workbench_model(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let first = runs::first_drive(&p, prep);
+    let xs: Vec<f64> = (0..=PROBES).map(|j| -range + 2.0 * range * j as f64 / PROBES as f64).collect();
+    let ms: Vec<f64> =
+        xs.iter().map(|&x| model.rest_state_at(first, x as f32).m_slow_a_per_m.value() as f64).collect();
+    let span = ms.iter().copied().fold(f64::MIN, f64::max) - ms.iter().copied().fold(f64::MAX, f64::min);
+    let (dx, dm) = (2.0 * range / GRID_SPAN, span * GRID_MAGNETIZATION);
+    let mut grid = vec![xs[0]];
+    let mut last = (xs[0], ms[0]);
+    for (&x, &m) in xs.iter().zip(&ms).skip(1) {
+        if x - last.0 >= dx - 1e-9 * range || (m - last.1).abs() >= dm || x == xs[PROBES] {
+            grid.push(x);
+            last = (x, m);
+        }
+    }
+    Ok(grid)
+}
+
+/// The estimate's grid steps at most this fraction of the excursions' span …
+const GRID_SPAN: f64 = 12.0;
+/// … and at most this fraction of the magnetization's span at the first field.
+const GRID_MAGNETIZATION: f64 = 1.0 / 24.0;

@@ -271,20 +271,6 @@ pub enum Warning {
         /// `amp.gain_a_per_v` as given [A/V].
         gain: f64,
     },
-    /// A recording whose drive starts away from rest and whose first samples follow the model
-    /// settled there, not started from rest ([`crate::fit::started_mid_run`]).
-    StartedMidRun {
-        /// The recording.
-        file: String,
-        /// Its drive column.
-        column: &'static str,
-        /// The drive's first value.
-        first: f64,
-        /// The displacement NRMSE of the first samples with the model started from rest.
-        from_rest: f64,
-        /// The same with the model settled at the first drive value.
-        settled: f64,
-    },
     /// A loop driven symmetrically whose magnetization is not centred on zero.
     LoopOffCentre {
         /// The loop file.
@@ -338,7 +324,6 @@ impl Warning {
             | Warning::PreisachPlaneWide { .. }
             | Warning::FluxScaleAtBound { .. }
             | Warning::UnfittedGain { .. }
-            | Warning::StartedMidRun { .. }
             | Warning::Data(_) => Weight::Data,
             Warning::AtEdge { .. }
             | Warning::SquarerThanJa { .. }
@@ -513,16 +498,6 @@ impl fmt::Display for Warning {
                  {gain} A/V, which {params} marks as not fitted (its files gave the current, so the gain never \
                  acted): the displacement's scale rests on a start value; fit on command-driven files, or set \
                  the rig amplifier's gain in [amp] and remove the mark"
-            ),
-            Warning::StartedMidRun { file, column, first, from_rest, settled } => write!(
-                f,
-                "{file}: `{column}` starts at {first}, not at rest, and the first samples follow the model settled \
-                 there ({:.2} % NRMSE) better than the model started from rest ({:.2} %), as every command runs \
-                 it (no current before the file): the rig was running when the file began, and a fit bends \
-                 the dynamics (mechanical mode, eddy lag) to hide the start transient the model then makes; \
-                 start the recording with the rig at rest, or fit a file that does",
-                settled * 100.0,
-                from_rest * 100.0
             ),
             Warning::StrainScaleUnlikely { lambda_s, lo, hi } => write!(
                 f,

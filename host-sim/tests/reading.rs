@@ -238,15 +238,25 @@ fn a_point_in_a_decimal_comma_export_groups_thousands() {
         twin += &format!("{},{},{}\n", c[0].replace(',', "."), c[1].replace(',', "."), x / 1000.0);
     }
     std::fs::write(&nm, twin).unwrap();
-    assert!(text.contains(";35.580\n"), "{}", &text[..200]);
+    // Some displacement reaches a thousand nm: its cell groups the thousands with a point.
+    let grouped = |cell: &str| cell.split_once('.').is_some_and(|(_, frac)| frac.len() == 3);
+    assert!(text.lines().skip(1).any(|l| l.rsplit(';').next().is_some_and(grouped)), "{}", &text[..200]);
     let a = json(&compare(dir.path(), "ja+mech", &params, &[&nm], &[]));
     let b = json(&compare(dir.path(), "ja+mech", &params, &[&de], &[]));
     assert_eq!(a["nrmse"], b["nrmse"]);
     // A `.` that groups no thousands in such a file is refused at its cell, never read as a point.
     let bad = dir.path().join("bad.csv");
-    std::fs::write(&bad, text.replacen(";35.580\n", ";35.58\n", 1)).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let at = lines.iter().skip(1).position(|l| l.rsplit(';').next().is_some_and(grouped)).unwrap() + 1;
+    lines[at].pop(); // 35.580 → 35.58: a point that groups no thousands
+    let cell = lines[at].rsplit(';').next().unwrap().to_string();
+    std::fs::write(&bad, lines.join("\n") + "\n").unwrap();
     let o = compare(dir.path(), "ja+mech", &params, &[&bad], &[]);
-    refused(&o, &[&format!("{}:2:3", path(&bad)), "`35.58`", "mixes decimal marks"], "35.58");
+    refused(
+        &o,
+        &[&format!("{}:{}:3", path(&bad), at + 1), &format!("`{cell}`"), "mixes decimal marks"],
+        &cell,
+    );
     // The mirror: a tab-separated export with decimal points and `,` grouping thousands.
     let en = dir.path().join("en.csv");
     let (head, body) = text.split_once('\n').unwrap();

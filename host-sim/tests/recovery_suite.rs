@@ -186,7 +186,8 @@ fn recording_and_clean(
     };
     let mut h = DefaultHasher::new();
     format!(
-        "{} {} {:?} {:?} {} {current_lsb} {}",
+        "{} {} {} {:?} {:?} {} {current_lsb} {}",
+        textrig::BEHAVIOUR,
         case.structure,
         params.to_gma_toml(),
         file.drive,

@@ -132,6 +132,26 @@ impl SecondOrderAmp {
         Ok(Self { zoh, p, zero_per_rad })
     }
 
+    /// The ramp term of its discretisation ([`SecondOrderZoh::ramp_term`]).
+    pub fn ramp_term(&self, dt_s: f32) -> [f32; 2] {
+        self.zoh.ramp_term(dt_s)
+    }
+
+    /// One sample under a command running linearly from `u0` to `u1` ([`SecondOrderZoh::step_ramp`]);
+    /// returns the coil current [A].
+    #[inline]
+    pub fn step_ramp(&self, s: &mut MechState, u0: f32, u1: f32, ramp: &[f32; 2]) -> f32 {
+        self.zoh.step_ramp(s, u0, u1, ramp);
+        self.p.k_u * (s.displacement_m + self.zero_per_rad * s.velocity_m_per_rad)
+    }
+
+    /// Sets `s` to the amplifier settled at command `u_v` held for ever; returns its current
+    /// k_U u [A] (x = u, ẋ = 0).
+    pub fn settle_at(&self, s: &mut MechState, u_v: f32) -> f32 {
+        *s = MechState { displacement_m: u_v, velocity_m_per_rad: 0.0 };
+        self.p.k_u * u_v
+    }
+
     /// One sample with command `u_v` held; returns the coil current [A].
     #[inline]
     pub fn step(&self, s: &mut MechState, u_v: f32) -> f32 {

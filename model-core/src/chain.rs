@@ -24,6 +24,9 @@ use crate::slow::{Aftereffect, DelayLine, ThermalDrift};
 use crate::spec::ModelSpec;
 
 pub use crate::params::{ActuatorParams, ModalMechanics};
+pub use hold::{FirstOrderHold, PreviousSample};
+
+mod hold;
 
 /// The chain's sensor delays lie below this [samples] (its delay line's capacity).
 pub const MAX_DELAY_SAMPLES: usize = 64;
@@ -219,6 +222,16 @@ impl Actuator {
         })
     }
 
+    /// This model with its hysteresis law integrated `factor` times finer
+    /// ([`JilesAtherton::refined`]; the other laws as they are): for the workbench, whose time
+    /// per sample is not budgeted. The board steps the model as built.
+    pub fn with_finer_hysteresis(mut self, factor: u32) -> Self {
+        if let Magnetization::JilesAtherton(j) = self.magnetization {
+            self.magnetization = Magnetization::JilesAtherton(j.refined(factor));
+        }
+        self
+    }
+
     /// The structure this model was built for.
     pub fn spec(&self) -> ModelSpec {
         self.spec
@@ -229,9 +242,42 @@ impl Actuator {
         self.amp.is_some()
     }
 
-    /// The state at rest with zero input (demagnetised rod, cold coil).
+    /// The state the board boots in: zero input, cold coil, the rod demagnetised at zero field
+    /// and then brought to the bias field in one step (its virgin curve).
     pub fn rest_state(&self) -> ActuatorState {
-        self.rest_state_after(0.0)
+        let mut ja = JaState::default();
+        let mut preisach = match &self.magnetization {
+            Magnetization::Preisach(p) => p.demagnetized(),
+            _ => PreisachState::default(),
+        };
+        let h0 = self.coil.bias_a_per_m;
+        let m0 = match &self.magnetization {
+            Magnetization::Linear(l) => l.magnetization(h0),
+            Magnetization::Anhysteretic(a) => a.magnetization(h0),
+            Magnetization::JilesAtherton(j) => j.step(&mut ja, h0),
+            Magnetization::Preisach(p) => p.step(&mut preisach, h0),
+        };
+        self.at_rest(AmpState::default(), h0, (ja, preisach), m0)
+    }
+
+    /// The state at rest with the amplifier in `amp`, the rod's field `h0` and its magnetic
+    /// state (`law`, giving `m0`): the slow magnetization caught up, the coil cold, the
+    /// mechanics and the delay line at the strain's displacement. (Inlined: the board builds its
+    /// state on its deepest stack path, where a frame of its own would cost the state's size.)
+    #[inline(always)]
+    fn at_rest(&self, amp: AmpState, h0: f32, law: (JaState, PreisachState), m0: f32) -> ActuatorState {
+        let y0 = self.rod_length_m * self.magnetostriction.strain(m0);
+        ActuatorState {
+            amp,
+            rod_field_a_per_m: LagState::at(h0),
+            ja: law.0,
+            preisach: law.1,
+            m_slow_a_per_m: LagState::at(m0),
+            temperature_rise_c: LagState::default(),
+            rod_temperature_rise_c: LagState::default(),
+            mech: MechState { displacement_m: y0, velocity_m_per_rad: 0.0 },
+            delay: DelayLine::clamped(self.delay_samples, y0), // checked ≤ capacity in `new`
+        }
     }
 
     /// Whether the magnetization law carries a history (J–A, Preisach): then the state at rest
@@ -240,55 +286,58 @@ impl Actuator {
         matches!(self.magnetization, Magnetization::JilesAtherton(_) | Magnetization::Preisach(_))
     }
 
-    /// The state at rest after a pre-history: from the demagnetised state the field goes to
-    /// bias + `excursion_a_per_m` and back to the bias (cold coil). A rod on a real rig has
-    /// seen fields before a recording starts; one excursion reaches every J–A state at the
-    /// bias (J–A's state there is M_irr alone) and the last reversal of a Preisach history.
-    /// `rest_state_after(0.0)` is [`Actuator::rest_state`].
-    pub fn rest_state_after(&self, excursion_a_per_m: f32) -> ActuatorState {
-        // The bias field magnetizes the rod before the first sample: settle the magnetization
-        // there so that the recording starts at its operating point.
+    /// The state of a rig at rest at drive `input` (the command [V] when the amplifier is
+    /// modelled, else the coil current [A]) before a record starts: the amplifier, the eddy lag
+    /// and the mechanics settled at it, the coil cold, and the rod demagnetised at the field
+    /// that drive gives (J–A: the integrated magnetization, M_irr or the total forms' M, is 0
+    /// there; Preisach: the demagnetised plane raised to it), then taken through a field
+    /// excursion of `excursion_a_per_m` from that field and back. Every magnetic state a rod can
+    /// hold at that field lies on this one line: a J–A state at a field is its integrated
+    /// magnetization alone, and the excursions reach every value between the branches, the
+    /// demagnetised (0) and the anhysteretic state too. A file's first row is this state.
+    pub fn rest_state_at(&self, input: f32, excursion_a_per_m: f32) -> ActuatorState {
+        let input = if input.is_finite() { input.clamp(-MAX_INPUT, MAX_INPUT) } else { 0.0 };
+        let mut amp = AmpState::default();
+        let current = match &self.amp {
+            Some(Amplifier::FirstOrder(a)) => {
+                amp.first_order = LagState::at(a.gain() * input);
+                a.gain() * input
+            }
+            Some(Amplifier::SecondOrder(a)) => a.settle_at(&mut amp.internal, input),
+            None => input,
+        };
+        amp.current_a = current;
+        let h0 = self.coil.field(current);
         let mut ja = JaState::default();
         let mut preisach = match &self.magnetization {
             Magnetization::Preisach(p) => p.demagnetized(),
             _ => PreisachState::default(),
         };
-        let h0 = self.coil.bias_a_per_m;
-        let excursion = if excursion_a_per_m.is_finite() { excursion_a_per_m } else { 0.0 };
-        let mut m0 = 0.0;
-        // `n` equal steps: the state then depends smoothly on the excursion (a fit
-        // differentiates through it), and J–A's sub-step cap (64 × min(a/4, k/2) per step) covers
-        // legs of 64² · min(a/4, k/2).
-        let mut walk = |from: f32, to: f32, n: u32, m0: &mut f32| {
-            for k in 1..=n {
-                let h = from + (to - from) * k as f32 / n as f32;
-                *m0 = match &self.magnetization {
-                    Magnetization::Linear(l) => l.magnetization(h),
-                    Magnetization::Anhysteretic(a) => a.magnetization(h),
-                    Magnetization::JilesAtherton(j) => j.step(&mut ja, h),
-                    Magnetization::Preisach(p) => p.step(&mut preisach, h),
-                };
+        let mut m0 = match &self.magnetization {
+            Magnetization::Linear(l) => l.magnetization(h0),
+            Magnetization::Anhysteretic(a) => a.magnetization(h0),
+            Magnetization::JilesAtherton(j) => {
+                ja = j.demagnetized_at(h0);
+                ja.m_a_per_m
             }
+            Magnetization::Preisach(p) => p.step(&mut preisach, h0),
         };
-        if excursion != 0.0 {
-            walk(0.0, h0 + excursion, 64, &mut m0);
-            walk(h0 + excursion, h0, 64, &mut m0);
-        } else {
-            walk(0.0, h0, 1, &mut m0); // one step, as the firmware boots
+        let excursion = if excursion_a_per_m.is_finite() { excursion_a_per_m } else { 0.0 };
+        if excursion != 0.0 && self.has_magnetic_memory() {
+            // 64 equal steps a leg: the state then depends smoothly on the excursion (a fit
+            // differentiates through it).
+            for (from, to) in [(h0, h0 + excursion), (h0 + excursion, h0)] {
+                for k in 1..=64 {
+                    let h = from + (to - from) * k as f32 / 64.0;
+                    m0 = match &self.magnetization {
+                        Magnetization::JilesAtherton(j) => j.step(&mut ja, h),
+                        Magnetization::Preisach(p) => p.step(&mut preisach, h),
+                        _ => m0,
+                    };
+                }
+            }
         }
-        let y0 = self.rod_length_m * self.magnetostriction.strain(m0);
-        let delay = DelayLine::clamped(self.delay_samples, y0); // checked ≤ capacity in `new`
-        ActuatorState {
-            amp: AmpState::default(),
-            rod_field_a_per_m: LagState::at(h0),
-            ja,
-            preisach,
-            m_slow_a_per_m: LagState::at(m0),
-            temperature_rise_c: LagState::default(),
-            rod_temperature_rise_c: LagState::default(),
-            mech: MechState { displacement_m: y0, velocity_m_per_rad: 0.0 },
-            delay,
-        }
+        self.at_rest(amp, h0, (ja, preisach), m0)
     }
 
     /// The start of [`Actuator::thermal_tail_step`]: cold coil, mechanics and delay line at 0.

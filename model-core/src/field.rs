@@ -154,6 +154,26 @@ impl FirstOrderLag {
         value
     }
 
+    /// The ramp factor r = 1 − (1 − e^{−T/τ})/(T/τ) at sample period `dt_s`: the output's share,
+    /// at the end of a sample, of a rise of the input that runs linearly across it (exact for a
+    /// first-order hold, [`FirstOrderLag::step_ramp`]). Formed in f64 (a series for tiny T/τ).
+    pub fn ramp_factor(&self, dt_s: f32) -> f32 {
+        let x = dt_s as f64 / self.tau_s as f64;
+        (if x < 1e-4 { x / 2.0 - x * x / 6.0 + x * x * x / 24.0 } else { 1.0 + libm::expm1(-x) / x }) as f32
+    }
+
+    /// One sample under an input that runs linearly from `u0` (this sample's) to `u1` (the
+    /// next's): exact for that ramp, with `ramp` = [`FirstOrderLag::ramp_factor`].
+    #[inline]
+    pub fn step_ramp(&self, s: &mut LagState, u0: f32, u1: f32, ramp: f32) -> f32 {
+        let increment =
+            self.fraction * (self.gain * u0 - s.value - s.carry) + ramp * self.gain * (u1 - u0) + s.carry;
+        let value = s.value + increment;
+        s.carry = increment - (value - s.value);
+        s.value = value;
+        value
+    }
+
     /// The input that takes the lag from `s` to `target` in one sample (its exact one-step
     /// inverse). Finite for a non-zero gain and a finite target that is not absurdly far
     /// (f ≥ 1e-9: no 0/0, as f = 0 gave); beyond, ±∞, which callers clamp.
@@ -179,6 +199,28 @@ mod tests {
         let u = lag.input_for(&y, 0.3);
         lag.step(&mut y, u);
         assert!((y.value() - 0.3).abs() < 1e-5);
+    }
+
+    /// The ramp step is exact for an input running linearly across each sample: a ramp
+    /// u(t) = t from rest has y(t) = t − τ (1 − e^{−t/τ}); for T/τ from 1e-6 to 20.
+    #[test]
+    fn ramp_step_is_exact_for_a_ramp() {
+        for (tau, dt) in [(2e-4, 1e-4), (1e-4, 1e-4), (5e-6, 1e-4), (100.0, 1e-4)] {
+            let lag = FirstOrderLag::new("t", tau as f32, 1.0, dt as f32).unwrap();
+            let r = lag.ramp_factor(dt as f32);
+            let mut y = LagState::default();
+            for n in 0..50 {
+                let (u0, u1) = (n as f64 * dt, (n + 1) as f64 * dt);
+                lag.step_ramp(&mut y, u0 as f32, u1 as f32, r);
+                let t = u1;
+                let exact = t + tau * libm::expm1(-t / tau);
+                assert!(
+                    (y.value() as f64 - exact).abs() <= 1e-5 * t + 1e-12,
+                    "τ = {tau}, sample {n}: {} vs {exact}",
+                    y.value()
+                );
+            }
+        }
     }
 
     /// Runs `lag` for `steps` samples at input `u` from rest; its output against the exact

@@ -18,8 +18,8 @@ pub mod slow;
 pub mod spec;
 
 pub use chain::{
-    Actuator, ActuatorOutput, ActuatorParams, ActuatorState, MagneticOutput, StepError, ThermalTailState,
-    DT_MAX_S, DT_MIN_S,
+    Actuator, ActuatorOutput, ActuatorParams, ActuatorState, FirstOrderHold, MagneticOutput, PreviousSample,
+    StepError, ThermalTailState, DT_MAX_S, DT_MIN_S,
 };
 pub use effects::{Effect, MagnetizationLaw};
 pub use error::ParamError;

@@ -37,6 +37,19 @@ impl Aftereffect {
         (1.0 - self.fraction) * m + self.fraction * slow
     }
 
+    /// Its lag's ramp factor ([`FirstOrderLag::ramp_factor`]).
+    pub fn ramp_factor(&self, dt_s: f32) -> f32 {
+        self.lag.ramp_factor(dt_s)
+    }
+
+    /// One sample under a magnetization running linearly from `m0` to `m1`: returns the
+    /// observed magnetization at its end.
+    #[inline]
+    pub fn step_ramp(&self, m_slow: &mut LagState, m0: f32, m1: f32, ramp: f32) -> f32 {
+        let slow = self.lag.step_ramp(m_slow, m0, m1, ramp);
+        (1.0 - self.fraction) * m1 + self.fraction * slow
+    }
+
     /// The instantaneous magnetization that makes the observed one equal `m_out` this sample.
     #[inline]
     pub fn magnetization_for(&self, m_slow: &LagState, m_out: f32) -> f32 {
@@ -133,6 +146,36 @@ impl ThermalDrift {
         let coil = self.lag.step(theta_c, current_a * current_a);
         let rod = match &self.rod_lag {
             Some(lag) => lag.step(rod_theta_c, coil),
+            None => {
+                *rod_theta_c = *theta_c;
+                coil
+            }
+        };
+        rod * self.metres_per_c
+    }
+
+    /// The ramp factors of the coil's and the rod's lags ([`FirstOrderLag::ramp_factor`]; 0 for a
+    /// rod that follows the coil at once).
+    pub fn ramp_factors(&self, dt_s: f32) -> (f32, f32) {
+        (self.lag.ramp_factor(dt_s), self.rod_lag.as_ref().map_or(0.0, |l| l.ramp_factor(dt_s)))
+    }
+
+    /// One sample under a current running linearly from `i0` to `i1` (its square taken as
+    /// running linearly too), with `ramps` = [`ThermalDrift::ramp_factors`]: returns the
+    /// thermal elongation [m] at its end.
+    #[inline]
+    pub fn step_ramp(
+        &self,
+        theta_c: &mut LagState,
+        rod_theta_c: &mut LagState,
+        i0: f32,
+        i1: f32,
+        ramps: (f32, f32),
+    ) -> f32 {
+        let coil_before = theta_c.value();
+        let coil = self.lag.step_ramp(theta_c, i0 * i0, i1 * i1, ramps.0);
+        let rod = match &self.rod_lag {
+            Some(lag) => lag.step_ramp(rod_theta_c, coil_before, coil, ramps.1),
             None => {
                 *rod_theta_c = *theta_c;
                 coil

@@ -63,10 +63,11 @@ pub struct SimulateArgs {
     /// lag). Excludes the waveform options; the reading options below apply to this file.
     #[arg(long, value_name = "FILE", conflicts_with_all = DRIVE_EXCLUDES)]
     pub drive: Option<PathBuf>,
-    /// With `--drive`: the rod's initial magnetic state, as the pre-history excursion above the
-    /// bias field [A/m] — the value `gma compare --json` reports for the file
+    /// With `--drive`: the rod's initial magnetic state, as the pre-history field excursion
+    /// from the first sample's field and back [A/m] — the value `gma compare --json` reports for the file
     /// (`files[].initial_excursion_a_per_m`), so that the run is the one compare scored. Default:
-    /// demagnetised (hysteretic laws only; other models have no magnetic memory).
+    /// demagnetised at the first sample's field (hysteretic laws only; other models have no
+    /// magnetic memory).
     #[arg(long, value_name = "A_PER_M", requires = "drive", allow_negative_numbers = true)]
     pub initial_excursion: Option<f64>,
     /// Excitation waveform.

@@ -3,7 +3,7 @@
 //! least-squares search.
 
 use anyhow::Result;
-use model_core::{Actuator, ActuatorParams, Effect, ModelSpec};
+use model_core::{ActuatorParams, Effect, ModelSpec};
 use rayon::prelude::*;
 
 use crate::recording::Recording;
@@ -172,8 +172,8 @@ pub(super) fn projected_residuals(
 
 /// The coil-heating share [µm] of `sim`'s displacement (a run of `spec` at `params` on `prep`):
 /// the thermal elongation through the mechanics and delay, driven by the currents the run
-/// reported ([`Actuator::thermal_tail_step`]). Sample k's output follows the steps before it,
-/// whose currents are the run's samples 1..=k.
+/// reported, stepped as the run steps (`Actuator::thermal_tail_step_ramp`: the current a ramp
+/// between the run's samples).
 fn thermal_share(
     spec: ModelSpec,
     params: &ActuatorParams,
@@ -181,11 +181,16 @@ fn thermal_share(
     sim: &Simulation,
 ) -> Result<Vec<f64>> {
     let p = at_rate_of(spec, params, prep)?;
-    let model = Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let model = crate::simulation::workbench_model(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let hold = model_core::FirstOrderHold::new(&model, p.dt_s);
     let mut s = model.thermal_tail_rest();
     let mut t = Vec::with_capacity(sim.current_a.len());
     t.push(0.0);
-    t.extend(sim.current_a.iter().skip(1).map(|&i| model.thermal_tail_step(&mut s, i as f32) as f64 * 1e6));
+    t.extend(
+        sim.current_a
+            .windows(2)
+            .map(|i| model.thermal_tail_step_ramp(&mut s, &hold, i[0] as f32, i[1] as f32) as f64 * 1e6),
+    );
     Ok(t)
 }
 

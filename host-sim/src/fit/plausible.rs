@@ -252,7 +252,7 @@ fn delay_at_other_rate(
 }
 
 /// The doubts about `files` the model's physics and their samples raise, none a refusal: a
-/// file started mid-run ([`started_mid_run`]), a channel stuck or clipped while the drive moved,
+/// channel stuck or clipped while the drive moved,
 /// a displacement whose scale the drive cannot make ([`displacement_scale`]), a file that reads
 /// better with its drive and its displacement both negated ([`both_negated`]), a loop run the
 /// other way round ([`loop_direction`]), a sensor delay that follows the file better counted in
@@ -273,7 +273,6 @@ pub fn data_doubts<'a>(
             doubts.extend(loop_direction(spec, params, rec, &sim)?);
             doubts.extend(delay_rate_doubt(spec, params, rec, &sim)?);
         }
-        doubts.extend(started_mid_run(spec, params, rec)?);
     }
     Ok(doubts)
 }
@@ -474,75 +473,4 @@ fn unexplained(r: f64) -> f64 {
     } else {
         1.0
     }
-}
-
-/// Samples the drive is held at its first value before a file to settle the model there (a
-/// mechanical mode and the eddy and amplifier lags settle within a few ms at 10 kHz).
-const SETTLE_SAMPLES: usize = 2000;
-
-/// The start of a file judged for its start transient [samples].
-const START_WINDOW: usize = 200;
-
-/// A file whose drive starts away from rest (no current) while its displacement does not show
-/// the step the model then takes at the first sample: the model is run from rest (the rig off
-/// before the file, the state `gma simulate` starts from), and a fit bends the dynamics to hide
-/// the start transient of a rig already running when the file began (a mode pushed above the
-/// Nyquist frequency, the eddy lag to its bound). Said when the model settled at the first
-/// drive value follows the file's first samples at least twice as well (for `params`).
-pub fn started_mid_run(spec: ModelSpec, params: &ActuatorParams, rec: &Recording) -> Result<Option<Warning>> {
-    let steps = [Effect::MechanicalDynamics, Effect::EddyCurrent, Effect::AmplifierDynamics];
-    let drive = model_input(spec, rec)?;
-    let input = rec.column(drive.column()).map(Vec::as_slice).unwrap_or_default();
-    let Some(y) = rec.displacement_um.as_deref() else { return Ok(None) };
-    let (lo, hi) = input.iter().fold((f64::MAX, f64::MIN), |(l, h), &v| (l.min(v), h.max(v)));
-    let first = input.first().copied().unwrap_or(0.0);
-    if !steps.iter().any(|e| spec.has(*e)) || rec.len() < 4 * START_WINDOW || first.abs() <= 0.05 * (hi - lo)
-    {
-        return Ok(None);
-    }
-    // Its start only (the window and what precedes it in the runs), with the drive (and the
-    // displacement, for the checks) held before it.
-    let rec = &rec.head(4 * START_WINDOW);
-    let settled = {
-        let held = |v: &Option<Vec<f64>>| {
-            v.as_ref().map(|v| std::iter::repeat_n(v[0], SETTLE_SAMPLES).chain(v.iter().copied()).collect())
-        };
-        let dt = rec.dt_s();
-        let t0 = rec.time_s[0] - SETTLE_SAMPLES as f64 * dt;
-        Recording {
-            time_s: (0..SETTLE_SAMPLES)
-                .map(|k| t0 + k as f64 * dt)
-                .chain(rec.time_s.iter().copied())
-                .collect(),
-            command_v: held(&rec.command_v),
-            current_a: held(&rec.current_a),
-            displacement_um: held(&rec.displacement_um),
-            force_n: None,
-            temperature_c: None,
-            flux_density_t: None,
-            ..rec.clone()
-        }
-    };
-    // A start the model cannot run on (a drive held through the whole start) says nothing.
-    let run = |r: &Recording| demagnetised_run(spec, params, r).ok().flatten();
-    let (Some(from_rest), Some(from_settled)) = (run(rec), run(&settled)) else {
-        return Ok(None);
-    };
-    let head = &y[..START_WINDOW];
-    let error = |model: &[f64]| {
-        let offset = head.iter().zip(model).map(|(a, b)| a - b).sum::<f64>() / head.len() as f64;
-        let shifted: Vec<f64> = model.iter().map(|m| m + offset).collect();
-        super::nrmse(head, &shifted)
-    };
-    let (rest, settled) = (
-        error(&from_rest.displacement_um[..START_WINDOW]),
-        error(&from_settled.displacement_um[SETTLE_SAMPLES..]),
-    );
-    Ok((settled.is_finite() && rest > 2.0 * settled).then(|| Warning::StartedMidRun {
-        file: rec.name.clone(),
-        column: drive.column(),
-        first,
-        from_rest: rest,
-        settled,
-    }))
 }

@@ -98,7 +98,7 @@ fn runs_through_the_magnetic_memo_are_the_runs_without_it() {
         .unwrap();
     let memo = MagneticMemo::default();
     let bare = Prepared::new(spec, &rec).unwrap().starting(InitialState::Excursion(4000.0));
-    let kept = Prepared { memo: Some(&memo), ..bare };
+    let kept = Prepared { memo: Some(&memo), ..bare.clone() };
     let mut mechanical = truth;
     mechanical.mech.natural_frequency_hz *= 0.9;
     mechanical.mech.damping_ratio *= 1.2;

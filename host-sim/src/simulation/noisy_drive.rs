@@ -4,12 +4,79 @@
 //! towards its anhysteretic curve, a loop the rod never ran. Here the current's white-noise
 //! level is estimated from the file, and the field's turns smaller than a multiple of it are
 //! taken as noise: the law then stays on its branch ([`model_core::JaBranch`]).
+//!
+//! The noise also reaches the law's output through its slope, sample by sample (the rod saw
+//! the true current), and a fit or a start-state estimate then prefers states where the slope
+//! is low (errors in the variables). So the model is driven by the logged current smoothed to
+//! its noise ([`denoised`]): a local quadratic fit whose width is chosen by Stein's unbiased
+//! estimate of its error against the true current, which the noise level gives.
 
 use realfft::RealFftPlanner;
 
 /// A turn of the field is a reversal when it moves back by more than this many noise rms (of
 /// the current, through the coil): white noise moves back that far about once in 10¹⁵ samples.
 pub const REVERSAL_IN_NOISE_RMS: f64 = 8.0;
+
+/// Half-widths (samples) the drive's smoother tries: a local quadratic over 2m + 1 samples.
+const SMOOTHER_HALF_WIDTHS: [usize; 11] = [2, 3, 4, 6, 8, 11, 16, 22, 32, 45, 64];
+
+/// The logged current `x` with white noise of rms `sigma` smoothed by the local quadratic
+/// (Savitzky–Golay) fit whose half-width m minimises Stein's unbiased risk estimate
+/// ‖x − Sx‖² − nσ² + 2σ² tr S of the true current (near the ends the window narrows to the
+/// samples there are), and m; `None` where no width beats the logged current itself (risk nσ²),
+/// or without noise. A smoother can only round what it cannot tell from noise: a width is
+/// chosen only where its bias costs less than the noise it removes.
+pub fn denoised(x: &[f64], sigma: f64) -> Option<(Vec<f64>, usize)> {
+    let n = x.len();
+    if sigma.is_nan() || sigma <= 0.0 || n < 5 {
+        return None;
+    }
+    let variance = sigma * sigma;
+    let mut best: Option<(f64, Vec<f64>, usize)> = None;
+    for m in SMOOTHER_HALF_WIDTHS {
+        if 2 * m + 1 > n {
+            break;
+        }
+        let (smooth, trace) = savitzky_golay(x, m);
+        let residual: f64 = x.iter().zip(&smooth).map(|(a, b)| (a - b) * (a - b)).sum();
+        let risk = residual - n as f64 * variance + 2.0 * variance * trace;
+        if risk < n as f64 * variance && best.as_ref().is_none_or(|b| risk < b.0) {
+            best = Some((risk, smooth, m));
+        }
+    }
+    best.map(|(_, smooth, m)| (smooth, m))
+}
+
+/// `x` smoothed by a local quadratic over 2m + 1 samples (m' = min(m, k, n − 1 − k) at sample
+/// k), and the smoother's trace Σ_k w₀(m').
+fn savitzky_golay(x: &[f64], m: usize) -> (Vec<f64>, f64) {
+    let n = x.len();
+    // Weights of the symmetric quadratic fit's centre value: 3(3m² + 3m − 1 − 5j²)/((2m + 1)(4m² + 4m − 3)).
+    let weights = |m: usize| -> Vec<f64> {
+        let mf = m as f64;
+        let den = (2.0 * mf + 1.0) * (4.0 * mf * mf + 4.0 * mf - 3.0);
+        (0..=m).map(|j| 3.0 * (3.0 * mf * mf + 3.0 * mf - 1.0 - 5.0 * (j * j) as f64) / den).collect()
+    };
+    let full = weights(m);
+    let mut trace = 0.0;
+    let out = (0..n)
+        .map(|k| {
+            let mk = m.min(k).min(n - 1 - k);
+            if mk < 2 {
+                trace += 1.0;
+                return x[k];
+            }
+            let w = if mk == m {
+                std::borrow::Cow::Borrowed(&full)
+            } else {
+                std::borrow::Cow::Owned(weights(mk))
+            };
+            trace += w[0];
+            w[0] * x[k] + (1..=mk).map(|j| w[j] * (x[k - j] + x[k + j])).sum::<f64>()
+        })
+        .collect();
+    (out, trace)
+}
 
 /// Segment length of the noise estimate (shorter files: the largest power of two that fits).
 const SEGMENT: usize = 512;
@@ -169,6 +236,30 @@ mod tests {
         assert!((est / expected - 1.0).abs() < 0.15, "quantised: {est} vs {expected}");
         assert_eq!(white_noise_rms(&slow[..50]), 0.0);
         assert!(white_noise_rms(&slow) < 1e-6, "clean: {}", white_noise_rms(&slow));
+    }
+
+    /// The smoother takes a slow sine's noise down to a fraction of it and leaves a fast one
+    /// (20 samples a period) nearly as logged: each within its noise of the true current, and a
+    /// clean current is not touched.
+    #[test]
+    fn the_drive_is_smoothed_to_its_noise() {
+        let rms = |a: &[f64], b: &[f64]| {
+            (a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>() / a.len() as f64).sqrt()
+        };
+        let sigma = 2e-3;
+        for (per, at_most) in [(10_000.0, 0.25), (200.0, 0.6), (20.0, 1.0)] {
+            let truth = sine(20_000, per, 0.8);
+            let noisy = with_noise(&truth, sigma, 4);
+            let error = match denoised(&noisy, sigma) {
+                Some((smooth, m)) => {
+                    assert!(m >= 2, "period {per}: half-width {m}");
+                    rms(&smooth, &truth)
+                }
+                None => rms(&noisy, &truth),
+            };
+            assert!(error <= at_most * sigma, "period {per} samples: {:.3} of the noise left", error / sigma);
+        }
+        assert!(denoised(&sine(20_000, 10_000.0, 0.8), 0.0).is_none());
     }
 
     /// The noisy sine's branches turn at its peaks, within the noise's reach of them; a clean

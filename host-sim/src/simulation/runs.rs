@@ -4,7 +4,7 @@
 //! before, so one run leaves most of a core's issue slots idle (the integration is bound by
 //! latency, not throughput). Where files outnumber threads, [`run_models`] steps two files' runs
 //! in turn on one thread, sample by sample and, within a sample, J–A sub-step by sub-step
-//! ([`Actuator::step_magnetic_beside`]): the core overlaps the two independent chains. Each
+//! ([`Actuator::step_magnetic_ramp_beside`]): the core overlaps the two independent chains. Each
 //! run's arithmetic is unchanged, so the results are the same bits as [`run_model`]'s.
 
 use std::borrow::Cow;
@@ -13,7 +13,8 @@ use std::sync::Arc;
 use anyhow::Result;
 use model_core::magnetization::JaBranch;
 use model_core::{
-    Actuator, ActuatorParams, ActuatorState, Effect, MagneticOutput, MagnetizationLaw, ModelSpec,
+    Actuator, ActuatorParams, ActuatorState, Effect, FirstOrderHold, MagneticOutput, MagnetizationLaw,
+    ModelSpec, PreviousSample,
 };
 use rayon::prelude::*;
 
@@ -21,6 +22,19 @@ use super::noisy_drive::{branch_directions, REVERSAL_IN_NOISE_RMS};
 use super::{at_rate_of, estimate_excursion, Drive, InitialState, MagneticMemo, Prepared};
 use crate::error::InRecording;
 use crate::simulated::Simulation;
+
+/// The model input of `prep`'s first sample (the ideal amplifier's command as its current).
+pub(super) fn first_drive(p: &ActuatorParams, prep: &Prepared) -> f32 {
+    let first = |v: &Option<Vec<f64>>| v.as_deref().and_then(|v| v.first().copied()).unwrap_or(0.0);
+    (match prep.drive {
+        Drive::Current => match &prep.drive_estimate {
+            Some(estimate) => estimate.first().copied().unwrap_or(0.0),
+            None => first(&prep.rec.current_a),
+        },
+        Drive::CommandIdeal => first(&prep.rec.command_v) * p.amp.gain_a_per_v as f64,
+        Drive::CommandDynamic => first(&prep.rec.command_v),
+    }) as f32
+}
 
 /// [`super::simulate`]; `all_channels: false` keeps only the channels the file measured (the
 /// fit's inner loop: displacement and current, and field and magnetization for a measured flux
@@ -82,6 +96,12 @@ struct Run<'a> {
     /// The model's input per sample: current [A] or command [V].
     input: Cow<'a, [f64]>,
     n: usize,
+    /// The ramp coefficients of the model's linear stages (the first-order hold).
+    hold: FirstOrderHold,
+    /// The drive and the law's magnetization at sample k.
+    prev: PreviousSample,
+    /// The magnetic stages' output at sample k.
+    before: MagneticOutput,
     /// The magnetic stages' outputs, kept from an earlier run with the same upstream parameters.
     kept: Option<Arc<[MagneticOutput]>>,
     /// A noisy current's J–A branch and each step's direction (its noise taken as no reversal).
@@ -122,21 +142,22 @@ impl<'a> Run<'a> {
                 ),
             ));
         }
-        let model = Actuator::new(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let model = super::workbench_model(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
         let n = rec.len();
         let all_channels = all_channels || rec.flux_density_t.is_some();
         // Borrowed from the recording (this runs at every fit evaluation); only the ideal
         // amplifier's scaled command is a new vector.
-        let input: Cow<[f64]> = match drive {
-            Drive::Current => rec.current_a.as_deref().unwrap_or_default().into(),
-            Drive::CommandIdeal => rec
+        let input: Cow<[f64]> = match (drive, &prep.drive_estimate) {
+            (Drive::Current, Some(estimate)) => estimate[..n.min(estimate.len())].to_vec().into(),
+            (Drive::Current, None) => rec.current_a.as_deref().unwrap_or_default().into(),
+            (Drive::CommandIdeal, _) => rec
                 .command_v
                 .iter()
                 .flatten()
                 .map(|u| u * p.amp.gain_a_per_v as f64)
                 .collect::<Vec<_>>()
                 .into(),
-            Drive::CommandDynamic => rec.command_v.as_deref().unwrap_or_default().into(),
+            (Drive::CommandDynamic, _) => rec.command_v.as_deref().unwrap_or_default().into(),
         };
         let excursion = match prep.initial {
             _ if !model.has_magnetic_memory() => 0.0,
@@ -145,7 +166,16 @@ impl<'a> Run<'a> {
             InitialState::Estimated if rec.displacement_um.is_none() => 0.0,
             InitialState::Estimated => estimate_excursion(spec, params, prep)?,
         };
-        let s = model.rest_state_after(excursion as f32);
+        // At rest at the drive's first value (a command drive's amplifier settled there).
+        let first = input.first().copied().unwrap_or(0.0) as f32;
+        let s = model.rest_state_at(first, excursion as f32);
+        let hold = FirstOrderHold::new(&model, p.dt_s);
+        let prev = model.previous_at_rest(&s, first);
+        let before = MagneticOutput {
+            current_a: s.amp.current_a,
+            field_a_per_m: s.rod_field_a_per_m.value(),
+            magnetization_a_per_m: s.m_slow_a_per_m.value(),
+        };
         // The magnetic stages' run kept in the memo (parameters that differ only downstream),
         // or none: then they run here, interleaved with the mechanical ones, and are kept.
         let (mut kept, mut to_keep) = (None, None);
@@ -170,12 +200,15 @@ impl<'a> Run<'a> {
             initial_excursion_a_per_m: excursion,
         };
         let y = s.mech.displacement_m as f64; // rest: the delay line holds this value too
-        let i = if drive == Drive::CommandDynamic { 0.0 } else { input[0] };
-        let h = p.coil.bias_a_per_m as f64;
+        let i = if drive == Drive::CommandDynamic { s.amp.current_a as f64 } else { input[0] };
+        let (h, m) = (s.rod_field_a_per_m.value() as f64, s.m_slow_a_per_m.value() as f64);
         Ok(Run {
             rec,
             model,
             s,
+            hold,
+            prev,
+            before,
             input,
             n,
             kept,
@@ -188,7 +221,7 @@ impl<'a> Run<'a> {
             y,
             i,
             h,
-            m: f64::NAN,
+            m,
             failed: None,
         })
     }
@@ -204,10 +237,13 @@ impl<'a> Run<'a> {
     fn step(&mut self) {
         self.record();
         let u = self.drive();
+        let (model, hold) = (&self.model, &self.hold);
         let magnetic = match (&self.kept, &mut self.branch) {
             (Some(run), _) => Ok(run[self.k]),
-            (None, Some((b, dirs))) => self.model.step_magnetic_on_branch(&mut self.s, b, u, dirs[self.k]),
-            (None, None) => self.model.step_magnetic(&mut self.s, u, |h| h),
+            (None, Some((b, dirs))) => {
+                model.step_magnetic_ramp_on_branch(&mut self.s, hold, &mut self.prev, b, u, dirs[self.k])
+            }
+            (None, None) => model.step_magnetic_ramp(&mut self.s, hold, &mut self.prev, u),
         };
         self.advance(magnetic);
     }
@@ -225,8 +261,11 @@ impl<'a> Run<'a> {
         self.record();
         other.record();
         let (u, u_other) = (self.drive(), other.drive());
-        let [magnetic, magnetic_other] =
-            self.model.step_magnetic_beside(&mut self.s, u, &other.model, &mut other.s, u_other);
+        let [magnetic, magnetic_other] = self.model.step_magnetic_ramp_beside(
+            (&mut self.s, &self.hold, &mut self.prev, u),
+            &other.model,
+            (&mut other.s, &other.hold, &mut other.prev, u_other),
+        );
         self.advance(magnetic);
         other.advance(magnetic_other);
     }
@@ -246,10 +285,10 @@ impl<'a> Run<'a> {
         }
     }
 
-    /// The drive from sample k to k + 1 ([`held_drive`]).
+    /// The drive at sample k + 1, where the step from k goes (the last sample's, past the end).
     #[inline(always)]
     fn drive(&self) -> f32 {
-        held_drive(&self.input, self.k)
+        next_drive(&self.input, self.k)
     }
 
     /// The mechanical stages from the magnetic ones' output (kept, or just stepped and then
@@ -267,7 +306,8 @@ impl<'a> Run<'a> {
         if let Some((_, _, run)) = &mut self.to_keep {
             run.push(magnetic);
         }
-        let o = self.model.step_mechanical(&mut self.s, magnetic);
+        let o = self.model.step_mechanical_ramp(&mut self.s, &self.hold, &self.before, magnetic);
+        self.before = magnetic;
         self.y = o.displacement_m as f64;
         self.i = o.current_a as f64;
         self.h = o.field_a_per_m as f64;
@@ -286,20 +326,16 @@ impl<'a> Run<'a> {
         if let Some((memo, key, run)) = self.to_keep {
             memo.keep(key, run);
         }
-        let mut out = self.out;
-        // Sample 0 is the rest state's: its magnetization is the first step's (the field is the bias).
-        if let Some(first) = out.magnetization_a_per_m.get(1).copied() {
-            out.magnetization_a_per_m[0] = first;
-        }
-        Ok(out)
+        Ok(self.out)
     }
 }
 
-/// The drive from sample k to k + 1 of `input`. It is known only at their ends: their mean is
-/// held (an O(dt²) hold, where a plain zero-order hold of u_k would lag by half a sample).
+/// The drive at sample k + 1 of `input`, where a step from sample k goes: the drive runs
+/// linearly between the two (the first-order hold, [`FirstOrderHold`]); past the last sample it
+/// stays there.
 #[inline(always)]
-fn held_drive(input: &[f64], k: usize) -> f32 {
-    (0.5 * (input[k] + input[(k + 1).min(input.len() - 1)])) as f32
+fn next_drive(input: &[f64], k: usize) -> f32 {
+    input[(k + 1).min(input.len() - 1)] as f32
 }
 
 /// The J–A branch and step directions of a logged current whose noise turns the field back
@@ -322,23 +358,25 @@ fn noise_free_branches(
     }
     let threshold = (REVERSAL_IN_NOISE_RMS * prep.drive_noise_a) as f32 * p.coil.turns_per_m;
     let start = JaBranch::from(s.ja);
+    let hold = FirstOrderHold::new(model, p.dt_s);
+    let mut prev = model.previous_at_rest(&s, input[0] as f32);
     let mut field = Vec::with_capacity(input.len() + 1);
     field.push(s.ja.h_a_per_m);
     for k in 0..input.len() {
         let (_, h) = model
-            .step_field(&mut s, held_drive(input, k))
+            .rod_field_ramp(&mut s, &hold, &mut prev, next_drive(input, k))
             .map_err(|e| InRecording::error(&prep.rec.name, format!("sample {k}: {e}")))?;
         field.push(h);
     }
     Ok(branch_directions(&field, threshold).map(|dirs| (start, dirs)))
 }
 
-/// Whether the held current `input` (from rest at 0 A, as a run starts) turns back by no more
-/// than `threshold` [A] somewhere: [`branch_directions`] on the current a run's field follows
-/// through the coil alone.
+/// Whether the current `input` (at rest at its first value, as a run starts) turns back by no
+/// more than `threshold` [A] somewhere: [`branch_directions`] on the current a run's field
+/// follows through the coil alone.
 pub(super) fn turns_within(input: &[f64], threshold: f64) -> bool {
-    let held: Vec<f32> = std::iter::once(0.0).chain((0..input.len()).map(|k| held_drive(input, k))).collect();
-    branch_directions(&held, threshold as f32).is_some()
+    let path: Vec<f32> = input.iter().map(|&i| i as f32).collect();
+    branch_directions(&path, threshold as f32).is_some()
 }
 
 /// What decides a run's magnetic stages on one file ([`MagneticMemo`]'s key): the spec, the
@@ -445,18 +483,25 @@ mod tests {
         let mut p = ActuatorParams::TERFENOL_DEMO;
         p.ja.alpha *= 0.9;
         let by_hand = |prep: &Prepared| -> (Vec<u64>, Vec<u64>) {
-            let model = Actuator::new(spec, &at_rate_of(spec, &p, prep).unwrap()).unwrap();
-            let input = prep.rec.current_a.as_deref().unwrap();
+            let model = super::super::workbench_model(spec, &at_rate_of(spec, &p, prep).unwrap()).unwrap();
+            // The logged current, or what a noisy one is smoothed to.
+            let input = prep.drive_estimate.as_deref().or(prep.rec.current_a.as_deref()).unwrap();
             let n = input.len();
-            let mut s = model.rest_state_after(excursion as f32);
+            let mut s = model.rest_state_at(input[0] as f32, excursion as f32);
+            let hold = model_core::FirstOrderHold::new(&model, prep.dt_s as f32);
+            let mut prev = model.previous_at_rest(&s, input[0] as f32);
+            let mut before = MagneticOutput {
+                current_a: s.amp.current_a,
+                field_a_per_m: s.rod_field_a_per_m.value(),
+                magnetization_a_per_m: s.m_slow_a_per_m.value(),
+            };
             let (mut y, mut i) = (s.mech.displacement_m as f64, input[0]);
             let (mut ys, mut is) = (Vec::new(), Vec::new());
             for k in 0..n {
                 ys.push((y * 1e6).to_bits());
                 is.push(i.to_bits());
-                let u = (0.5 * (input[k] + input[(k + 1).min(n - 1)])) as f32;
-                let magnetic = model.step_magnetic(&mut s, u, |h| h).unwrap();
-                let o = model.step_mechanical(&mut s, magnetic);
+                let u = input[(k + 1).min(n - 1)] as f32;
+                let o = model.step_ramp(&mut s, &hold, &mut prev, &mut before, u).unwrap();
                 (y, i) = (o.displacement_m as f64, o.current_a as f64);
             }
             (ys, is)

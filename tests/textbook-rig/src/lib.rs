@@ -35,6 +35,9 @@ use wave::Signal;
 
 /// Vacuum permeability [H/m] (4π·10⁻⁷, as docs/formats.md gives it).
 pub const MU0: f64 = 4.0e-7 * PI;
+/// The rig's behaviour, counted up whenever a change moves what it records (suites that cache
+/// its recordings key them by it). 2: the mechanics start at rest at the free displacement.
+pub const BEHAVIOUR: u32 = 2;
 /// The current ADC's least significant bit [A]: 12 bits over ±4 A.
 pub const CURRENT_LSB_A: f64 = 8.0 / 4096.0;
 /// Reversals of the AC demagnetisation that stands in for the ideal demagnetised Preisach plane.
@@ -523,6 +526,8 @@ struct Disc {
 #[derive(Clone, Copy, Debug, Default)]
 struct Obs {
     u: f64,
+    /// The free displacement [µm] (strain and thermal elongation, before the mechanics).
+    y_free: f64,
     i: f64,
     h: f64,
     hrod: f64,
@@ -709,7 +714,7 @@ impl Plant {
         } else {
             y_free_um
         };
-        Obs { u: w, i, h, hrod, field_rate: dhrod, m_law, m_obs, y: yout, theta }
+        Obs { u: w, y_free: y_free_um, i, h, hrod, field_rate: dhrod, m_law, m_obs, y: yout, theta }
     }
 
     /// Steady state at the drive's value at `t` with the given start.
@@ -761,7 +766,9 @@ impl Plant {
         }
         let o = self.eval(sig, t, &y, None, &d);
         if let Some(k) = lay.mech {
-            y[k] = o.y;
+            // At rest at the free displacement (README, "Start states"): `o.y` is the mechanics'
+            // own state here, still 0, which started every `mech` record with a step.
+            y[k] = o.y_free;
             y[k + 1] = 0.0;
         }
         (y, d)
