@@ -122,10 +122,12 @@ impl Drive {
 }
 
 /// How much finer than the board the workbench integrates a hysteresis law
-/// ([`model_core::Actuator::with_finer_hysteresis`]): the board's sub-step of min(a/4, k/2)
-/// left held steps 36× their noise floor off a continuous-time rig, 4× finer 7.6× (the rest is
-/// the sampling of the jumps), 16× finer 6.4× at four times the cost.
-pub const HYSTERESIS_REFINEMENT: u32 = 4;
+/// ([`model_core::Actuator::with_finer_hysteresis`]). The board's sub-step of min(a/4, k/2)
+/// leaves held 0.8 A steps 38× their noise floor off a continuous-time rig and fast files 4–8×;
+/// 4× finer, 4.5× and 2–3×, but the 8-file diagnosis then takes 2.2× as long (62 s against its
+/// 30 s target on 2 cores; 2× finer: 38 s), so the workbench keeps the board's sub-step until
+/// the integration is second order.
+pub const HYSTERESIS_REFINEMENT: u32 = 1;
 
 /// The model the workbench runs for `spec` at `params` (the board's, its hysteresis law
 /// integrated [`HYSTERESIS_REFINEMENT`] times finer): one stepping for the fit, `simulate` and
