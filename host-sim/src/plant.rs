@@ -256,19 +256,11 @@ impl FineModel {
     /// stepped under the first-order hold at step `dt_s` (the lumped chain).
     fn rest_state_at(&self, drive: f64, dt_s: f64) -> FineState {
         let mut s = self.settled(self.chain.rest_state_at(drive as f32, 0.0));
-        {
-            let c = &s.chain;
-            let before = MagneticOutput {
-                current_a: c.amp.current_a,
-                field_a_per_m: c.rod_field_a_per_m.value(),
-                magnetization_a_per_m: c.m_slow_a_per_m.value(),
-            };
-            s.ramp = Some((
-                FirstOrderHold::new(&self.chain, dt_s as f32),
-                self.chain.previous_at_rest(c, drive as f32),
-                before,
-            ));
-        }
+        s.ramp = Some((
+            FirstOrderHold::new(&self.chain, dt_s as f32),
+            self.chain.previous_at_rest(&s.chain, drive as f32),
+            self.chain.magnetic_at_rest(&s.chain),
+        ));
         s
     }
 

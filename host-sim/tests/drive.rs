@@ -142,50 +142,32 @@ fn bad_commands_are_refused_on_the_host_before_sending() {
     // error names the condition that failed.
     let accepted = dir.path().join("accepted.bin");
     let a = accepted.to_str().unwrap();
-    run_ok(&[
-        "drive",
-        "reference",
-        "--shape",
-        "sine",
-        "--amplitude-um",
-        "5",
-        "--freq-hz",
-        "1666.6",
-        "--out",
-        a,
-    ]);
-    refused(
-        &gma(&[
+    let sine = |amplitude_um: &str, freq_hz: &str, out: &str| {
+        gma(&[
             "drive",
             "reference",
             "--shape",
             "sine",
             "--amplitude-um",
-            "5",
+            amplitude_um,
             "--freq-hz",
-            "1666.7",
+            freq_hz,
             "--out",
-            o,
-        ]),
+            out,
+        ])
+    };
+    let o_accepted = sine("5", "1666.6", a);
+    assert!(
+        o_accepted.status.success(),
+        "1666.6 Hz refused: {}",
+        String::from_utf8_lossy(&o_accepted.stderr)
+    );
+    refused(
+        &sine("5", "1666.7", o),
         &["out of range: the frequency 1666.7 Hz is outside (0, 1666.6] Hz"],
         "above a sixth of the tick rate",
     );
-    refused(
-        &gma(&[
-            "drive",
-            "reference",
-            "--shape",
-            "sine",
-            "--amplitude-um",
-            "-5",
-            "--freq-hz",
-            "10",
-            "--out",
-            o,
-        ]),
-        &["out of range: the amplitude -5 µm is negative"],
-        "a negative amplitude",
-    );
+    refused(&sine("-5", "10", o), &["out of range: the amplitude -5 µm is negative"], "a negative amplitude");
     refused(
         &gma(&["drive", "load", "--params", "nonexistent.toml", "--model", "ja", "--out", o]),
         &["nonexistent.toml"],

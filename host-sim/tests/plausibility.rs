@@ -407,22 +407,28 @@ fn a_file_in_reverse_time_order_is_said() {
     );
 }
 
+/// A `gma simulate` recording (20 Hz, 0.5 A bias) with a `temperature_C` column that starts at
+/// `first` and creeps up, written as `name`; its path.
+fn with_thermometer(dir: &std::path::Path, name: &str, first: f64) -> String {
+    let good = simulate(dir, "good.csv", &["--freq-hz", "20", "--duration-s", "0.5", "--bias", "0.5"]);
+    let text = std::fs::read_to_string(&good).unwrap();
+    let mut out = String::new();
+    for (k, line) in text.lines().enumerate() {
+        let cell = if k == 0 { "temperature_C".to_string() } else { format!("{}", first + 1e-4 * k as f64) };
+        out.push_str(&format!("{line},{cell}\n"));
+    }
+    let f = dir.join(name);
+    std::fs::write(&f, out).unwrap();
+    f.display().to_string()
+}
+
 /// A coil thermometer logged in °F under `temperature_C` (68 for a 20 °C room): the coil
 /// heating's thermal resistance came out 1.8× too large, unsaid. A warning names `°F` and its
 /// `--column`; read with it, the file is not doubted.
 #[test]
 fn a_thermometer_in_fahrenheit_is_said_with_its_unit() {
     let dir = tempfile::tempdir().unwrap();
-    let good = simulate(dir.path(), "good.csv", &["--freq-hz", "20", "--duration-s", "0.5", "--bias", "0.5"]);
-    let text = std::fs::read_to_string(&good).unwrap();
-    let mut out = String::new();
-    for (k, line) in text.lines().enumerate() {
-        let cell = if k == 0 { "temperature_C".to_string() } else { format!("{}", 68.0 + 1e-4 * k as f64) };
-        out.push_str(&format!("{line},{cell}\n"));
-    }
-    let f = dir.path().join("fahrenheit.csv");
-    std::fs::write(&f, out).unwrap();
-    let f = f.display().to_string();
+    let f = with_thermometer(dir.path(), "fahrenheit.csv", 68.0);
     let w = warnings(&compare(&["--model", "ja+mech", &f]).unwrap()).join("\n");
     assert!(w.contains("fahrenheit.csv: `temperature_C` starts at 68") && w.contains(":°F`"), "{w}");
     let w = warnings(
@@ -437,16 +443,7 @@ fn a_thermometer_in_fahrenheit_is_said_with_its_unit() {
 #[test]
 fn a_thermometer_in_kelvin_is_said_with_its_unit() {
     let dir = tempfile::tempdir().unwrap();
-    let good = simulate(dir.path(), "good.csv", &["--freq-hz", "20", "--duration-s", "0.5", "--bias", "0.5"]);
-    let text = std::fs::read_to_string(&good).unwrap();
-    let mut out = String::new();
-    for (k, line) in text.lines().enumerate() {
-        let cell = if k == 0 { "temperature_C".to_string() } else { format!("{}", 295.15 + 1e-4 * k as f64) };
-        out.push_str(&format!("{line},{cell}\n"));
-    }
-    let f = dir.path().join("kelvin.csv");
-    std::fs::write(&f, out).unwrap();
-    let f = f.display().to_string();
+    let f = with_thermometer(dir.path(), "kelvin.csv", 295.15);
     let w = warnings(&compare(&["--model", "ja+mech", &f]).unwrap()).join("\n");
     assert!(
         w.contains("kelvin.csv: `temperature_C` starts at 295.15") && w.contains("temperature_C:K`"),

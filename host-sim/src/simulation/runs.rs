@@ -7,7 +7,6 @@
 //! ([`Actuator::step_magnetic_ramp_beside`]): the core overlaps the two independent chains. Each
 //! run's arithmetic is unchanged, so the results are the same bits as [`run_model`]'s.
 
-use std::borrow::Cow;
 use std::sync::Arc;
 
 use anyhow::Result;
@@ -88,13 +87,44 @@ fn run_pair(
     }
 }
 
+/// A run's drive per sample: the file's own column, a noisy current's smoothed estimate
+/// (shared by every run on the file, its first `n` samples), or the ideal amplifier's current.
+enum DriveInput<'a> {
+    Logged(&'a [f64]),
+    Smoothed(Arc<[f64]>, usize),
+    Computed(Vec<f64>),
+}
+
+impl<'a> From<&'a [f64]> for DriveInput<'a> {
+    fn from(v: &'a [f64]) -> Self {
+        DriveInput::Logged(v)
+    }
+}
+
+impl From<Vec<f64>> for DriveInput<'_> {
+    fn from(v: Vec<f64>) -> Self {
+        DriveInput::Computed(v)
+    }
+}
+
+impl std::ops::Deref for DriveInput<'_> {
+    type Target = [f64];
+    fn deref(&self) -> &[f64] {
+        match self {
+            DriveInput::Logged(v) => v,
+            DriveInput::Smoothed(v, n) => &v[..*n],
+            DriveInput::Computed(v) => v,
+        }
+    }
+}
+
 /// A run in progress: the model, its state, and the channels recorded so far.
 struct Run<'a> {
     rec: &'a crate::recording::Recording,
     model: Actuator,
     s: ActuatorState,
     /// The model's input per sample: current [A] or command [V].
-    input: Cow<'a, [f64]>,
+    input: DriveInput<'a>,
     n: usize,
     /// The ramp coefficients of the model's linear stages (the first-order hold).
     hold: FirstOrderHold,
@@ -145,10 +175,10 @@ impl<'a> Run<'a> {
         let model = super::workbench_model(spec, &p).map_err(|e| anyhow::anyhow!("{e}"))?;
         let n = rec.len();
         let all_channels = all_channels || rec.flux_density_t.is_some();
-        // Borrowed from the recording (this runs at every fit evaluation); only the ideal
-        // amplifier's scaled command is a new vector.
-        let input: Cow<[f64]> = match (drive, &prep.drive_estimate) {
-            (Drive::Current, Some(estimate)) => estimate[..n.min(estimate.len())].to_vec().into(),
+        // Borrowed from the recording or shared with the file's other runs (this runs at every
+        // fit evaluation); only the ideal amplifier's scaled command is a new vector.
+        let input: DriveInput = match (drive, &prep.drive_estimate) {
+            (Drive::Current, Some(estimate)) => DriveInput::Smoothed(estimate.clone(), n.min(estimate.len())),
             (Drive::Current, None) => rec.current_a.as_deref().unwrap_or_default().into(),
             (Drive::CommandIdeal, _) => rec
                 .command_v
@@ -171,11 +201,7 @@ impl<'a> Run<'a> {
         let s = model.rest_state_at(first, excursion as f32);
         let hold = FirstOrderHold::new(&model, p.dt_s);
         let prev = model.previous_at_rest(&s, first);
-        let before = MagneticOutput {
-            current_a: s.amp.current_a,
-            field_a_per_m: s.rod_field_a_per_m.value(),
-            magnetization_a_per_m: s.m_slow_a_per_m.value(),
-        };
+        let before = model.magnetic_at_rest(&s);
         // The magnetic stages' run kept in the memo (parameters that differ only downstream),
         // or none: then they run here, interleaved with the mechanical ones, and are kept.
         let (mut kept, mut to_keep) = (None, None);
@@ -490,11 +516,7 @@ mod tests {
             let mut s = model.rest_state_at(input[0] as f32, excursion as f32);
             let hold = model_core::FirstOrderHold::new(&model, prep.dt_s as f32);
             let mut prev = model.previous_at_rest(&s, input[0] as f32);
-            let mut before = MagneticOutput {
-                current_a: s.amp.current_a,
-                field_a_per_m: s.rod_field_a_per_m.value(),
-                magnetization_a_per_m: s.m_slow_a_per_m.value(),
-            };
+            let mut before = model.magnetic_at_rest(&s);
             let (mut y, mut i) = (s.mech.displacement_m as f64, input[0]);
             let (mut ys, mut is) = (Vec::new(), Vec::new());
             for k in 0..n {

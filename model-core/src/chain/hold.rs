@@ -64,6 +64,15 @@ impl Actuator {
         PreviousSample { input, law_magnetization_a_per_m: s.m_slow_a_per_m.value() }
     }
 
+    /// What the magnetic stages give at rest in `s` (the `before` of a run's first step).
+    pub fn magnetic_at_rest(&self, s: &ActuatorState) -> MagneticOutput {
+        MagneticOutput {
+            current_a: s.amp.current_a,
+            field_a_per_m: s.rod_field_a_per_m.value(),
+            magnetization_a_per_m: s.m_slow_a_per_m.value(),
+        }
+    }
+
     /// The magnetic stages of one first-order-hold step to the next sample's drive `input`
     /// (`prev` is this sample's, and becomes the next's).
     #[inline]
