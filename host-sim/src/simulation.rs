@@ -122,21 +122,24 @@ impl Drive {
 }
 
 /// How much finer than the board the workbench integrates a hysteresis law
-/// ([`model_core::Actuator::with_finer_hysteresis`]). The board's sub-step of min(a/4, k/2)
-/// leaves held 0.8 A steps 38× their noise floor off a continuous-time rig and fast files 4–8×;
-/// 4× finer, 4.5× and 2–3×, but the 8-file diagnosis then takes 2.2× as long (62 s against its
-/// 30 s target on 2 cores; 2× finer: 38 s), so the workbench keeps the board's sub-step until
-/// the integration is second order.
+/// ([`model_core::Actuator::with_finer_hysteresis`]): the board's sub-step of min(a/4, k/2),
+/// corrected to second order ([`model_core::Actuator::with_second_order_hysteresis`]). Explicit
+/// at that size the law left held 0.8 A steps 38× their noise floor off a continuous-time rig
+/// and fast files 4–8×; corrected, 3× and 2× (docs/validation.md#forward-fidelity), at a
+/// quarter more time per evaluation. 4× finer explicit steps gave less (4.5× and 2–3×) for 2.2×
+/// the time.
 pub const HYSTERESIS_REFINEMENT: u32 = 1;
 
 /// The model the workbench runs for `spec` at `params` (the board's, its hysteresis law
-/// integrated [`HYSTERESIS_REFINEMENT`] times finer): one stepping for the fit, `simulate` and
-/// the plant.
+/// integrated [`HYSTERESIS_REFINEMENT`] times finer and to second order): one stepping for the
+/// fit, `simulate` and the plant.
 pub fn workbench_model(
     spec: ModelSpec,
     params: &ActuatorParams,
 ) -> Result<model_core::Actuator, model_core::ParamError> {
-    Ok(model_core::Actuator::new(spec, params)?.with_finer_hysteresis(HYSTERESIS_REFINEMENT))
+    Ok(model_core::Actuator::new(spec, params)?
+        .with_finer_hysteresis(HYSTERESIS_REFINEMENT)
+        .with_second_order_hysteresis())
 }
 
 /// The rod's magnetic state when a recording starts. A rod on a rig has a history the file does

@@ -278,7 +278,12 @@ fn two_percent_jitter_is_refused_unless_resampled_and_then_fits() {
         path(&si),
     ]));
     let e_plain = plain["nrmse"].as_f64().unwrap();
-    assert!((e_si - e_plain).abs() < 1e-4 * e_plain && (e_jit - e_plain).abs() < 0.05 * e_plain, "{c}");
+    // The jittered file within 5 % of the plain one's error, or 0.01 % of the range where the
+    // model is the plant and that error next to 0 (its resampling's interpolation then shows).
+    assert!(
+        (e_si - e_plain).abs() < 1e-4 * e_plain && (e_jit - e_plain).abs() < 0.05 * e_plain + 1e-4,
+        "{c}"
+    );
     let d = json(&gma(&["diagnose", "--model", "linear", "--json", "--resample", "linear", path(&jit)]));
     assert_eq!(d["verdict"], "hysteresis");
 

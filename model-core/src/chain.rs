@@ -232,6 +232,15 @@ impl Actuator {
         self
     }
 
+    /// This model with its hysteresis law's sub-steps corrected to second order
+    /// ([`JilesAtherton::second_order`]; the other laws as they are): for the workbench.
+    pub fn with_second_order_hysteresis(mut self) -> Self {
+        if let Magnetization::JilesAtherton(j) = self.magnetization {
+            self.magnetization = Magnetization::JilesAtherton(j.second_order());
+        }
+        self
+    }
+
     /// The structure this model was built for.
     pub fn spec(&self) -> ModelSpec {
         self.spec

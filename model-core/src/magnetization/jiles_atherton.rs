@@ -9,6 +9,8 @@
 //!   that removes the classic non-physical negative slopes after reversals);
 //! - a sample's field change is integrated in sub-steps of at most `max_substep_a_per_m`
 //!   = min(a/4, k/2) (at most [`MAX_SUBSTEPS`]), so accuracy does not depend on the sample rate;
+//!   each sub-step explicit (the board's) or corrected to second order
+//!   ([`JilesAtherton::second_order`], the workbench's);
 //! - every mean-field denominator (1 − α dM/dH_e, k − α g) is floored, so large α (steep, nearly
 //!   square loops) stays finite; and |M|, |M_irr| ≤ M_s always hold.
 //!
@@ -222,6 +224,10 @@ pub struct JilesAtherton {
     c_ms: f32,
     c_ms_over_a: f32,
     one_minus_c: f32,
+    /// Each sub-step's order: 1 explicit, 2 corrected ([`JilesAtherton::second_order`]). A word
+    /// like the other fields: the board's sub-step took 148 instructions with a `bool` here
+    /// (how the struct was kept in registers), 138 with this word, 136 with neither.
+    order: u32,
 }
 
 /// J–A state: applied field, total and irreversible magnetization (mutable, per sample). The
@@ -274,14 +280,14 @@ impl JilesAtherton {
             c_ms: p.c * p.ms_a_per_m,
             c_ms_over_a: p.c * p.ms_a_per_m / p.a_a_per_m,
             one_minus_c: 1.0 - p.c,
+            order: 1,
         })
     }
 
     /// This law with sub-steps `factor` (in [1, 16]) times finer, and that many times more of
     /// them allowed per sample: for a caller whose time per sample is not budgeted (the
-    /// workbench). The explicit sub-step's error falls with its size: held 0.8 A steps on a
-    /// Terfenol-D rod, 5.6 % of the range off a continuous-time rig at the board's size, 1.2 %
-    /// at 4× finer (host-sim's forward-fidelity test).
+    /// workbench). The explicit sub-step's error falls with its size, the second-order one's
+    /// ([`Self::second_order`]) with its square (`tests/rate_independence.rs`).
     pub fn refined(self, factor: u32) -> Self {
         let factor = factor.clamp(1, 16);
         Self {
@@ -290,6 +296,20 @@ impl JilesAtherton {
             max_substeps: MAX_SUBSTEPS * factor,
             ..self
         }
+    }
+
+    /// This law with every sub-step corrected to second order (Heun's trapezoid, its end slope
+    /// taken from the anhysteretic the sub-step evaluates anyway, so it costs no second
+    /// Langevin function): the explicit sub-step's error falls with the square of its size, not
+    /// linearly. For a caller whose time per sample is not budgeted (the workbench); the board
+    /// steps the explicit law.
+    pub fn second_order(self) -> Self {
+        Self { order: 2, ..self }
+    }
+
+    /// Whether sub-steps are corrected to second order ([`Self::second_order`]).
+    pub fn is_second_order(&self) -> bool {
+        self.order == 2
     }
 
     /// The parameters.
@@ -406,7 +426,8 @@ impl JilesAtherton {
         }
     }
 
-    /// One integration sub-step of size `dh` (sign gives δ).
+    /// One explicit integration sub-step of size `dh` (sign gives δ): the board's, whatever
+    /// [`Self::second_order`] says (the corrected one is taken per sample, in [`Self::step`]).
     #[inline(always)]
     pub fn substep(&self, s: &mut JaState, dh: f32) {
         // One dispatch per sub-step; each form's step is straight-line code (the budgeted
@@ -448,6 +469,65 @@ impl JilesAtherton {
         s.m_a_per_m = m;
         s.langevin = l;
         s.langevin_slope_offset = dl - 1.0 / 3.0;
+    }
+
+    /// The bulk form's sub-step corrected to second order ([`Self::second_order`]): Heun's
+    /// trapezoid on M_irr, the end's slope from the Euler prediction and the anhysteretic at the
+    /// end (the end's mean-field factor 1/(1 − α dM/dH_e) to first order from the start's,
+    /// which keeps the step second order without a second division).
+    #[inline(always)]
+    fn substep_bulk_corrected(&self, s: &mut JaState, dh: f32, dir: f32) {
+        let p = &self.p;
+        let (dm_dhe, chi_irr) = self.slopes(s, dir);
+        let mean_field = 1.0 / at_least(1.0 - p.alpha * dm_dhe, MIN_DENOMINATOR);
+        let dhe = dh * mean_field;
+        let m_irr_start = s.m_irr_a_per_m;
+        let m_irr_predicted = within(m_irr_start + chi_irr * dhe, p.ms_a_per_m);
+        let m_predicted = within(s.m_a_per_m + dm_dhe * dhe, p.ms_a_per_m);
+        s.h_a_per_m += dh;
+        let (l, dl) = langevin_with_slope((s.h_a_per_m + p.alpha * m_predicted) * self.inv_a);
+        let chi_irr_end = at_least((p.ms_a_per_m * l - m_irr_predicted) * dir, 0.0) * self.inv_k;
+        let dm_dhe_end = self.c_ms_over_a * dl + self.one_minus_c * chi_irr_end;
+        let mean_field_end = mean_field + mean_field * mean_field * p.alpha * (dm_dhe_end - dm_dhe);
+        s.m_irr_a_per_m = within(
+            m_irr_start + 0.5 * dh * (chi_irr * mean_field + chi_irr_end * mean_field_end),
+            p.ms_a_per_m,
+        );
+        s.m_a_per_m = within(self.c_ms * l + self.one_minus_c * s.m_irr_a_per_m, p.ms_a_per_m);
+        s.langevin = l;
+        s.langevin_slope_offset = dl - 1.0 / 3.0;
+    }
+
+    /// The 1986 form's sub-step corrected to second order ([`Self::substep_bulk_corrected`]'s
+    /// trapezoid on M_irr in the applied field). The mean field is predicted with M's own slope,
+    /// ((1 − c) dM_irr/dh + c dM_an/dH_e)/(1 − α c dM_an/dH_e): the susceptibility's
+    /// reversible-only mean-field factor leaves the anhysteretic at the end a first-order error
+    /// the trapezoid inherits.
+    #[inline(always)]
+    fn substep_1986_corrected(&self, s: &mut JaState, dh: f32, dir: f32) {
+        let p = &self.p;
+        let m_irr_start = s.m_irr_a_per_m;
+        let slope_start = self.pinned_slope(s, m_irr_start, dir);
+        let c_dman = p.c * self.anhysteretic_slope(s);
+        let chi =
+            (self.one_minus_c * slope_start + c_dman) / at_least(1.0 - p.alpha * c_dman, MIN_DENOMINATOR);
+        s.m_irr_a_per_m = within(m_irr_start + slope_start * dh, p.ms_a_per_m);
+        let m_predicted = s.m_a_per_m + chi * dh;
+        self.close_with_irreversible(s, dh, m_predicted);
+        let slope_end = self.pinned_slope(s, s.m_irr_a_per_m, dir);
+        s.m_irr_a_per_m = within(m_irr_start + 0.5 * (slope_start + slope_end) * dh, p.ms_a_per_m);
+        s.m_a_per_m = within(self.c_ms * s.langevin + self.one_minus_c * s.m_irr_a_per_m, p.ms_a_per_m);
+    }
+
+    /// The total-magnetization forms' sub-step corrected to second order (Heun's trapezoid on
+    /// M; the cached anhysteretic stays the one at the predicted mean field).
+    #[inline(always)]
+    fn substep_szewczyk_corrected(&self, s: &mut JaState, dh: f32, dir: f32) {
+        let (m_start, chi_start) = (s.m_a_per_m, self.susceptibility(s, dir));
+        self.substep_szewczyk(s, dh, dir);
+        let m = within(m_start + 0.5 * (chi_start + self.susceptibility(s, dir)) * dh, self.p.ms_a_per_m);
+        s.m_a_per_m = m;
+        s.m_irr_a_per_m = m;
     }
 
     /// The end of a bulk or 1986 sub-step: the anhysteretic curve at the new field with the
@@ -519,16 +599,33 @@ impl JilesAtherton {
         let n = self.substeps_for(dh_total).min(max_substeps).max(1);
         let dh = if n == 1 { dh_total } else { dh_total / n as f32 };
         let dir = dir.unwrap_or(direction_of(dh));
-        // The form is chosen once per sample, not once per sub-step.
-        match self.p.variant {
-            JaVariant::Bulk => (0..n).for_each(|_| self.substep_bulk(s, dh, dir)),
-            JaVariant::Original1986 => (0..n).for_each(|_| self.substep_1986(s, dh, dir)),
-            JaVariant::Szewczyk | JaVariant::Ungated1986 => {
-                (0..n).for_each(|_| self.substep_szewczyk(s, dh, dir))
+        if self.order == 2 {
+            self.substeps_corrected(s, n, dh, dir);
+        } else {
+            // The form is chosen once per sample, not once per sub-step.
+            match self.p.variant {
+                JaVariant::Bulk => (0..n).for_each(|_| self.substep_bulk(s, dh, dir)),
+                JaVariant::Original1986 => (0..n).for_each(|_| self.substep_1986(s, dh, dir)),
+                JaVariant::Szewczyk | JaVariant::Ungated1986 => {
+                    (0..n).for_each(|_| self.substep_szewczyk(s, dh, dir))
+                }
             }
         }
         s.h_a_per_m = h;
         s.m_a_per_m
+    }
+
+    /// `n` sub-steps of `dh` on the branch of `dir`, each corrected to second order: out of the
+    /// board's line (it steps explicitly and pays one compare per sample for this).
+    #[inline(never)]
+    fn substeps_corrected(&self, s: &mut JaState, n: u32, dh: f32, dir: f32) {
+        match self.p.variant {
+            JaVariant::Bulk => (0..n).for_each(|_| self.substep_bulk_corrected(s, dh, dir)),
+            JaVariant::Original1986 => (0..n).for_each(|_| self.substep_1986_corrected(s, dh, dir)),
+            JaVariant::Szewczyk | JaVariant::Ungated1986 => {
+                (0..n).for_each(|_| self.substep_szewczyk_corrected(s, dh, dir))
+            }
+        }
     }
 
     /// [`Self::step`] of this rod and of `other` (each with its own state and field) at once,
@@ -546,7 +643,10 @@ impl JilesAtherton {
         h_other: f32,
     ) -> (f32, f32) {
         let (dh, dh_other) = (h - s.h_a_per_m, h_other - s_other.h_a_per_m);
-        if !(dh.is_finite() && dh_other.is_finite()) || self.p.variant != other.p.variant {
+        if !(dh.is_finite() && dh_other.is_finite())
+            || self.p.variant != other.p.variant
+            || self.order != other.order
+        {
             return (self.step(s, h), other.step(s_other, h_other));
         }
         // As `step`'s: n ≥ 1 sub-steps of equal size.
@@ -556,11 +656,24 @@ impl JilesAtherton {
         };
         let ((n, dh), (n_other, dh_other)) = (per_substep(self, dh), per_substep(other, dh_other));
         let rods = [(self, &mut *s, n, dh), (other, &mut *s_other, n_other, dh_other)];
-        match self.p.variant {
-            JaVariant::Bulk => interleave(rods, |ja, s, dh| ja.substep_bulk(s, dh, direction_of(dh))),
-            JaVariant::Original1986 => interleave(rods, |ja, s, dh| ja.substep_1986(s, dh, direction_of(dh))),
-            JaVariant::Szewczyk | JaVariant::Ungated1986 => {
+        match (self.p.variant, self.order == 2) {
+            (JaVariant::Bulk, false) => {
+                interleave(rods, |ja, s, dh| ja.substep_bulk(s, dh, direction_of(dh)))
+            }
+            (JaVariant::Bulk, true) => {
+                interleave(rods, |ja, s, dh| ja.substep_bulk_corrected(s, dh, direction_of(dh)))
+            }
+            (JaVariant::Original1986, false) => {
+                interleave(rods, |ja, s, dh| ja.substep_1986(s, dh, direction_of(dh)))
+            }
+            (JaVariant::Original1986, true) => {
+                interleave(rods, |ja, s, dh| ja.substep_1986_corrected(s, dh, direction_of(dh)))
+            }
+            (JaVariant::Szewczyk | JaVariant::Ungated1986, false) => {
                 interleave(rods, |ja, s, dh| ja.substep_szewczyk(s, dh, direction_of(dh)))
+            }
+            (JaVariant::Szewczyk | JaVariant::Ungated1986, true) => {
+                interleave(rods, |ja, s, dh| ja.substep_szewczyk_corrected(s, dh, direction_of(dh)))
             }
         }
         s.h_a_per_m = h;
