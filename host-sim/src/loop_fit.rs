@@ -314,7 +314,6 @@ impl LoopFit {
             }
             LoopModel::Anhysteretic => {
                 p.anhysteretic = AnhystereticParams { ms_a_per_m: v[0] as f32, a_a_per_m: v[1] as f32 };
-                p.magnetostriction.ms_a_per_m = v[0] as f32;
             }
             LoopModel::JilesAtherton(variant) => {
                 p.ja = JaParams {
@@ -325,8 +324,6 @@ impl LoopFit {
                     c: v[4] as f32,
                     variant,
                 };
-                p.anhysteretic.ms_a_per_m = v[0] as f32;
-                p.magnetostriction.ms_a_per_m = v[0] as f32;
             }
             LoopModel::Preisach => {
                 p.preisach.ms_a_per_m = v[0] as f32;
@@ -336,8 +333,16 @@ impl LoopFit {
                 p.preisach.h_max_a_per_m = v[4] as f32;
                 p.preisach.reversible_fraction = Some(v[5] as f32);
                 p.preisach.reversible_field_a_per_m = Some(v[6] as f32);
-                p.magnetostriction.ms_a_per_m = v[0] as f32;
             }
+        }
+        // One rod, one M_s: every table that holds it (model-core refuses a set whose strain's
+        // M_s is not its law's, and the file may go on to another law, `diagnose --laws`).
+        if self.model != LoopModel::Linear {
+            let ms = v[0] as f32;
+            p.ja.ms_a_per_m = ms;
+            p.anhysteretic.ms_a_per_m = ms;
+            p.preisach.ms_a_per_m = ms;
+            p.magnetostriction.ms_a_per_m = ms;
         }
         p
     }

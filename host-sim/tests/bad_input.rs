@@ -288,6 +288,13 @@ fn params_with(dir: &Path, name: &str, edit: impl Fn(&str) -> String) -> String 
     write(dir, name, edit(&text).as_bytes())
 }
 
+/// [`replace_line`] within `[table]`.
+fn replace_in_table(text: &str, table: &str, key: &str, new: &str) -> String {
+    let header = format!("[{table}]");
+    let start = text.find(&header).unwrap_or_else(|| panic!("no {header}"));
+    format!("{}{}", &text[..start], replace_line(&text[start..], key, new))
+}
+
 fn replace_line(text: &str, key: &str, new: &str) -> String {
     let mut seen = false;
     let out: Vec<String> = text
@@ -318,7 +325,25 @@ fn bad_parameter_files_name_the_file_line_and_parameter_in_every_command() {
     let (negative_at, ppm_at, nan_at) =
         (at("negative.toml", "k_a_per_m"), at("ppm.toml", "lambda_s"), at("nan.toml", "alpha"));
     let huge_at = at("huge.toml", "k_a_per_m");
+    let strain_ms_line = {
+        let table = demo.lines().position(|l| l == "[magnetostriction]").unwrap();
+        table + demo.lines().skip(table).position(|l| l.starts_with("ms_a_per_m =")).unwrap() + 1
+    };
+    let two_ms_at = format!("two_ms.toml:{strain_ms_line}: ");
     let cases: Vec<(String, Vec<&str>)> = vec![
+        (
+            // One rod, one M_s: the strain's half the law's (issue 78: the strain reached 3.3× its
+            // saturation, a fit answered λ_s a quarter of the truth).
+            params_with(dir.path(), "two_ms.toml", |t| {
+                replace_in_table(t, "magnetostriction", "ms_a_per_m", "ms_a_per_m = 300000.0")
+            }),
+            vec![
+                &two_ms_at,
+                "`magnetostriction.ms_a_per_m` is out of range",
+                "the magnetization law's own M_s",
+                "found `300000.0`",
+            ],
+        ),
         (
             params_with(dir.path(), "missing.toml", |t| replace_line(t, "k_a_per_m", "")),
             vec!["missing.toml:", "parameter `ja.k_a_per_m` is missing"],
@@ -378,6 +403,15 @@ fn bad_parameter_files_name_the_file_line_and_parameter_in_every_command() {
             refused(&gma(&args), expected, &format!("{} --params {p}", args[0]));
         }
     }
+    // The board's loader too: the frames it would send are never written.
+    let frames = dir.path().join("frames.bin");
+    let two_ms = &cases[0];
+    refused(
+        &gma(&["drive", "load", "--params", &two_ms.0, "--model", "ja", "--out", frames.to_str().unwrap()]),
+        &two_ms.1,
+        "drive load --params two_ms.toml",
+    );
+    assert!(!frames.exists(), "drive load wrote frames of a self-contradicting set");
     let missing = dir.path().join("nope.toml");
     refused(
         &gma(&["simulate", "--params", missing.to_str().unwrap(), "--out", &out]),

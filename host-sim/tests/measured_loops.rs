@@ -22,10 +22,15 @@ fn folder() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/data/measured-loops")
 }
 
-/// A parameter file: the demo set with `ja` replaced (only the J–A table matters to a loop fit).
+/// A parameter file: the demo set with `ja` replaced (only the J–A table matters to a loop fit)
+/// and its M_s in every table that holds one (a set whose strain's M_s is not its law's is
+/// refused).
 fn params_file(dir: &Path, name: &str, ja: JaParams) -> PathBuf {
     let mut p = ActuatorParams::TERFENOL_DEMO;
     p.ja = ja;
+    p.anhysteretic.ms_a_per_m = ja.ms_a_per_m;
+    p.preisach.ms_a_per_m = ja.ms_a_per_m;
+    p.magnetostriction.ms_a_per_m = ja.ms_a_per_m;
     let path = dir.join(name);
     std::fs::write(&path, to_toml(&p, "measured_loops test").unwrap()).unwrap();
     path

@@ -158,6 +158,10 @@ impl core::fmt::Display for StepError {
 
 impl core::error::Error for StepError {}
 
+/// How closely `[magnetostriction] ms_a_per_m` must agree with the law's M_s (relative): the
+/// same number written twice, allowing for a decimal round trip.
+const MS_AGREEMENT: f32 = 1e-4;
+
 impl Actuator {
     /// Builds the model for `spec`, validating only the stages it uses.
     pub fn new(spec: ModelSpec, p: &ActuatorParams) -> Result<Self, ParamError> {
@@ -188,6 +192,21 @@ impl Actuator {
             None
         };
         let magnetostriction = QuadraticMagnetostriction::new(p.magnetostriction)?;
+        // One rod, one saturation magnetization: the strain is normalised by the law's M_s. A set
+        // whose `[magnetostriction]` M_s was half its `[ja]` one drove the strain to 3.3× its
+        // saturation, and a fit answered with λ_s a quarter of the truth.
+        let law_ms = match spec.law() {
+            MagnetizationLaw::Preisach => Some(p.preisach.ms_a_per_m),
+            MagnetizationLaw::JilesAtherton => Some(p.ja.ms_a_per_m),
+            MagnetizationLaw::Anhysteretic => Some(p.anhysteretic.ms_a_per_m),
+            MagnetizationLaw::Linear => None,
+        };
+        if law_ms.is_some_and(|ms| (p.magnetostriction.ms_a_per_m - ms).abs() > MS_AGREEMENT * ms) {
+            return Err(ParamError::OutOfRange(
+                "magnetostriction.ms_a_per_m",
+                "the magnetization law's own M_s (`ms_a_per_m` of its [ja], [preisach] or [anhysteretic] table), within 1e-4",
+            ));
+        }
         let rod_length_m =
             check("rod_length_m", p.rod_length_m, |l| (1e-4..=10.0).contains(&l), "in [1e-4, 10] m")?;
         let mech = if spec.has(Effect::MechanicalDynamics) { Some(p.mech.discretised(dt)?) } else { None };
