@@ -79,10 +79,11 @@ impl Decimal {
     }
 }
 
-/// How many first stamps' magnitudes of steps an `f64` time axis may start at: beyond, the
-/// stamps are read as offsets from the first. At 1e6 steps the rounding of one stamp is below
-/// 1e-9 of a step; Unix-epoch seconds at 10 kHz are 1.8e13 steps from zero.
-const MAX_ORIGIN_STEPS: f64 = 1e6;
+/// How many steps from zero an `f64` time axis may start: beyond, the stamps are read as
+/// offsets from the first. At 1e9 steps one stamp's rounding is 2.2e-7 of a step (a clock at
+/// 1000 s sampled at 10 kHz, 1e7 steps: 2.2e-9); Unix-epoch seconds at 10 kHz are 1.8e13 steps
+/// from zero. At 1e6, clocks at 101 s were rebased and what gma wrote began at 0 (issue 78).
+const MAX_ORIGIN_STEPS: f64 = 1e9;
 
 /// The time axis as it is read: each stamp's exact decimal value, and (once the second stamp
 /// gives the step) whether stamps are held as offsets from the first.

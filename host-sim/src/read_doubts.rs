@@ -125,8 +125,9 @@ impl fmt::Display for ReadDoubt {
             ),
             ReadDoubt::StampsFromFirst { file, origin } => write!(
                 f,
-                "{file}: time stamps read as offsets from the first, {} s (at that magnitude a 64-bit \
-                 float does not resolve the sample period; the offsets are exact)",
+                "{file}: time stamps read as offsets from the first, {} s (more than 1e9 sample periods \
+                 from zero, where a 64-bit float resolves the period to worse than 2e-7 of it; the offsets \
+                 are exact, and the `time_s` gma writes for this file are these offsets)",
                 echo(origin)
             ),
             ReadDoubt::TimeTooFast { file, step_s, drive_hz } => write!(

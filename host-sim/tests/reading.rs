@@ -103,6 +103,45 @@ fn epoch_time_stamps_give_the_period_and_result_of_stamps_from_zero() {
     );
 }
 
+/// A clock far from zero but well within what a 64-bit float resolves (101 s and 1000 s at
+/// 10 kHz: 1e6 and 1e7 steps) is read as written, and what `gma` writes keeps its stamps:
+/// `simulate --drive`'s rows and `compare --out-csv`'s (issue 78: a clock at 101 s came back
+/// from both from 0, one at 99 s with its stamps, and a note said the float could not resolve
+/// the period).
+#[test]
+fn a_clock_far_from_zero_keeps_its_stamps_in_what_gma_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = demo(dir.path());
+    let params = d.join("params-1-ja_mech.toml");
+    for (origin_s, first) in [(101u128, "101.0000"), (1000, "1000.0000")] {
+        let file = dir.path().join(format!("clock{origin_s}.csv"));
+        retimed(&d.join("demo-val1.csv"), &file, 1, origin_s * 100_000_000_000, 6);
+        let sim = dir.path().join(format!("sim{origin_s}.csv"));
+        let o = gma(&[
+            "simulate",
+            "--model",
+            "ja+mech",
+            "--params",
+            path(&params),
+            "--drive",
+            path(&file),
+            "-o",
+            path(&sim),
+        ]);
+        assert!(o.status.success(), "{}", err(&o));
+        assert!(!err(&o).contains("offsets from the first"), "{}", err(&o));
+        let written = rows(&sim);
+        assert!(written[1][0].starts_with(first), "simulate --drive: first stamp {}", written[1][0]);
+        let series = dir.path().join(format!("series{origin_s}.csv"));
+        let o = compare(dir.path(), "ja+mech", &params, &[&file], &["--out-csv", path(&series)]);
+        let j = json(&o);
+        assert!(!warnings(&j).iter().any(|w| w.contains("offsets from the first")), "{:?}", warnings(&j));
+        let written = rows(&series);
+        let t: f64 = written[1][1].parse().unwrap();
+        assert!((t - origin_s as f64).abs() < 1e-9, "compare --out-csv: first stamp {}", written[1][1]);
+    }
+}
+
 /// `gma simulate` of a search-coil rig (`time_s,current_A,displacement_um,flux_density_T`), its
 /// header and columns rewritten by `header` and `row` (cells in that order).
 fn search_coil_rig(dir: &Path, d: &Path, name: &str, header: &str, row: fn(&[String]) -> String) -> PathBuf {
