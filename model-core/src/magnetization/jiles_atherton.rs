@@ -307,11 +307,6 @@ impl JilesAtherton {
         Self { order: 2, ..self }
     }
 
-    /// Whether sub-steps are corrected to second order ([`Self::second_order`]).
-    pub fn is_second_order(&self) -> bool {
-        self.order == 2
-    }
-
     /// The parameters.
     pub fn params(&self) -> &JaParams {
         &self.p
@@ -470,6 +465,9 @@ impl JilesAtherton {
         s.langevin = l;
         s.langevin_slope_offset = dl - 1.0 / 3.0;
     }
+
+    // The corrected sub-steps repeat their explicit one's predictor rather than share a body
+    // with it, so that the board's explicit steps stay the code they were (its budget is tight).
 
     /// The bulk form's sub-step corrected to second order ([`Self::second_order`]): Heun's
     /// trapezoid on M_irr, the end's slope from the Euler prediction and the anhysteretic at the
