@@ -7,10 +7,11 @@
 //! - the irreversible susceptibility is never negative: it is zero whenever M_an − M_irr (M_an − M
 //!   for the total-magnetization form) has the opposite sign of the field change (the δ_M gate
 //!   that removes the classic non-physical negative slopes after reversals);
-//! - a sample's field change is integrated in sub-steps of at most `max_substep_a_per_m`
-//!   = min(a/4, k/2) (at most [`MAX_SUBSTEPS`]), so accuracy does not depend on the sample rate;
-//!   each sub-step explicit (the board's) or corrected to second order
-//!   ([`JilesAtherton::second_order`], the workbench's);
+//! - a sample's field change is integrated in sub-steps (at most [`MAX_SUBSTEPS`]), so accuracy
+//!   does not depend on the sample rate: explicit ones of at most `max_substep_a_per_m`
+//!   = min(a/4, k/2) (the board's), or ones corrected to second order
+//!   ([`JilesAtherton::second_order`], the workbench's) as many as a tolerance on their error
+//!   estimate asks;
 //! - every mean-field denominator (1 − α dM/dH_e, k − α g) is floored, so large α (steep, nearly
 //!   square loops) stays finite; and |M|, |M_irr| ≤ M_s always hold.
 //!
@@ -466,68 +467,6 @@ impl JilesAtherton {
         s.langevin_slope_offset = dl - 1.0 / 3.0;
     }
 
-    // The corrected sub-steps repeat their explicit one's predictor rather than share a body
-    // with it, so that the board's explicit steps stay the code they were (its budget is tight).
-
-    /// The bulk form's sub-step corrected to second order ([`Self::second_order`]): Heun's
-    /// trapezoid on M_irr, the end's slope from the Euler prediction and the anhysteretic at the
-    /// end (the end's mean-field factor 1/(1 − α dM/dH_e) to first order from the start's,
-    /// which keeps the step second order without a second division).
-    #[inline(always)]
-    fn substep_bulk_corrected(&self, s: &mut JaState, dh: f32, dir: f32) {
-        let p = &self.p;
-        let (dm_dhe, chi_irr) = self.slopes(s, dir);
-        let mean_field = 1.0 / at_least(1.0 - p.alpha * dm_dhe, MIN_DENOMINATOR);
-        let dhe = dh * mean_field;
-        let m_irr_start = s.m_irr_a_per_m;
-        let m_irr_predicted = within(m_irr_start + chi_irr * dhe, p.ms_a_per_m);
-        let m_predicted = within(s.m_a_per_m + dm_dhe * dhe, p.ms_a_per_m);
-        s.h_a_per_m += dh;
-        let (l, dl) = langevin_with_slope((s.h_a_per_m + p.alpha * m_predicted) * self.inv_a);
-        let chi_irr_end = at_least((p.ms_a_per_m * l - m_irr_predicted) * dir, 0.0) * self.inv_k;
-        let dm_dhe_end = self.c_ms_over_a * dl + self.one_minus_c * chi_irr_end;
-        let mean_field_end = mean_field + mean_field * mean_field * p.alpha * (dm_dhe_end - dm_dhe);
-        s.m_irr_a_per_m = within(
-            m_irr_start + 0.5 * dh * (chi_irr * mean_field + chi_irr_end * mean_field_end),
-            p.ms_a_per_m,
-        );
-        s.m_a_per_m = within(self.c_ms * l + self.one_minus_c * s.m_irr_a_per_m, p.ms_a_per_m);
-        s.langevin = l;
-        s.langevin_slope_offset = dl - 1.0 / 3.0;
-    }
-
-    /// The 1986 form's sub-step corrected to second order ([`Self::substep_bulk_corrected`]'s
-    /// trapezoid on M_irr in the applied field). The mean field is predicted with M's own slope,
-    /// ((1 − c) dM_irr/dh + c dM_an/dH_e)/(1 − α c dM_an/dH_e): the susceptibility's
-    /// reversible-only mean-field factor leaves the anhysteretic at the end a first-order error
-    /// the trapezoid inherits.
-    #[inline(always)]
-    fn substep_1986_corrected(&self, s: &mut JaState, dh: f32, dir: f32) {
-        let p = &self.p;
-        let m_irr_start = s.m_irr_a_per_m;
-        let slope_start = self.pinned_slope(s, m_irr_start, dir);
-        let c_dman = p.c * self.anhysteretic_slope(s);
-        let chi =
-            (self.one_minus_c * slope_start + c_dman) / at_least(1.0 - p.alpha * c_dman, MIN_DENOMINATOR);
-        s.m_irr_a_per_m = within(m_irr_start + slope_start * dh, p.ms_a_per_m);
-        let m_predicted = s.m_a_per_m + chi * dh;
-        self.close_with_irreversible(s, dh, m_predicted);
-        let slope_end = self.pinned_slope(s, s.m_irr_a_per_m, dir);
-        s.m_irr_a_per_m = within(m_irr_start + 0.5 * (slope_start + slope_end) * dh, p.ms_a_per_m);
-        s.m_a_per_m = within(self.c_ms * s.langevin + self.one_minus_c * s.m_irr_a_per_m, p.ms_a_per_m);
-    }
-
-    /// The total-magnetization forms' sub-step corrected to second order (Heun's trapezoid on
-    /// M; the cached anhysteretic stays the one at the predicted mean field).
-    #[inline(always)]
-    fn substep_szewczyk_corrected(&self, s: &mut JaState, dh: f32, dir: f32) {
-        let (m_start, chi_start) = (s.m_a_per_m, self.susceptibility(s, dir));
-        self.substep_szewczyk(s, dh, dir);
-        let m = within(m_start + 0.5 * (chi_start + self.susceptibility(s, dir)) * dh, self.p.ms_a_per_m);
-        s.m_a_per_m = m;
-        s.m_irr_a_per_m = m;
-    }
-
     /// The end of a bulk or 1986 sub-step: the anhysteretic curve at the new field with the
     /// predicted mean field, and M = c M_an + (1 − c) M_irr.
     #[inline(always)]
@@ -594,12 +533,12 @@ impl JilesAtherton {
         if !dh_total.is_finite() {
             return s.m_a_per_m;
         }
-        let n = self.substeps_for(dh_total).min(max_substeps).max(1);
-        let dh = if n == 1 { dh_total } else { dh_total / n as f32 };
-        let dir = dir.unwrap_or(direction_of(dh));
         if self.order == 2 {
-            self.substeps_corrected(s, n, dh, dir);
+            self.integrate_corrected(s, dh_total, dir.unwrap_or(direction_of(dh_total)), max_substeps);
         } else {
+            let n = self.substeps_for(dh_total).min(max_substeps).max(1);
+            let dh = if n == 1 { dh_total } else { dh_total / n as f32 };
+            let dir = dir.unwrap_or(direction_of(dh));
             // The form is chosen once per sample, not once per sub-step.
             match self.p.variant {
                 JaVariant::Bulk => (0..n).for_each(|_| self.substep_bulk(s, dh, dir)),
@@ -611,19 +550,6 @@ impl JilesAtherton {
         }
         s.h_a_per_m = h;
         s.m_a_per_m
-    }
-
-    /// `n` sub-steps of `dh` on the branch of `dir`, each corrected to second order: out of the
-    /// board's line (it steps explicitly and pays one compare per sample for this).
-    #[inline(never)]
-    fn substeps_corrected(&self, s: &mut JaState, n: u32, dh: f32, dir: f32) {
-        match self.p.variant {
-            JaVariant::Bulk => (0..n).for_each(|_| self.substep_bulk_corrected(s, dh, dir)),
-            JaVariant::Original1986 => (0..n).for_each(|_| self.substep_1986_corrected(s, dh, dir)),
-            JaVariant::Szewczyk | JaVariant::Ungated1986 => {
-                (0..n).for_each(|_| self.substep_szewczyk_corrected(s, dh, dir))
-            }
-        }
     }
 
     /// [`Self::step`] of this rod and of `other` (each with its own state and field) at once,
@@ -647,6 +573,9 @@ impl JilesAtherton {
         {
             return (self.step(s, h), other.step(s_other, h_other));
         }
+        if self.order == 2 {
+            return self.step_beside_corrected((s, h, dh), (other, s_other, h_other, dh_other));
+        }
         // As `step`'s: n ≥ 1 sub-steps of equal size.
         let per_substep = |ja: &JilesAtherton, dh: f32| {
             let n = ja.substeps_for(dh).max(1);
@@ -654,24 +583,11 @@ impl JilesAtherton {
         };
         let ((n, dh), (n_other, dh_other)) = (per_substep(self, dh), per_substep(other, dh_other));
         let rods = [(self, &mut *s, n, dh), (other, &mut *s_other, n_other, dh_other)];
-        match (self.p.variant, self.order == 2) {
-            (JaVariant::Bulk, false) => {
-                interleave(rods, |ja, s, dh| ja.substep_bulk(s, dh, direction_of(dh)))
-            }
-            (JaVariant::Bulk, true) => {
-                interleave(rods, |ja, s, dh| ja.substep_bulk_corrected(s, dh, direction_of(dh)))
-            }
-            (JaVariant::Original1986, false) => {
-                interleave(rods, |ja, s, dh| ja.substep_1986(s, dh, direction_of(dh)))
-            }
-            (JaVariant::Original1986, true) => {
-                interleave(rods, |ja, s, dh| ja.substep_1986_corrected(s, dh, direction_of(dh)))
-            }
-            (JaVariant::Szewczyk | JaVariant::Ungated1986, false) => {
+        match self.p.variant {
+            JaVariant::Bulk => interleave(rods, |ja, s, dh| ja.substep_bulk(s, dh, direction_of(dh))),
+            JaVariant::Original1986 => interleave(rods, |ja, s, dh| ja.substep_1986(s, dh, direction_of(dh))),
+            JaVariant::Szewczyk | JaVariant::Ungated1986 => {
                 interleave(rods, |ja, s, dh| ja.substep_szewczyk(s, dh, direction_of(dh)))
-            }
-            (JaVariant::Szewczyk | JaVariant::Ungated1986, true) => {
-                interleave(rods, |ja, s, dh| ja.substep_szewczyk_corrected(s, dh, direction_of(dh)))
             }
         }
         s.h_a_per_m = h;
@@ -706,5 +622,6 @@ fn interleave(
     (both..n_other).for_each(|_| substep(ja_other, s_other, dh_other));
 }
 
+mod corrected;
 #[cfg(test)]
 mod tests;

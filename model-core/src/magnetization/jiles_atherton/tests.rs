@@ -136,6 +136,27 @@ fn substep_size_does_not_change_the_loop() {
     assert!(err < 0.01 * 6.0e5, "max difference {err}");
 }
 
+/// [`sine_drive`] in the explicit law's sub-steps, each corrected (no tolerance): the corrected
+/// sub-step's own order, apart from the control of its count.
+fn sine_drive_corrected_fixed(
+    ja: &JilesAtherton,
+    amp: f32,
+    bias: f32,
+    cycles: usize,
+    per_cycle: usize,
+) -> Vec<f32> {
+    let mut s = JaState::default();
+    (0..cycles * per_cycle)
+        .map(|n| {
+            let h = bias + amp * libm::sinf(2.0 * core::f32::consts::PI * n as f32 / per_cycle as f32);
+            let dh = h - s.h_a_per_m;
+            ja.substeps_corrected(&mut s, ja.substeps_for(dh), dh, direction_of(dh));
+            s.h_a_per_m = h;
+            s.m_a_per_m
+        })
+        .collect()
+}
+
 /// The corrected sub-step is second order in each form: halving it cuts a fast loop's distance
 /// from a 64× finer one about 4× (the explicit step's about 2×), and at the board's sub-step
 /// the corrected loop is at least 2.5× closer than the explicit one.
@@ -145,12 +166,15 @@ fn the_corrected_sub_step_is_second_order() {
         let p = JaParams { variant, ..JaParams::TSMA_ROD1_002 };
         let gap = |factor: u32, second_order: bool| {
             let ja = JilesAtherton::new(p).unwrap().refined(factor);
-            let ja = if second_order { ja.second_order() } else { ja };
-            let reference = JilesAtherton::new(p).unwrap().refined(16).second_order();
+            let reference = JilesAtherton::new(p).unwrap().refined(16);
             // 20 samples per cycle: every sample many sub-steps, the last cycle compared.
-            let (l, r) =
-                (sine_drive(&ja, 60_000.0, 5_000.0, 3, 20), sine_drive(&reference, 60_000.0, 5_000.0, 3, 20));
-            (40..60).map(|i| (l[i].1 - r[i].1).abs()).fold(0.0, f32::max)
+            let r = sine_drive_corrected_fixed(&reference, 60_000.0, 5_000.0, 3, 20);
+            let l: Vec<f32> = if second_order {
+                sine_drive_corrected_fixed(&ja, 60_000.0, 5_000.0, 3, 20)
+            } else {
+                sine_drive(&ja, 60_000.0, 5_000.0, 3, 20).iter().map(|x| x.1).collect()
+            };
+            (40..60).map(|i| (l[i] - r[i]).abs()).fold(0.0, f32::max)
         };
         let (explicit, corrected, corrected_half) = (gap(1, false), gap(1, true), gap(2, true));
         assert!(corrected * 2.5 < explicit, "{variant}: corrected {corrected} A/m, explicit {explicit} A/m");
@@ -158,6 +182,42 @@ fn the_corrected_sub_step_is_second_order() {
             corrected_half * 3.0 < corrected,
             "{variant}: halving the corrected sub-step takes {corrected} A/m to {corrected_half} A/m"
         );
+    }
+}
+
+/// The corrected sub-steps' count follows their tolerance: a held step (the field's whole
+/// swing in one sample) and a fast sine (20 samples per cycle) land within 10⁻³ M_s of the
+/// same drive in sub-steps 16× finer than the explicit law's, in each form, where the first
+/// try's coarse sub-steps alone miss by over 10× more.
+#[test]
+fn the_corrected_sub_steps_are_as_many_as_their_tolerance_asks() {
+    for variant in JaVariant::ALL {
+        let p = JaParams { variant, ..JaParams::TSMA_ROD1_002 };
+        let ja = JilesAtherton::new(p).unwrap().second_order();
+        let reference = JilesAtherton::new(p).unwrap().refined(16);
+        // Held steps: 0 → 60 kA/m → −20 kA/m → 5 kA/m, each in one sample.
+        let fields = [60_000.0f32, -20_000.0, 5_000.0];
+        let (mut s, mut s_ref, mut s_first) = (JaState::default(), JaState::default(), JaState::default());
+        for h in fields {
+            let m = ja.step(&mut s, h);
+            let dh = h - s_ref.h_a_per_m;
+            reference.substeps_corrected(&mut s_ref, reference.substeps_for(dh), dh, direction_of(dh));
+            s_ref.h_a_per_m = h;
+            let first = ja.first_corrected_count(dh);
+            ja.substeps_corrected(&mut s_first, first, dh, direction_of(dh));
+            s_first.h_a_per_m = h;
+            let (err, first_err) = ((m - s_ref.m_a_per_m).abs(), (s_first.m_a_per_m - s_ref.m_a_per_m).abs());
+            assert!(err < 1e-3 * p.ms_a_per_m, "{variant} held step to {h} A/m: {err} A/m off");
+            s_first = s_ref;
+            assert!(
+                first_err > 10.0 * err,
+                "{variant} held step to {h} A/m: the first try alone {first_err} A/m off"
+            );
+        }
+        let fast = sine_drive(&ja, 60_000.0, 5_000.0, 3, 20);
+        let fine = sine_drive_corrected_fixed(&reference, 60_000.0, 5_000.0, 3, 20);
+        let err = (40..60).map(|i| (fast[i].1 - fine[i]).abs()).fold(0.0, f32::max);
+        assert!(err < 1e-3 * p.ms_a_per_m, "{variant} fast sine: {err} A/m off");
     }
 }
 
