@@ -355,6 +355,77 @@ pub fn check_outputs(outputs: &[&Path], inputs: &[InputId]) -> Result<()> {
     Ok(())
 }
 
+/// What an output holds, for [`replaces_only`]: an existing file is replaced only by one of its
+/// own kind, so that a measurement named as an output by mistake is never lost.
+#[derive(Clone, Copy, Debug)]
+pub enum OutputKind {
+    /// A parameter file (`fit --params-out`): it must read as TOML.
+    ParameterFile,
+    /// An HTML page (`report -o`): it must start as one.
+    HtmlPage,
+    /// `compare --out-csv`'s table: its header starts `file,time_s,measured_`.
+    ComparisonTable,
+    /// A recording's CSV (`simulate -o`): the same kind as a measurement, so never replaced
+    /// unless the user says so (`--overwrite`).
+    Recording {
+        /// The user said an existing file may go (`--overwrite`).
+        overwrite: bool,
+    },
+}
+
+/// Refuses to replace an existing regular file at `out` (named by the option `flag`) that is not
+/// of `kind`; a new path, standard output or a file of that kind passes. Reads at most the first
+/// mebibyte: a file larger than that is no parameter file, page header or table header.
+pub fn replaces_only(out: &Path, kind: OutputKind, flag: &str) -> Result<()> {
+    if is_stdout(out) {
+        return Ok(());
+    }
+    let Ok(meta) = std::fs::metadata(out) else { return Ok(()) };
+    if !meta.is_file() {
+        return Ok(()); // `check_outputs` says what it is
+    }
+    let head = || -> String {
+        let mut buf = Vec::new();
+        let read = std::fs::File::open(out).and_then(|f| f.take(1 << 20).read_to_end(&mut buf));
+        if read.is_err() {
+            buf.clear();
+        }
+        String::from_utf8_lossy(&buf).trim_start_matches('\u{feff}').trim_start().to_string()
+    };
+    let (is_kind, what) = match kind {
+        OutputKind::ParameterFile => (
+            meta.len() <= 1 << 20 && head().parse::<toml::Table>().is_ok(),
+            "a parameter file (it does not read as TOML)",
+        ),
+        OutputKind::HtmlPage => {
+            let h = head().get(..14).unwrap_or_default().to_ascii_lowercase();
+            (h.starts_with("<!doctype html") || h.starts_with("<html"), "an HTML page")
+        }
+        OutputKind::ComparisonTable => {
+            (head().starts_with("file,time_s,measured_"), "a table `gma compare --out-csv` wrote")
+        }
+        OutputKind::Recording { overwrite } => {
+            if overwrite {
+                return Ok(());
+            }
+            bail!(
+                "{flag} {}: the file exists, and gma cannot tell a recording it simulated from a measurement \
+                 (the same columns), so it will not replace it; give --overwrite to replace it, or choose \
+                 another path",
+                display(out)
+            );
+        }
+    };
+    if !is_kind {
+        bail!(
+            "{flag} {}: the file exists and is not {what}, so gma will not replace it (a measurement named as \
+             the output by mistake would be lost); remove it first or choose another path",
+            display(out)
+        );
+    }
+    Ok(())
+}
+
 /// Creates `dir` (and its parents) for outputs, and checks that it takes new files. The folders
 /// it made are removed again, if still empty, unless [`OutputFolder::keep`] is called: a command
 /// that fails on its second input leaves no empty folder behind.

@@ -519,7 +519,18 @@ fn simulate_says_the_drive_levels_with_their_unit() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("sim.csv");
     for (model, said) in [("ja", "sine 50 Hz, 1 ± 1 A"), ("ja+amp", "sine 50 Hz, 1 ± 1 V")] {
-        let o = gma(&["simulate", "--model", model, "--duration-s", "0.02", "--out", out.to_str().unwrap()]);
+        // One output path for every run: each replaces the last (`--overwrite`).
+        let args = [
+            "simulate",
+            "--model",
+            model,
+            "--duration-s",
+            "0.02",
+            "--overwrite",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        let o = gma(&args);
         let e = String::from_utf8_lossy(&o.stderr);
         assert!(o.status.success() && e.contains(said), "{model}: {e}");
     }
@@ -532,6 +543,7 @@ fn simulate_says_the_drive_levels_with_their_unit() {
         "--duration-s",
         "0.02",
         "--json",
+        "--overwrite",
         "--out",
         out.to_str().unwrap(),
     ]);

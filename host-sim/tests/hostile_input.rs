@@ -172,6 +172,40 @@ fn an_output_that_is_an_input_a_link_or_a_device_is_refused_before_any_work() {
     assert!(!err(&o).contains("evaluations"), "the fit ran before the output was checked:\n{}", err(&o));
 }
 
+/// Issue 78: an output path that names an existing measurement (not one of the command's
+/// inputs) is refused before any work, the measurement kept; an output of the command's own kind
+/// is replaced, and `simulate`, whose output has a measurement's columns, replaces a file only
+/// when told to (`--overwrite`).
+#[test]
+fn a_measurement_named_as_an_output_is_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = write(dir.path(), "rig.csv", &recording());
+    let measured = recording();
+    let meas = write(dir.path(), "meas.csv", &measured);
+    let kept =
+        |why: &str| assert_eq!(std::fs::read(&meas).unwrap(), measured, "{why}: the measurement changed");
+
+    let o = gma(&["simulate", "--model", "ja", "--duration-s", "0.01", "-o", path(&meas)]);
+    refused(&o, &["--out", "meas.csv", "--overwrite"], "simulate -o onto a measurement");
+    kept("simulate -o");
+    let o = gma(&["compare", "--model", "ja", path(&rec), "--out-csv", path(&meas)]);
+    refused(&o, &["--out-csv", "meas.csv", "not a table"], "compare --out-csv onto a measurement");
+    kept("compare --out-csv");
+    let o = gma(&["report", "--model", "ja", path(&rec), "-o", path(&meas)]);
+    refused(&o, &["--out", "meas.csv", "not an HTML page"], "report -o onto a measurement");
+    kept("report -o");
+
+    // Outputs of the command's own kind are replaced; `simulate`'s only with `--overwrite`.
+    let table = dir.path().join("cmp.csv");
+    for run in 0..2 {
+        let o = gma(&["compare", "--model", "ja", path(&rec), "--out-csv", path(&table)]);
+        assert!(o.status.success(), "compare --out-csv, run {run}: {}", err(&o));
+    }
+    let o = gma(&["simulate", "--model", "ja", "--duration-s", "0.01", "--overwrite", "-o", path(&meas)]);
+    assert!(o.status.success(), "simulate --overwrite: {}", err(&o));
+    assert_ne!(std::fs::read(&meas).unwrap(), measured, "--overwrite did not replace the file");
+}
+
 #[test]
 fn a_failed_fit_never_replaces_a_good_parameter_file_and_json_gets_only_the_error() {
     let dir = tempfile::tempdir().unwrap();

@@ -12,7 +12,8 @@ use common::{err, gma, refused};
 /// `gma simulate` with `args` into `dir/name`; its path.
 fn simulate(dir: &Path, name: &str, args: &[&str]) -> String {
     let out = dir.join(name).display().to_string();
-    let mut all = vec!["simulate", "-o", &out];
+    // A name may be written again (the helper serves several rigs): `--overwrite`.
+    let mut all = vec!["simulate", "--overwrite", "-o", &out];
     all.extend(args);
     let o = gma(&all);
     assert!(o.status.success(), "simulate {args:?}: {}", err(&o));

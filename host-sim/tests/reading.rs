@@ -154,6 +154,7 @@ fn search_coil_rig(dir: &Path, d: &Path, name: &str, header: &str, row: fn(&[Str
         "--params",
         path(&params),
         "--search-coil",
+        "--overwrite",
         "--freq-hz",
         "100",
         "--duration-s",

@@ -59,7 +59,7 @@ proptest! {
         let args = SimulateArgs {
             model: model.into(), params: None, waveform, freq_hz, amplitude, bias, duration_s, noise_um,
             quantum_um, offset_um, oversample, eddy_model: EddyModel::Distributed, no_current: false,
-            search_coil, flux_noise_mt: 0.5, seed: 7, out: out.clone(), drive: None, initial_excursion: None, json: false, read: ReadArgs::default(), quiet: true,
+            search_coil, flux_noise_mt: 0.5, seed: 7, out: out.clone(), overwrite: false, drive: None, initial_excursion: None, json: false, read: ReadArgs::default(), quiet: true,
         };
         match run(&args) {
             Err(e) => {

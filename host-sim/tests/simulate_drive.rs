@@ -173,7 +173,7 @@ fn the_initial_state_compare_estimated_gives_the_run_compare_scored() {
             rig.to_str().unwrap(),
         ];
         args.extend(extra);
-        args.extend(["--out", out.to_str().unwrap()]);
+        args.extend(["--overwrite", "--out", out.to_str().unwrap()]);
         let o = gma(&args);
         assert!(o.status.success(), "{}", err(&o));
         let (measured, model) = (read_csv(&rig), read_csv(&out));
@@ -251,6 +251,7 @@ fn mapped_columns_and_the_command_drive() {
         "--drive",
         cmd.to_str().unwrap(),
         "--json",
+        "--overwrite",
         "--out",
         out.to_str().unwrap(),
     ]);

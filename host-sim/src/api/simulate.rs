@@ -12,7 +12,7 @@ use serde_json::json;
 
 use super::inputs::{read_recording, ReadArgs};
 use crate::excitation::Excitation;
-use crate::files::{check_outputs, display, to_stdout, Input};
+use crate::files::{check_outputs, display, replaces_only, to_stdout, Input, OutputKind};
 use crate::params;
 use crate::plant::{EddyModel, Plant};
 use crate::recording::Recording;
@@ -118,6 +118,10 @@ pub struct SimulateArgs {
     /// output (not with `--json`, whose object stdout carries).
     #[arg(long, short)]
     pub out: PathBuf,
+    /// Replace an existing file at `--out`. Without it an existing file is refused: a simulated
+    /// recording has a measurement's columns, so gma cannot tell one it wrote from a rig's.
+    #[arg(long)]
+    pub overwrite: bool,
     /// Print exactly one JSON object on stdout (what was written and from what).
     #[arg(long)]
     pub json: bool,
@@ -158,6 +162,7 @@ pub fn run(a: &SimulateArgs) -> Result<Simulated> {
     let drive_input = a.drive.as_deref().map(Input::open).transpose()?;
     let ids: Vec<_> = params_input.iter().chain(&drive_input).map(Input::id).collect();
     check_outputs(&[a.out.as_path()], &ids)?;
+    replaces_only(&a.out, OutputKind::Recording { overwrite: a.overwrite }, "--out")?;
     let role = if a.drive.is_some() { "the model's parameters" } else { "the simulated rig's parameters" };
     let (p, source) = params::load_input(params_input, spec, role)?;
     for (name, v) in [("--noise-um", a.noise_um), ("--quantum-um", a.quantum_um)] {

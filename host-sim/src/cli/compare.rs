@@ -10,8 +10,8 @@ use model_core::{ActuatorParams, ModelSpec};
 use crate::analysis;
 use crate::api::inputs::{check_max_samples, read_data, repeated_inputs, Data, ReadArgs};
 use crate::files::{
-    check_outputs, display, is_stdout, no_stdout, open_all, output_folder, to_stdout, unique_stems, Input,
-    OutputWriter,
+    check_outputs, display, is_stdout, no_stdout, open_all, output_folder, replaces_only, to_stdout,
+    unique_stems, Input, OutputKind, OutputWriter,
 };
 use crate::fit::{self};
 use crate::loop_fit;
@@ -92,6 +92,9 @@ pub fn run(a: &CompareArgs) -> Result<()> {
         .chain(a.out_csv.iter().cloned())
         .collect();
     check_outputs(&planned.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &ids)?;
+    if let Some(csv) = &a.out_csv {
+        replaces_only(csv, OutputKind::ComparisonTable, "--out-csv")?;
+    }
     let digests: Vec<_> = inputs.iter().map(|i| (i.name.clone(), i.digest())).collect();
     let (data, mut cut) = read_data(inputs, Vec::new(), a.read.max_samples, &read_opts)?;
     // Every input has been read to its end: the digests are final.

@@ -7,7 +7,7 @@ use clap::Args;
 
 use crate::api::fitting::{add_time_limit_warning, fit_loops, fit_recordings};
 use crate::api::inputs::{Data, ModelFiles};
-use crate::files::{display, names, to_stdout, write_atomic};
+use crate::files::{display, names, replaces_only, to_stdout, write_atomic, OutputKind};
 use crate::fit;
 use crate::params;
 use crate::provenance::Provenance;
@@ -31,26 +31,6 @@ pub struct FitArgs {
     /// which it can only narrow; repeat for several; displacement fits only).
     #[arg(long, value_name = "NAME=LO:HI", allow_hyphen_values = true)]
     pub bound: Vec<String>,
-}
-
-/// `--params-out` onto an existing file that is not a parameter file is refused before any work:
-/// a recording's name typed one slot early (`--params-out fit1.csv fit2.csv`) would replace a
-/// measurement with TOML. New paths, devices (`/dev/null`) and files that read as TOML pass.
-fn replaces_only_a_parameter_file(out: &std::path::Path) -> Result<()> {
-    let Ok(meta) = std::fs::metadata(out) else { return Ok(()) };
-    // A parameter file is a few kB; anything over 1 MiB is not one, and is not read.
-    let reads_as_toml = || {
-        meta.len() <= 1 << 20
-            && std::fs::read_to_string(out).is_ok_and(|text| text.parse::<toml::Table>().is_ok())
-    };
-    if meta.is_file() && !reads_as_toml() {
-        bail!(
-            "--params-out {}: the file exists and is not a parameter file (it does not read as TOML), so \
-             gma will not replace it; remove it first or choose another path (e.g. fitted.toml)",
-            display(out)
-        );
-    }
-    Ok(())
 }
 
 /// The header of a fitted parameter file: what made it, its fit (and validation) NRMSE, the
@@ -90,7 +70,7 @@ pub fn run(a: &FitArgs) -> Result<()> {
     let mut p = a.mf.prepare(&outputs)?;
     // After `prepare`'s output checks: an input named as the output is said as such.
     if let Some(out) = a.params_out.as_deref().filter(|_| !params_to_stdout) {
-        replaces_only_a_parameter_file(out)?;
+        replaces_only(out, OutputKind::ParameterFile, "--params-out")?;
     }
     let (mut summary, params, mut warnings) = match &p.data {
         Data::Loops(fit_files, val_files) => {

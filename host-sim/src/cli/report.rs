@@ -9,7 +9,10 @@ use serde_json::json;
 
 use super::fit::params_header;
 use crate::api::inputs::{Data, ModelFiles};
-use crate::files::{check_outputs, display, no_stdout, output_folder, to_stdout, write_atomic, InputId};
+use crate::files::{
+    check_outputs, display, no_stdout, output_folder, replaces_only, to_stdout, write_atomic, InputId,
+    OutputKind,
+};
 use crate::progress::Phase;
 use crate::provenance::Provenance;
 use crate::recording::Recording;
@@ -81,6 +84,8 @@ pub fn run(a: &ReportArgs) -> Result<()> {
         no_stdout("--params-out-dir", dir, "a folder for one parameter file per model")?;
     }
     let p = a.mf.prepare(&[a.out.as_path()])?;
+    // After `prepare`'s output checks: an input named as the output is said as such.
+    replaces_only(&a.out, OutputKind::HtmlPage, "--out")?;
     let written_to = if page_to_stdout { "standard output".to_string() } else { display(&a.out) };
     // The folder now, the file names (the models found) after the ladder.
     let params_folder = match &a.params_out_dir {
