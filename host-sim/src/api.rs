@@ -139,8 +139,9 @@ pub fn recording_from_arrays(name: &str, arrays: Vec<(String, Vec<f64>)>) -> Res
     let mut steps: Vec<f64> = time_s.windows(2).take(REFERENCE_STEPS).map(|w| w[1] - w[0]).collect();
     steps.sort_by(f64::total_cmp);
     let dt = steps[steps.len() / 2];
-    let (lo, hi) = (model_core::DT_MIN_S as f64, model_core::DT_MAX_S as f64);
-    if !(lo..=hi).contains(&dt) {
+    // As the CSV reader checks a file's: in f32, the model's stepping, shown as model-core states it.
+    let (lo, hi) = (model_core::DT_MIN_S, model_core::DT_MAX_S);
+    if !(lo..=hi).contains(&(dt as f32)) {
         return Err(array_error(
             name,
             "time_s",
@@ -284,14 +285,20 @@ fn read_sources(fit_src: &[Source], val_src: &[Source], read: &ReadSettings) -> 
         v.iter().filter_map(|s| if let Source::File(p) = s { Some(p.clone()) } else { None }).collect()
     };
     let (fit_paths, val_paths) = (paths(fit_src), paths(val_src));
+    // Arrays get the doubts a file's time axis gets when it is read.
+    let array_doubts = fit_src.iter().chain(val_src).filter_map(|s| match s {
+        Source::Arrays(r) => r.time_doubt().map(Warning::Read),
+        Source::File(_) => None,
+    });
     if fit_paths.is_empty() && val_paths.is_empty() {
         let arrays = |v: &[Source]| {
             v.iter().filter_map(|s| if let Source::Arrays(r) = s { Some(r.clone()) } else { None }).collect()
         };
-        return Ok((Data::Recordings(arrays(fit_src), arrays(val_src)), Vec::new()));
+        return Ok((Data::Recordings(arrays(fit_src), arrays(val_src)), array_doubts.collect()));
     }
-    let (data, warnings) =
+    let (data, mut warnings) =
         inputs::read_inputs(open_all(&fit_paths)?, open_all(&val_paths)?, read.max_samples, &opts)?;
+    warnings.extend(array_doubts);
     let has_arrays = fit_src.iter().chain(val_src).any(|s| matches!(s, Source::Arrays(_)));
     match data {
         Data::Loops(..) if has_arrays => bail!(
@@ -500,7 +507,9 @@ pub fn compare(
             fit::check_files(spec, &p, &recs)?;
             warnings.extend(fit::unresolved_mode(spec, &p, &recs).map(|w| w.to_string()));
             warnings.extend(fit::unfitted_gain(spec, &p, &source, &recs).map(|w| w.to_string()));
+            warnings.extend(fit::unfitted_effects(spec, &source).map(|w| w.to_string()));
             warnings.extend(fit::data_doubts(spec, &p, &recs)?.iter().map(|w| w.to_string()));
+            warnings.extend(fit::sign_doubts(spec, &p, &recs)?.iter().map(|w| w.to_string()));
             for rec in &recs {
                 let mut sim = crate::simulation::simulate(spec, &p, rec)?;
                 let sc = crate::score::score(spec, rec, &sim);

@@ -235,6 +235,8 @@ pub struct ReadOptions {
     pub resample: Option<Resample>,
     /// `--trim-start` [s]: samples before t0 + this are dropped.
     pub trim_start_s: Option<f64>,
+    /// `--skip-rows`: lines before the header (a logger's preamble) passed over unread.
+    pub skip_rows: usize,
 }
 
 impl ReadOptions {
@@ -269,12 +271,25 @@ impl ReadOptions {
                 );
             }
         }
-        Ok(Self { columns: maps, resample: resample.map(Resample::parse).transpose()?, trim_start_s })
+        Ok(Self {
+            columns: maps,
+            resample: resample.map(Resample::parse).transpose()?,
+            trim_start_s,
+            skip_rows: 0,
+        })
+    }
+
+    /// These options passing over the first `rows` lines of each file (`--skip-rows`).
+    pub fn skipping(self, rows: usize) -> Self {
+        Self { skip_rows: rows, ..self }
     }
 
     /// Whether no option is set (files are read as they are).
     pub fn is_default(&self) -> bool {
-        self.columns.is_empty() && self.resample.is_none() && self.trim_start_s.is_none()
+        self.columns.is_empty()
+            && self.resample.is_none()
+            && self.trim_start_s.is_none()
+            && self.skip_rows == 0
     }
 
     /// These options with each canonical column a file's `headers` lack by name, and no option

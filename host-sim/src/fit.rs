@@ -31,6 +31,7 @@ mod bad_samples;
 mod constraints;
 mod cost;
 mod doubts;
+mod file_scales;
 mod free_params;
 mod plausible;
 mod start;
@@ -38,10 +39,14 @@ pub use bad_samples::{spikes, Spike};
 pub use constraints::Constraints;
 pub use cost::{evaluate, evaluate_projected, residual_blocks, Evaluation, LAMBDA_RANGE};
 use cost::{evaluate_projected_in, projected_cost, projected_residuals, FAILED_COST};
-pub use doubts::{flux_scale_doubts, strain_scale_doubt, unfitted_gain, unresolved_mode, unsearchable_mode};
+pub use doubts::{
+    flux_scale_doubts, strain_scale_doubt, unfitted_effects, unfitted_gain, unresolved_mode,
+    unsearchable_mode,
+};
+pub use file_scales::scale_outlier;
 pub use free_params::{free_params, identifiable, logs_coil_temperature, FreeParam, Given};
 use free_params::{given_by, MODE_DAMPING, MODE_FREQUENCY};
-pub use plausible::{check_files, check_physics, data_doubts};
+pub use plausible::{check_files, check_physics, data_doubts, sign_doubts};
 pub use start::StartScore;
 
 /// Fit settings.

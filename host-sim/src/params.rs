@@ -47,6 +47,10 @@ pub struct ParamSource {
     /// Parameters the file marks as not fitted ([`NOT_FITTED`]: no recording constrained them).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub parameters_not_fitted: Vec<&'static str>,
+    /// Effects of the command's model that the model the file was written for (its header's)
+    /// lacks: their values are start values, never fitted ([`effects_not_fitted`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub effects_not_fitted: Vec<&'static str>,
 }
 
 /// `parameters_source` when no parameter file was given.
@@ -80,6 +84,7 @@ pub fn load_input_also_for(
                 parameters_source: DEMO_SET.into(),
                 parameters_defaulted: Vec::new(),
                 parameters_not_fitted: Vec::new(),
+                effects_not_fitted: Vec::new(),
             };
             Ok((ActuatorParams::TERFENOL_DEMO, source))
         }
@@ -130,6 +135,7 @@ pub fn load_text(
             parameters_source: name.into(),
             parameters_defaulted: f.defaulted,
             parameters_not_fitted,
+            effects_not_fitted: effects_not_fitted(text, spec),
         },
     ))
 }
@@ -463,10 +469,7 @@ pub fn not_fitted_in(text: &str) -> Vec<&'static str> {
 /// effects left to feedback do not count): the file's values for the other effects were never
 /// fitted.
 pub fn written_for_another_model(file: &str, text: &str, spec: ModelSpec) -> Option<String> {
-    let header = text.lines().next().filter(|l| l.starts_with('#'))?;
-    let after = header.split_once("--model ").or_else(|| header.split_once(", model "))?.1;
-    let word = after.split_whitespace().next()?;
-    let written = ModelSpec::parse(word).ok()?;
+    let written = written_for(text)?;
     (written.for_compensator() != spec.for_compensator()).then(|| {
         let unfitted: Vec<&str> = spec
             .for_compensator()
@@ -485,6 +488,22 @@ pub fn written_for_another_model(file: &str, text: &str, spec: ModelSpec) -> Opt
              `--model {written}`"
         )
     })
+}
+
+/// The model a parameter file's header says it was fitted or written for (`# gma fit --model
+/// SPEC …`, `# gma demo, model SPEC`, `# gma.fit (Python) --model SPEC …`).
+fn written_for(text: &str) -> Option<ModelSpec> {
+    let header = text.lines().next().filter(|l| l.starts_with('#'))?;
+    let after = header.split_once("--model ").or_else(|| header.split_once(", model "))?.1;
+    ModelSpec::parse(after.split_whitespace().next()?).ok()
+}
+
+/// The effects of `spec` that the model parameter-file `text` was written for lacks (by their
+/// short names): a set fitted as `ja+mech` and run as `eddy+ja+mech` runs the eddy lag's start
+/// value. Nothing when the header names no model.
+pub fn effects_not_fitted(text: &str, spec: ModelSpec) -> Vec<&'static str> {
+    let Some(written) = written_for(text) else { return Vec::new() };
+    spec.effects().filter(|e| !written.has(*e)).map(|e| e.alias().unwrap_or(e.name())).collect()
 }
 
 /// Parses a spec, turning an error's byte range into the offending word. An effect named twice

@@ -164,7 +164,7 @@ impl Recording {
     }
 
     /// The doubt about this recording's time axis ([`time_doubt`]).
-    fn time_doubt(&self) -> Option<ReadDoubt> {
+    pub(crate) fn time_doubt(&self) -> Option<ReadDoubt> {
         let drive = self.current_a.as_deref().or(self.command_v.as_deref());
         time_doubt(&self.name, self.dt_s(), self.duration_s(), drive, self.displacement_um.as_deref())
     }

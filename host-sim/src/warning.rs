@@ -261,6 +261,30 @@ pub enum Warning {
         /// The scale it ended at (the range's end).
         scale: f64,
     },
+    /// One recording's displacement per unit drive disagrees with the other files' beyond what
+    /// the model explains ([`crate::fit::scale_outlier`]).
+    GainsDisagree {
+        /// The recording.
+        file: String,
+        /// Its displacement spread per what the other files' model makes of its drive.
+        gain: f64,
+        /// The joint fit's NRMSE on it.
+        joint_nrmse: f64,
+        /// The smallest and largest NRMSE of the fit without it on the other files.
+        others_nrmse: (f64, f64),
+        /// The ratio from which scales are doubted.
+        doubted_from: f64,
+    },
+    /// A parameter set run with effects the model it was fitted as lacks: their values are start
+    /// values.
+    EffectsNotFitted {
+        /// The parameter file.
+        params: String,
+        /// The model it is run as.
+        model: String,
+        /// The effects its header's model lacks.
+        effects: Vec<&'static str>,
+    },
     /// A command-driven recording is run through an amplifier gain that no recording constrained
     /// (the parameter file marks it not fitted).
     UnfittedGain {
@@ -323,6 +347,8 @@ impl Warning {
             | Warning::Truncated { .. }
             | Warning::PreisachPlaneWide { .. }
             | Warning::FluxScaleAtBound { .. }
+            | Warning::GainsDisagree { .. }
+            | Warning::EffectsNotFitted { .. }
             | Warning::UnfittedGain { .. }
             | Warning::Data(_) => Weight::Data,
             Warning::AtEdge { .. }
@@ -492,6 +518,16 @@ impl fmt::Display for Warning {
                 )
             }
             Warning::FluxScaleAtBound { file, scale } => flux_scale_at_bound(f, file, *scale),
+            Warning::GainsDisagree { file, gain, joint_nrmse, others_nrmse, doubted_from } => {
+                gains_disagree(f, file, *gain, *joint_nrmse, *others_nrmse, *doubted_from)
+            }
+            Warning::EffectsNotFitted { params, model, effects } => write!(
+                f,
+                "{params} was fitted as a model without `{}`, run here as `{model}`: those values are the start \
+                 values the file was written with, never fitted to a recording, and the figures rest on them; fit \
+                 `--model {model}` (from this set: `--params {params}`) to score that model",
+                effects.join("`, `")
+            ),
             Warning::UnfittedGain { file, params, gain } => write!(
                 f,
                 "{file} gives the command, not the current, so the model is driven through `amp.gain_a_per_v` = \
@@ -564,6 +600,33 @@ fn flux_scale_at_bound(f: &mut fmt::Formatter<'_>, file: &str, scale: f64) -> fm
         f,
         "{file}: the search coil's magnetization scale g = {scale} ended at an end of its range \
          [{lo}, {hi}] (B = μ0 (H + g M) + c): {why}; the other parameters may have bent to follow it"
+    )
+}
+
+/// [`Warning::GainsDisagree`] in words.
+fn gains_disagree(
+    f: &mut fmt::Formatter<'_>,
+    file: &str,
+    gain: f64,
+    joint_nrmse: f64,
+    (lo, hi): (f64, f64),
+    doubted_from: f64,
+) -> fmt::Result {
+    let followed = if lo == hi {
+        format!("{:.2} %", 100.0 * lo)
+    } else {
+        format!("{:.2}–{:.2} %", 100.0 * lo, 100.0 * hi)
+    };
+    write!(
+        f,
+        "{file}: its displacement spreads {gain:.3}× as far as the other files' rig makes it from its drive \
+         (the model fitted without it, which follows them at {followed}, run on its drive from the \
+         demagnetised rod); the joint fit follows it at {:.2} % only by bending every parameter: files of one \
+         rig do not disagree so (doubted from {doubted_from}×). A probe gain or range not the others' (an amplifier range \
+         switch, a sensitivity entered for another probe) or a file of another rig reads like this; check its \
+         probe scale (if that is the cause, divide its displacement by {gain:.3} and fit again) or fit it on its \
+         own",
+        100.0 * joint_nrmse,
     )
 }
 

@@ -245,6 +245,23 @@ fn float_vec(py: Python<'_>, name: &str, array: &str, v: &Bound<'_, PyAny>) -> P
         to_py_err(py, ArrayError { file: name.into(), array: array.into(), index: None, message: why }.into())
     };
     let np = py.import("numpy")?;
+    // A masked array's data under its mask is not a sample: `asarray` would read it as one.
+    let ma = np.getattr("ma")?;
+    if ma.call_method1("isMaskedArray", (v,))?.extract::<bool>()? {
+        let mask = ma.call_method1("getmaskarray", (v,))?;
+        if mask.call_method0("any")?.extract::<bool>()? {
+            let first: usize = np.call_method1("argmax", (mask.call_method0("ravel")?,))?.extract()?;
+            let message = format!(
+                "a masked array with masked samples (the first at index {first}): a masked sample is a missing \
+                 one, and the data under the mask is not a measurement; fill or interpolate them, or cut the \
+                 recording there, before the call"
+            );
+            return Err(to_py_err(
+                py,
+                ArrayError { file: name.into(), array: array.into(), index: Some(first), message }.into(),
+            ));
+        }
+    }
     let as_given =
         np.call_method1("asarray", (v,)).map_err(|e| bad(format!("not an array of numbers ({e})")))?;
     // Integers and floats only: NumPy would turn booleans into 0/1, drop an imaginary part and

@@ -260,6 +260,28 @@ def test_arrays_are_checked_as_the_csv_reader_checks_a_file():
         assert fragment in str(e.value)
 
 
+def test_a_masked_sample_is_refused_and_an_implausible_time_axis_is_said_as_from_a_file():
+    rec = gma.read_recording(VAL_CSV)
+    masked = dict(rec, current_A=np.ma.masked_array(rec["current_A"], mask=np.arange(rec["current_A"].size) == 40))
+    with pytest.raises(gma.GmaError) as e:
+        gma.compare("ja", masked)
+    assert (e.value.array, e.value.index) == ("current_A", 40), str(e.value)
+    assert "masked" in str(e.value)
+    # A mask with nothing masked is the plain array.
+    unmasked = dict(rec, current_A=np.ma.masked_array(rec["current_A"]))
+    assert gma.compare("ja", unmasked)["nrmse"] == gma.compare("ja", rec)["nrmse"]
+    # A time axis ten thousand times too coarse (a drive at 5 mHz): the doubt a file with that
+    # axis gets, from the arrays too.
+    coarse = dict(rec, time_s=rec["time_s"] * 1e4)
+    with pytest.warns(UserWarning) as from_arrays:
+        gma.compare("ja", coarse)
+    said = " ".join(str(w.message) for w in from_arrays)
+    assert "the time axis is implausible for an actuator rig" in said, said
+    # A period at the model's shortest (1e-7 s) is read from arrays as from a file.
+    fine = dict(rec, time_s=np.arange(rec["time_s"].size) * 1e-7)
+    assert "nrmse" in gma.compare("ja", fine)
+
+
 def test_read_options_are_refused_for_arrays_not_ignored():
     rec = gma.read_recording(VAL_CSV)
     for option in [{"trim_start_s": 0.1}, {"max_samples": 500}, {"columns": ["current_A=current_A:mA"]}]:

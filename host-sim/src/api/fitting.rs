@@ -73,6 +73,9 @@ pub fn fit_recordings(
         files.extend(rows("val", val_files, &ev.files));
         nrmse_val = Some(ev.mean_nrmse());
     }
+    // Judged at the fitted parameters: the start set may sit elsewhere on the rod's curve.
+    warnings.extend(fit::sign_doubts(p.spec, &res.params, fit_files.iter().chain(val_files))?);
+    warnings.extend(fit::scale_outlier(&p.init, &res, fit_files, p.opts, constraints)?);
     let summary = FitSummary {
         model: p.spec.to_string(),
         ja_variant: ja_variant(p.spec, &res.params),

@@ -91,12 +91,23 @@ pub struct ReadArgs {
     /// `--resample`.
     #[arg(long, value_name = "SECONDS")]
     pub trim_start: Option<f64>,
+    /// Pass over the first N lines of each recording before its header: a logger's preamble
+    /// (a LabVIEW header block, an oscilloscope's settings lines). Line numbers in messages
+    /// stay the file's.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub skip_rows: usize,
 }
 
 impl Default for ReadArgs {
     /// Files read as `gma` writes them: no mapping, no resampling, no trimming.
     fn default() -> Self {
-        Self { max_samples: DEFAULT_MAX_SAMPLES, columns: Vec::new(), resample: None, trim_start: None }
+        Self {
+            max_samples: DEFAULT_MAX_SAMPLES,
+            columns: Vec::new(),
+            resample: None,
+            trim_start: None,
+            skip_rows: 0,
+        }
     }
 }
 
@@ -107,11 +118,13 @@ impl ReadArgs {
             && self.columns.is_empty()
             && self.resample.is_none()
             && self.trim_start.is_none()
+            && self.skip_rows == 0
     }
 
     /// The options, checked (each message names its option).
     pub fn options(&self) -> Result<ReadOptions> {
-        ReadOptions::new(&self.columns, self.resample.as_deref(), self.trim_start)
+        Ok(ReadOptions::new(&self.columns, self.resample.as_deref(), self.trim_start)?
+            .skipping(self.skip_rows))
     }
 }
 
@@ -371,7 +384,7 @@ pub fn read_data(
     let data = if kinds.first().copied().unwrap_or(false) {
         if !opts.is_default() {
             bail!(
-                "--column, --resample and --trim-start apply to measurement recordings, not to \
+                "--column, --resample, --trim-start and --skip-rows apply to measurement recordings, not to \
                  magnetization-loop files"
             );
         }

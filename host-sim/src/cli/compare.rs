@@ -167,7 +167,9 @@ fn compare_recordings(
     fit::check_files(spec, p, recs)?;
     let mut doubts: Vec<_> = fit::unresolved_mode(spec, p, recs).into_iter().collect();
     doubts.extend(fit::unfitted_gain(spec, p, source, recs));
+    doubts.extend(fit::unfitted_effects(spec, source));
     doubts.extend(fit::data_doubts(spec, p, recs)?);
+    doubts.extend(fit::sign_doubts(spec, p, recs)?);
     let model = [(spec, *p)];
     let mut rows = Vec::new();
     let mut charts = Vec::new();

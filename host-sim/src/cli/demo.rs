@@ -116,6 +116,7 @@ pub fn run(a: &DemoArgs) -> Result<()> {
         parameters_source: "the demo case's start values".into(),
         parameters_defaulted: Vec::new(),
         parameters_not_fitted: Vec::new(),
+        effects_not_fitted: Vec::new(),
     };
     let sections =
         report::uncertainty_html(&rungs, &uncertainties) + &report::provenance_html(&provenance, &start);

@@ -1,5 +1,6 @@
 //! What a fit says about its own result: a strain scale off its physical range, a mode the files
-//! cannot resolve, an amplifier gain no file constrained, a search coil of another scale.
+//! cannot resolve, an amplifier gain no file constrained, effects a set was never fitted with, a
+//! search coil of another scale.
 
 use model_core::effects::STRAIN_SCALE;
 use model_core::{ActuatorParams, Effect, ModelSpec};
@@ -73,6 +74,16 @@ pub fn unfitted_gain(
         file: rec.name.clone(),
         params: source.parameters_source.clone(),
         gain: params.amp.gain_a_per_v as f64,
+    })
+}
+
+/// A parameter set run with effects the model it was fitted as lacks
+/// ([`crate::params::effects_not_fitted`]): their values are start values.
+pub fn unfitted_effects(spec: ModelSpec, source: &crate::params::ParamSource) -> Option<Warning> {
+    (!source.effects_not_fitted.is_empty()).then(|| Warning::EffectsNotFitted {
+        params: source.parameters_source.clone(),
+        model: spec.to_string(),
+        effects: source.effects_not_fitted.clone(),
     })
 }
 

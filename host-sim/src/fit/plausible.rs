@@ -109,7 +109,11 @@ fn current_scale(params: &ActuatorParams, name: &str, column: &str, drive: &[f64
 
 /// The model's run on `rec` from the demagnetised rod (all channels), or `None` where it cannot
 /// run (the fit's to say).
-fn demagnetised_run(spec: ModelSpec, params: &ActuatorParams, rec: &Recording) -> Result<Option<Simulation>> {
+pub(crate) fn demagnetised_run(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    rec: &Recording,
+) -> Result<Option<Simulation>> {
     let prep = Prepared::new(spec, rec)?.starting(InitialState::Demagnetized);
     Ok(run_model(spec, params, &prep, true).ok())
 }
@@ -253,11 +257,11 @@ fn delay_at_other_rate(
 
 /// The doubts about `files` the model's physics and their samples raise, none a refusal: a
 /// channel stuck or clipped while the drive moved,
-/// a displacement whose scale the drive cannot make ([`displacement_scale`]), a file that reads
-/// better with its drive and its displacement both negated ([`both_negated`]), a loop run the
+/// a displacement whose scale the drive cannot make ([`displacement_scale`]), a loop run the
 /// other way round ([`loop_direction`]), a sensor delay that follows the file better counted in
 /// its own samples ([`delay_rate_doubt`]), a coil temperature that reads like °F or K
-/// ([`temperature_unit`]).
+/// ([`temperature_unit`]). Each holds whatever the parameters, so start values may judge them;
+/// the channels' signs may not ([`sign_doubts`]).
 pub fn data_doubts<'a>(
     spec: ModelSpec,
     params: &ActuatorParams,
@@ -269,10 +273,25 @@ pub fn data_doubts<'a>(
         doubts.extend(temperature_unit(rec));
         if let Some(sim) = demagnetised_run(spec, params, rec)? {
             doubts.extend(displacement_scale(spec, rec, &sim)?);
-            doubts.extend(both_negated(spec, params, rec, &sim)?);
             doubts.extend(loop_direction(spec, params, rec, &sim)?);
             doubts.extend(delay_rate_doubt(spec, params, rec, &sim)?);
         }
+    }
+    Ok(doubts)
+}
+
+/// Files among `files` that read better with their drive and displacement both negated
+/// ([`both_negated`]), judged at parameters that hold the rig (fitted, or given to be scored):
+/// which way the strain curves at the bias depends on where the bias sits on the rod's curve,
+/// so a start set for another rod (the demo set) curves the other way on a correctly wired file.
+pub fn sign_doubts<'a>(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    files: impl IntoIterator<Item = &'a Recording>,
+) -> Result<Vec<Warning>> {
+    let mut doubts = Vec::new();
+    for rec in files {
+        doubts.extend(both_negated(spec, params, rec)?);
     }
     Ok(doubts)
 }
@@ -306,13 +325,6 @@ const SCALE_RATIO_DOUBTED: f64 = 100.0;
 /// less: a drive or a displacement logged in another unit than its column says (a current in A
 /// read as mA, a displacement in mm under `displacement_um`), or a coil not the parameter set's.
 fn displacement_scale(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> Result<Option<Warning>> {
-    // Spread, not span, and past the first tenth: the model's start from the demagnetised rod
-    // to the bias's state is a transient the rig's file need not show.
-    let spread = |v: &[f64]| {
-        let v = &v[v.len() / 10..];
-        let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
-        (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len().max(1) as f64).sqrt()
-    };
     let Some(y) = rec.displacement_um.as_deref() else { return Ok(None) };
     let (measured, model) = (spread(y), spread(&sim.displacement_um));
     if !(measured > 0.0 && model > 0.0) {
@@ -330,22 +342,31 @@ fn displacement_scale(spec: ModelSpec, rec: &Recording, sim: &Simulation) -> Res
     })))
 }
 
+/// A displacement's spread: rms about its mean past the first tenth (the model's start from the
+/// demagnetised rod to the bias's state is a transient the rig's file need not show).
+pub(crate) fn spread(v: &[f64]) -> f64 {
+    let v = &v[v.len() / 10..];
+    let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
+    (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len().max(1) as f64).sqrt()
+}
+
 /// The file's displacement and drive both read the other way round: the strain is even in the
 /// field, so with a bias a negated current puts the operating point on the field's other side,
 /// where the strain curves the other way, and the displacement negated too follows that model
-/// about as well as the right reading by correlation; the curvature tells them apart. Said when
-/// both negated leave a quarter of the variance (1 − ρ²) the file as read leaves, or less, and
-/// the file as read leaves more than 1 %.
-fn both_negated(
-    spec: ModelSpec,
-    params: &ActuatorParams,
-    rec: &Recording,
-    sim: &Simulation,
-) -> Result<Option<Warning>> {
+/// about as well as the right reading by correlation; the curvature tells them apart. Each
+/// reading is run from the start state that best explains it (a file that starts mid-history
+/// is not the demagnetised rod's). Said when both negated leave a quarter of the variance
+/// (1 − ρ²) the file as read leaves, or less, and the file as read leaves more than 1 %.
+fn both_negated(spec: ModelSpec, params: &ActuatorParams, rec: &Recording) -> Result<Option<Warning>> {
     let Some(y) = rec.displacement_um.as_deref() else { return Ok(None) };
-    let Some(negated) = demagnetised_run(spec, params, &drive_negated(rec))? else { return Ok(None) };
-    let as_read = unexplained(correlation(y, &sim.displacement_um));
-    let both = unexplained(-correlation(y, &negated.displacement_um));
+    let negated = Recording { displacement_um: Some(y.iter().map(|v| -v).collect()), ..drive_negated(rec) };
+    let follows = |r: &Recording| -> Result<f64> {
+        let prep = Prepared::new(spec, r)?;
+        Ok(run_model(spec, params, &prep, false).map_or(1.0, |sim| {
+            unexplained(correlation(r.displacement_um.as_deref().unwrap_or_default(), &sim.displacement_um))
+        }))
+    };
+    let (as_read, both) = (follows(rec)?, follows(&negated)?);
     if !(as_read > 0.01 && both * 4.0 <= as_read) {
         return Ok(None);
     }

@@ -67,9 +67,9 @@ impl Recording {
         opts: &ReadOptions,
     ) -> Result<ReadOutcome> {
         let (delimiter, sep_line, head, input) =
-            separated(input).map_err(|e| crate::files::read_error(file, e))?;
-        // The header's line: after a `sep=` line, the second.
-        let header_line = 1 + u64::from(sep_line);
+            separated(input, opts.skip_rows).map_err(|e| crate::files::read_error(file, e))?;
+        // The header's line: after the skipped preamble and a `sep=` line.
+        let header_line = 1 + opts.skip_rows as u64 + u64::from(sep_line);
         // Row lengths are checked row by row (a line of spaces is blank, not a row of one field).
         let mut rdr = csv::ReaderBuilder::new()
             .has_headers(true)
@@ -104,7 +104,16 @@ impl Recording {
         });
         let mut stamps = crate::cell_text::Stamps::default();
         let maps: [Option<&ColumnMap>; COLUMNS.len()] = std::array::from_fn(|k| opts.map_of(k));
-        check_time_and_drive(file, header_line, &headers, &index)?;
+        if index[0].is_none() {
+            // Only for the refusal: the lines below the first, looked through for a table's header.
+            let below = rdr.records().take(PREAMBLE_LINES).filter_map(|r| {
+                let r = r.ok()?;
+                Some((r.position()?.line(), r.iter().collect::<Vec<_>>().join(",")))
+            });
+            let hint = preamble_hint(below.collect());
+            check_time_and_drive(file, header_line, &headers, &index, hint)?;
+        }
+        check_time_and_drive(file, header_line, &headers, &index, None)?;
         let time_col = index[0].unwrap_or(0) + 1;
         let mut cols: [Vec<f64>; COLUMNS.len()] = Default::default();
         let mut time = TimeCheck { resample: opts.resample.is_some(), ..TimeCheck::default() };
@@ -224,12 +233,14 @@ fn check_time_and_drive(
     header_line: u64,
     headers: &csv::StringRecord,
     index: &[Option<usize>],
+    preamble: Option<String>,
 ) -> Result<()> {
     if index[0].is_none() {
         let found: Vec<&str> = headers.iter().collect();
         let joined = found.join(", ");
         let comment = headers.get(0).is_some_and(|h| h.trim_start().starts_with('#'));
         let hint = case_hint(headers, "time_s")
+            .or(preamble)
             .or_else(|| {
                 comment.then(|| {
                     " — the first line starts with `#`: measurement files have no comment lines; the header \
@@ -256,14 +267,51 @@ fn check_time_and_drive(
     Ok(())
 }
 
+/// Lines a logger writes above its table (a LabVIEW header block, an oscilloscope's settings)
+/// are looked through for this many lines.
+const PREAMBLE_LINES: usize = 200;
+
+/// Where a header below a preamble lies: the first of the file's next `lines` (the line the
+/// reader met each at, and its text) that is not numbers and is followed by two lines that
+/// are, said with the `--skip-rows` that reads it.
+fn preamble_hint(lines: Vec<(u64, String)>) -> Option<String> {
+    let numbers = |l: &str| {
+        let cells: Vec<&str> = l.split([',', ';', '\t']).map(str::trim).filter(|c| !c.is_empty()).collect();
+        !cells.is_empty() && cells.iter().all(|c| c.parse::<f64>().is_ok())
+    };
+    let k = (0..lines.len().saturating_sub(2))
+        .find(|&k| !numbers(&lines[k].1) && numbers(&lines[k + 1].1) && numbers(&lines[k + 2].1))?;
+    // A record's line is where the reader met it: blank lines before it count, and
+    // `--skip-rows` passing over fewer than them still reads the table (blank lines are).
+    let (line, header) = &lines[k];
+    let skip = line - 1;
+    Some(format!(
+        " — a table follows a logger's preamble: its header reads `{}`; read the file from there with \
+         `--skip-rows {skip}` (and map its columns with --column if they are named otherwise)",
+        echo(header.trim())
+    ))
+}
+
 /// The column separator of a measurement file, whether a first line named it, the file's first
 /// bytes from its header on (as far as one read buffered them: what the decimal mark is sniffed
 /// from), and the file to read: a spreadsheet's `sep=X` first line names it (the line is read
 /// as blank, so rows keep their line numbers); otherwise a
 /// header without a comma but with `;` or tabs is separated by those, else by commas.
-fn separated<R: std::io::Read>(input: R) -> std::io::Result<(u8, bool, Vec<u8>, impl std::io::Read)> {
+fn separated<R: std::io::Read>(
+    input: R,
+    skip_rows: usize,
+) -> std::io::Result<(u8, bool, Vec<u8>, impl std::io::Read)> {
     use std::io::BufRead;
     let mut buf = std::io::BufReader::with_capacity(1 << 16, input);
+    // A preamble passed over is read as blank lines, so rows keep the file's line numbers.
+    let mut skipped = Vec::new();
+    for _ in 0..skip_rows {
+        let mut line = Vec::new();
+        if buf.read_until(b'\n', &mut line)? == 0 {
+            break;
+        }
+        skipped.push(b'\n');
+    }
     let first_line = |bytes: &[u8]| -> String {
         let end = bytes.iter().position(|b| *b == b'\n').unwrap_or(bytes.len());
         String::from_utf8_lossy(&bytes[..end]).trim_start_matches('\u{feff}').trim().to_string()
@@ -285,7 +333,8 @@ fn separated<R: std::io::Read>(input: R) -> std::io::Result<(u8, bool, Vec<u8>, 
         None => (b',', b""),
     };
     let head = buf.fill_buf()?.to_vec();
-    Ok((delimiter, named.is_some(), head, std::io::Read::chain(blank, buf)))
+    let blanks = std::io::Read::chain(std::io::Cursor::new(skipped), blank);
+    Ok((delimiter, named.is_some(), head, std::io::Read::chain(blanks, buf)))
 }
 
 /// One cell: a finite number within the column's plausible range (after conversion from a

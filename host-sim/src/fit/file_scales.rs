@@ -1,0 +1,76 @@
+//! Files of one rig whose displacement per unit drive disagrees: a probe range switched for one
+//! file, a sensitivity entered for another probe, a file of another rig. A joint fit bends every
+//! parameter to split the difference (the law's curvature, the per-file start states) and can
+//! even match each file's spread, so the check is a fit without the file the joint fit follows
+//! worst, run on that file's drive.
+
+use anyhow::Result;
+use model_core::ActuatorParams;
+
+use super::plausible::{demagnetised_run, spread};
+use super::{fit_constrained, Constraints, FitOptions, FitResult};
+use crate::recording::Recording;
+use crate::warning::Warning;
+
+/// How many times worse than every other file the joint fit must follow one file for it to be
+/// checked: a model that lacks an effect leaves its fastest file up to about three times worse
+/// than the others (the textbook rig's `ja+mech` files under `ja`: 18 % against 5 %).
+const OUTLIER_NRMSE: f64 = 4.0;
+
+/// How many times the file's displacement spread may differ from what the other files' model
+/// makes of its drive before the scales are said to disagree: a rig's files agree within tens
+/// of percent once the model holds the drive's amplitude, bias and frequency; a range switch
+/// moves one file by 10×.
+const GAINS_DISAGREE: f64 = 3.0;
+
+/// The file among `files` whose displacement the other files' model, fitted without it
+/// (from `start` and the joint fit's result), makes [`GAINS_DISAGREE`] times too small or too
+/// large on its own drive, when the joint fit `joint` followed it [`OUTLIER_NRMSE`] times worse
+/// than every other file. One more fit, only when a file stands out so.
+pub fn scale_outlier(
+    start: &ActuatorParams,
+    joint: &FitResult,
+    files: &[Recording],
+    opts: FitOptions,
+    constraints: &Constraints,
+) -> Result<Option<Warning>> {
+    let scores: Vec<f64> = joint.fit.files.iter().map(|s| s.nrmse).collect();
+    let Some(worst) = (0..scores.len()).max_by(|&a, &b| scores[a].total_cmp(&scores[b])) else {
+        return Ok(None);
+    };
+    let others_worst =
+        scores.iter().enumerate().filter(|(k, _)| *k != worst).map(|(_, s)| *s).fold(0.0, f64::max);
+    if files.len() < 2 || scores[worst] < OUTLIER_NRMSE * others_worst {
+        return Ok(None);
+    }
+    let others: Vec<Recording> =
+        files.iter().enumerate().filter(|(k, _)| *k != worst).map(|(_, r)| r.clone()).collect();
+    let quiet = FitOptions { progress: false, ..opts };
+    let Ok(without) = fit_constrained(joint.spec, &[*start, joint.params], &others, quiet, constraints)
+    else {
+        return Ok(None);
+    };
+    let rec = &files[worst];
+    let (Some(y), Some(sim)) =
+        (rec.displacement_um.as_deref(), demagnetised_run(joint.spec, &without.params, rec)?)
+    else {
+        return Ok(None);
+    };
+    let ratio = spread(y) / spread(&sim.displacement_um);
+    if !(ratio.is_finite() && ratio > 0.0) || (1.0 / GAINS_DISAGREE..GAINS_DISAGREE).contains(&ratio) {
+        return Ok(None);
+    }
+    let followed = without
+        .fit
+        .files
+        .iter()
+        .map(|s| s.nrmse)
+        .fold((f64::MAX, f64::MIN), |(l, h), s| (l.min(s), h.max(s)));
+    Ok(Some(Warning::GainsDisagree {
+        file: rec.name.clone(),
+        gain: ratio,
+        joint_nrmse: scores[worst],
+        others_nrmse: followed,
+        doubted_from: GAINS_DISAGREE,
+    }))
+}
