@@ -502,8 +502,21 @@ fn written_for(text: &str) -> Option<ModelSpec> {
 /// short names): a set fitted as `ja+mech` and run as `eddy+ja+mech` runs the eddy lag's start
 /// value. Nothing when the header names no model.
 pub fn effects_not_fitted(text: &str, spec: ModelSpec) -> Vec<&'static str> {
+    use model_core::MagnetizationLaw as Law;
     let Some(written) = written_for(text) else { return Vec::new() };
-    spec.effects().filter(|e| !written.has(*e)).map(|e| e.alias().unwrap_or(e.name())).collect()
+    let mut missing: Vec<&'static str> =
+        spec.effects().filter(|e| !written.has(*e)).map(|e| e.alias().unwrap_or(e.name())).collect();
+    // Another law reads its own table (`ja` implies saturation, but fits `[ja]`, not
+    // `[anhysteretic]`): the law run is not the one fitted.
+    if spec.law() != written.law() && missing.is_empty() {
+        missing.push(match spec.law() {
+            Law::Linear => "linear",
+            Law::Anhysteretic => "anhysteretic",
+            Law::JilesAtherton => "ja",
+            Law::Preisach => "preisach",
+        });
+    }
+    missing
 }
 
 /// Parses a spec, turning an error's byte range into the offending word. An effect named twice

@@ -36,6 +36,26 @@ pub struct RecordSummary {
     pub ending: Ending,
 }
 
+/// The recordings a run writing `out` would replace: `out` itself and every `stem-N.csv` beside
+/// it (the segments after gaps, [`segment_path`]), that exist now.
+pub fn existing_segments(out: &Path) -> Vec<PathBuf> {
+    let stem = out.file_stem().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "record".into());
+    let dir = match out.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let mut found: Vec<PathBuf> = out.exists().then(|| out.to_path_buf()).into_iter().collect();
+    let later = std::fs::read_dir(&dir).into_iter().flatten().flatten().filter(|e| {
+        let name = e.file_name().to_string_lossy().to_string();
+        name.strip_prefix(&format!("{stem}-"))
+            .and_then(|rest| rest.strip_suffix(".csv"))
+            .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+    });
+    found.extend(later.map(|e| out.with_file_name(e.file_name())));
+    found.sort();
+    found
+}
+
 /// The `k`-th segment's file (0-based): `out` itself, then `stem-2.csv`, `stem-3.csv`, …
 fn segment_path(out: &Path, k: usize) -> PathBuf {
     if k == 0 {

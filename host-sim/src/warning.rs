@@ -625,7 +625,8 @@ fn gains_disagree(
          rig do not disagree so (doubted from {doubted_from}×). A probe gain or range not the others' (an amplifier range \
          switch, a sensitivity entered for another probe) or a file of another rig reads like this; check its \
          probe scale (if that is the cause, divide its displacement by {gain:.3} and fit again) or fit it on its \
-         own",
+         own. An effect the model lacks that acts on this file alone (a drive near a mode, hours of heating) \
+         can read so too: `gma diagnose` tells",
         100.0 * joint_nrmse,
     )
 }

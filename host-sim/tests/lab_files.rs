@@ -148,6 +148,9 @@ fn a_file_at_another_probe_gain_is_named() {
     let w = warnings(&json(&["fit", "--model", "ja+mech", &a, &b, &switched]));
     assert!(w.contains("switched.csv: its displacement spreads"), "{w}");
     assert!(w.contains("divide its displacement by"), "{w}");
+    let switched = scaled(d, &c, "three.csv", 3.0, false);
+    let w = warnings(&json(&["fit", "--model", "ja+mech", &a, &b, &switched]));
+    assert!(w.contains("three.csv: its displacement spreads"), "{w}");
 }
 
 /// One rig logged at 10 kHz and at 5 kHz, fitted jointly: each file is stepped at its own rate,
@@ -183,6 +186,18 @@ fn a_set_compared_with_an_effect_it_was_not_fitted_with_is_said() {
     let w =
         warnings(&json(&["compare", "--model", "eddy+ja+mech", "--params", &set, "--out-dir", &out, &file]));
     assert!(w.contains("was fitted as a model without `eddy`, run here as `eddy+ja+mech`"), "{w}");
+    // Another law reads another table: `[anhysteretic]` was never fitted.
+    let w = warnings(&json(&[
+        "compare",
+        "--model",
+        "anhysteretic+mech",
+        "--params",
+        &set,
+        "--out-dir",
+        &out,
+        &file,
+    ]));
+    assert!(w.contains("without `anhysteretic`"), "{w}");
     let w = warnings(&json(&["compare", "--model", "ja+mech", "--params", &set, "--out-dir", &out, &file]));
     assert!(!w.contains("was fitted as a model without"), "{w}");
 }
@@ -224,4 +239,38 @@ fn a_logger_preamble_is_named_with_the_skip_rows_that_reads_it() {
         &d.join("bad.csv").display().to_string(),
     ]);
     assert!(err(&o).contains("bad.csv:10:2:"), "{}", err(&o));
+}
+
+/// `gma record -o` over earlier recordings (the file and its `-2` segment) replaced both with
+/// exit 0, and `gma drive … -o` onto a measurement appended binary frames to it. Both are
+/// refused with the files kept; `--overwrite` lets a recording go, and a frames file still takes
+/// more frames.
+#[test]
+fn a_lab_file_is_never_replaced_by_a_recording_or_appended_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let measured = rig_file(d, "rec.csv", sine(20.0), 10_000.0, 0.1, 10);
+    let text = std::fs::read_to_string(&measured).unwrap();
+    let second = d.join("rec-2.csv");
+    std::fs::write(&second, &text).unwrap();
+    let empty = d.join("empty.bin");
+    std::fs::write(&empty, b"").unwrap();
+    let (empty, second) = (empty.display().to_string(), second.display().to_string());
+    let o = gma(&["record", "-i", &empty, "-o", &measured]);
+    assert!(
+        !o.status.success() && err(&o).contains("--overwrite") && err(&o).contains("rec-2.csv"),
+        "{}",
+        err(&o)
+    );
+    assert_eq!(std::fs::read_to_string(&measured).unwrap(), text);
+    assert_eq!(std::fs::read_to_string(&second).unwrap(), text);
+    let o = gma(&["drive", "ping", "-o", &measured]);
+    assert!(!o.status.success() && err(&o).contains("holds no command frames"), "{}", err(&o));
+    assert_eq!(std::fs::read_to_string(&measured).unwrap(), text);
+    let frames = d.join("frames.bin").display().to_string();
+    for command in ["ping", "arm"] {
+        let o = gma(&["drive", command, "-o", &frames]);
+        assert!(o.status.success(), "{}", err(&o));
+    }
+    assert!(std::fs::metadata(&frames).unwrap().len() > 0);
 }

@@ -272,6 +272,9 @@ fn send(out: &Path, frame: &[u8]) -> Result<()> {
     // Under /dev nothing is created: a mistyped serial port would otherwise become a new file,
     // and the command "succeed" without reaching the board (a keep-alive loop would never stop).
     let device = out.starts_with("/dev");
+    if !device {
+        frames_only(out)?;
+    }
     let mut f = match std::fs::OpenOptions::new().append(true).create(!device).open(out) {
         Ok(f) => f,
         Err(e) if device && e.kind() == std::io::ErrorKind::NotFound => bail!(
@@ -282,6 +285,29 @@ fn send(out: &Path, frame: &[u8]) -> Result<()> {
         Err(e) => return Err(e).with_context(|| format!("cannot open {name}")),
     };
     f.write_all(frame).and_then(|()| f.flush()).with_context(|| format!("writing {name}"))
+}
+
+/// Refuses to append frames to an existing file that holds something else: every frame ends
+/// with the COBS delimiter 0x00, which a text file (a measurement, a parameter file) never has.
+fn frames_only(out: &Path) -> Result<()> {
+    use std::io::Read;
+    let Ok(meta) = std::fs::metadata(out) else { return Ok(()) };
+    if !meta.is_file() || meta.len() == 0 {
+        return Ok(());
+    }
+    let mut head = Vec::new();
+    std::fs::File::open(out)
+        .and_then(|f| f.take(1 << 16).read_to_end(&mut head))
+        .with_context(|| format!("cannot read {}", display(out)))?;
+    if !head.contains(&0) {
+        bail!(
+            "{}: the file exists and holds no command frames (no 0x00 frame ends in its first bytes): \
+             appending frames would spoil it (a measurement, a parameter file); name a new file or the \
+             board's serial port",
+            display(out)
+        );
+    }
+    Ok(())
 }
 
 fn opcode_name(op: u8) -> &'static str {

@@ -21,6 +21,10 @@ pub struct RecordArgs {
     /// its segment is complete).
     #[arg(long, short)]
     pub out: PathBuf,
+    /// Replace recordings already at `--out` and its `-2`, `-3`, … segment names (refused
+    /// without it: gma cannot tell an earlier recording from a measurement to keep).
+    #[arg(long)]
+    pub overwrite: bool,
     /// Control tick [s] (the firmware's: 1e-4 s at 10 kHz).
     #[arg(long, default_value_t = 1e-4)]
     pub tick_s: f64,
@@ -36,6 +40,18 @@ pub fn run(a: &RecordArgs) -> Result<()> {
     check_outputs(&[a.out.as_path()], &[])?;
     if same_file(&a.input, &a.out) {
         anyhow::bail!("cannot write {}: it is the input; choose another output path", display(&a.out));
+    }
+    let existing = record::existing_segments(&a.out);
+    if !a.overwrite && !existing.is_empty() {
+        let names: Vec<String> = existing.iter().map(|p| display(p)).collect();
+        anyhow::bail!(
+            "--out {}: {} already there ({}), and a recording writes `--out` and its `-2`, `-3`, … segments; \
+             gma cannot tell an earlier recording from a measurement to keep, so it will not replace them: \
+             give --overwrite to replace them, or choose another path",
+            display(&a.out),
+            if names.len() == 1 { "a file is" } else { "files are" },
+            names.join(", ")
+        );
     }
     let stop = record::stop_on_signals()?;
     let r = record::record(stream, &a.out, a.tick_s, stop).with_context(|| display(&a.input))?;

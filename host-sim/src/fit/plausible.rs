@@ -289,11 +289,7 @@ pub fn sign_doubts<'a>(
     params: &ActuatorParams,
     files: impl IntoIterator<Item = &'a Recording>,
 ) -> Result<Vec<Warning>> {
-    let mut doubts = Vec::new();
-    for rec in files {
-        doubts.extend(both_negated(spec, params, rec)?);
-    }
-    Ok(doubts)
+    files.into_iter().filter_map(|rec| both_negated(spec, params, rec).transpose()).collect()
 }
 
 /// A coil's temperature at a file's start above which, read in °C, it is doubted [°C]: a coil
