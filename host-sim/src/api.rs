@@ -206,7 +206,8 @@ impl ParamsSource {
     }
 }
 
-/// How files are read: the CLI's `--max-samples`, `--column`, `--resample`, `--trim-start`.
+/// How files are read: the CLI's `--max-samples`, `--column`, `--resample`, `--trim-start`,
+/// `--skip-rows`.
 #[derive(Debug, Clone)]
 pub struct ReadSettings {
     /// Samples (or loop points) kept per file.
@@ -217,6 +218,8 @@ pub struct ReadSettings {
     pub resample: Option<String>,
     /// Seconds dropped at the start of each recording.
     pub trim_start_s: Option<f64>,
+    /// Lines passed over before each recording's header (a logger's preamble).
+    pub skip_rows: usize,
 }
 
 impl Default for ReadSettings {
@@ -226,6 +229,7 @@ impl Default for ReadSettings {
             columns: Vec::new(),
             resample: None,
             trim_start_s: None,
+            skip_rows: 0,
         }
     }
 }
@@ -239,6 +243,7 @@ impl ReadSettings {
             (!self.columns.is_empty(), "columns"),
             (self.resample.is_some(), "resample"),
             (self.trim_start_s.is_some(), "trim_start_s"),
+            (self.skip_rows != 0, "skip_rows"),
         ]
         .into_iter()
         .filter_map(|(set, name)| set.then_some(name))
@@ -247,7 +252,8 @@ impl ReadSettings {
 
     fn options(&self) -> Result<ReadOptions> {
         inputs::check_max_samples(self.max_samples)?;
-        ReadOptions::new(&self.columns, self.resample.as_deref(), self.trim_start_s)
+        Ok(ReadOptions::new(&self.columns, self.resample.as_deref(), self.trim_start_s)?
+            .skipping(self.skip_rows))
     }
 }
 

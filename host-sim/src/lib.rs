@@ -16,6 +16,7 @@ pub mod diagnose;
 pub mod digests;
 pub mod error;
 pub mod excitation;
+pub mod field_units;
 pub mod files;
 pub mod fit;
 pub mod loop_fit;

@@ -198,7 +198,11 @@ pub fn result_doubts(
 ) -> Vec<Warning> {
     let mut doubts = input_warnings.to_vec();
     if let Some(last) = rungs.last() {
-        doubts.extend(crate::fit::strain_scale_doubt(&last.params, &crate::fit::Constraints::default()));
+        doubts.extend(crate::fit::strain_scale_doubt(
+            last.spec,
+            &last.params,
+            &crate::fit::Constraints::default(),
+        ));
         doubts.extend(crate::fit::unresolved_mode(
             last.spec,
             &last.params,

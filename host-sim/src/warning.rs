@@ -207,6 +207,9 @@ pub enum Warning {
         lo: f64,
         /// The physical range.
         hi: f64,
+        /// Field-valued parameters the set holds at a value a kA/m slip gives
+        /// ([`crate::field_units::fields_in_kilo`]): the strain scale's likelier cause then.
+        fields_in_kilo: Vec<(&'static str, f64)>,
     },
     /// The mechanical mode lies above every recording's Nyquist frequency: no file can show it,
     /// and the mechanics acts as a static gain (often a time column in ms read as seconds).
@@ -535,15 +538,37 @@ impl fmt::Display for Warning {
                  acted): the displacement's scale rests on a start value; fit on command-driven files, or set \
                  the rig amplifier's gain in [amp] and remove the mark"
             ),
-            Warning::StrainScaleUnlikely { lambda_s, lo, hi } => write!(
-                f,
-                "`magnetostriction.lambda_s` = {lambda_s:.2e} is outside [{lo:.0e}, {hi:.0e}], the range of \
-                 magnetostrictive materials (Terfenol-D ≈ 1e-3): is `displacement_um` in µm (`--column \
-                 displacement_um=NAME:mm` converts mm, `:nm` nm) and `rod_length_m` the rod's active length?"
-            ),
+            Warning::StrainScaleUnlikely { lambda_s, lo, hi, fields_in_kilo } => {
+                strain_scale_unlikely(f, *lambda_s, *lo, *hi, fields_in_kilo)
+            }
             Warning::Read(doubt) => write!(f, "{doubt}"),
             Warning::Data(doubt) => write!(f, "{doubt}"),
         }
+    }
+}
+
+/// [`Warning::StrainScaleUnlikely`] in words: a field in kA/m is the likelier cause where the set
+/// holds one, else the displacement's unit or the rod's length.
+fn strain_scale_unlikely(
+    f: &mut fmt::Formatter<'_>,
+    lambda_s: f64,
+    lo: f64,
+    hi: f64,
+    fields_in_kilo: &[(&'static str, f64)],
+) -> fmt::Result {
+    write!(
+        f,
+        "`magnetostriction.lambda_s` = {lambda_s:.2e} is outside [{lo:.0e}, {hi:.0e}], the range of \
+         magnetostrictive materials (Terfenol-D ≈ 1e-3)"
+    )?;
+    if fields_in_kilo.is_empty() {
+        write!(
+            f,
+            ": is `displacement_um` in µm (`--column displacement_um=NAME:mm` converts mm, `:nm` nm) and \
+             `rod_length_m` the rod's active length?"
+        )
+    } else {
+        write!(f, ", fitted to a set that holds {}", crate::field_units::kilo_words(fields_in_kilo))
     }
 }
 
@@ -671,7 +696,8 @@ mod tests {
     #[test]
     fn warnings_are_listed_heaviest_first() {
         let correlated = |a| Warning::Correlated { a, b: "ja.alpha", rho: 0.99 };
-        let unit = Warning::StrainScaleUnlikely { lambda_s: 1e-6, lo: 1e-5, hi: 1e-2 };
+        let unit =
+            Warning::StrainScaleUnlikely { lambda_s: 1e-6, lo: 1e-5, hi: 1e-2, fields_in_kilo: vec![] };
         let edge = Warning::AtEdge { param: "ja.c", value: 0.0, lo: 0.0, hi: 0.95 };
         let found = [correlated("ja.a_a_per_m"), edge.clone(), correlated("ja.c"), unit.clone()];
         let listed = by_weight(&found);

@@ -274,3 +274,47 @@ fn a_lab_file_is_never_replaced_by_a_recording_or_appended_frames() {
     }
     assert!(std::fs::metadata(&frames).unwrap().len() > 0);
 }
+
+/// A probe over range for a few rows (999.99, a logger's range code) amid a file: 12 rows were
+/// called a level step that "stays there", and the advice for 8 ("remove those rows") ended in
+/// the time axis's gap refusal. Each is now said as a run that comes back, and the advice is one
+/// the reader then accepts.
+#[test]
+fn an_over_range_run_is_said_as_one_with_advice_that_reads() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = rig_file(dir.path(), "rig.csv", sine(50.0), 10_000.0, 0.5, 9);
+    let text = std::fs::read_to_string(&file).unwrap();
+    let y = text.lines().next().unwrap().split(',').position(|c| c == "displacement_um").unwrap();
+    let with_run = |rows: usize, remove: bool| -> String {
+        let mut out = String::new();
+        for (k, line) in text.lines().enumerate() {
+            let in_run = (2001..2001 + rows).contains(&k);
+            if in_run && remove {
+                continue;
+            }
+            let mut cells: Vec<&str> = line.split(',').collect();
+            if in_run {
+                cells[y] = "999.99";
+            }
+            out.push_str(&cells.join(","));
+            out.push('\n');
+        }
+        let path = dir.path().join(format!("run{rows}{}.csv", if remove { "-removed" } else { "" }));
+        std::fs::write(&path, out).unwrap();
+        path.display().to_string()
+    };
+    for rows in [3, 8, 12, 40] {
+        let o = gma(&["fit", "--model", "ja+mech", &with_run(rows, false)]);
+        let e = err(&o);
+        assert!(!o.status.success(), "{rows} rows");
+        assert!(!e.contains("stays there") && e.contains("999.99") && e.contains("2000"), "{rows} rows: {e}");
+        if rows > 4 {
+            assert!(e.contains("split the file") && !e.contains("remove those rows"), "{rows} rows: {e}");
+        } else {
+            // The advice followed: the rows removed, the file read with `--resample linear`.
+            assert!(e.contains("--resample linear"), "{rows} rows: {e}");
+            let o = gma(&["compare", "--model", "ja+mech", "--resample", "linear", &with_run(rows, true)]);
+            assert!(o.status.success(), "{rows} rows removed: {}", err(&o));
+        }
+    }
+}

@@ -415,14 +415,17 @@ fn read_settings(
     columns: Option<Vec<String>>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
+    skip_rows: Option<i128>,
 ) -> PyResult<ReadSettings> {
     let d = ReadSettings::default();
     let max_samples = whole(py, "max_samples", max_samples, "a whole number of at least 5")?;
+    let skip_rows = whole(py, "skip_rows", skip_rows, "a whole number of at least 0")?;
     Ok(ReadSettings {
         max_samples: max_samples.unwrap_or(d.max_samples),
         columns: columns.unwrap_or_default(),
         resample,
         trim_start_s,
+        skip_rows: skip_rows.unwrap_or(d.skip_rows),
     })
 }
 
@@ -450,19 +453,21 @@ fn fit_settings(
 
 /// Reads a measurement CSV (docs/formats.md) as the CLI does: a dict with `name` and one
 /// float64 array per column present (`time_s` [s], `command_V` [V], `current_A` [A],
-/// `displacement_um` [µm], `force_N` [N], `temperature_C` [°C], `flux_density_T` [T]). `columns`, `resample`, `trim_start_s`
-/// and `max_samples` are the CLI's `--column`, `--resample`, `--trim-start`, `--max-samples`.
+/// `displacement_um` [µm], `force_N` [N], `temperature_C` [°C], `flux_density_T` [T]). `columns`, `resample`, `trim_start_s`,
+/// `skip_rows` and `max_samples` are the CLI's `--column`, `--resample`, `--trim-start`, `--skip-rows`,
+/// `--max-samples`.
 #[pyfunction]
-#[pyo3(signature = (path, *, columns=None, resample=None, trim_start_s=None, max_samples=None))]
+#[pyo3(signature = (path, *, columns=None, resample=None, trim_start_s=None, skip_rows=None, max_samples=None))]
 fn read_recording<'py>(
     py: Python<'py>,
     path: PathBuf,
     columns: Option<Vec<String>>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
+    skip_rows: Option<i128>,
     max_samples: Option<i128>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let read = read_settings(py, max_samples, columns, resample, trim_start_s)?;
+    let read = read_settings(py, max_samples, columns, resample, trim_start_s, skip_rows)?;
     let (r, cut) = run(py, || api::read_recording(path, &read))?;
     warn(py, cut)?;
     recording_dict(py, &r)
@@ -474,7 +479,7 @@ fn read_recording<'py>(
 #[pyfunction]
 #[pyo3(signature = (path, *, max_samples=None))]
 fn read_loop<'py>(py: Python<'py>, path: PathBuf, max_samples: Option<i128>) -> PyResult<Bound<'py, PyDict>> {
-    let read = read_settings(py, max_samples, None, None, None)?;
+    let read = read_settings(py, max_samples, None, None, None, None)?;
     let (f, cut) = run(py, || api::read_loop(path, &read))?;
     warn(py, cut)?;
     loop_dict(py, &f)
@@ -488,7 +493,7 @@ fn read_loop<'py>(py: Python<'py>, path: PathBuf, max_samples: Option<i128>) -> 
 /// shows it under the cell); a callable gets each line instead, a stream (`write`) is written to.
 #[pyfunction]
 #[pyo3(signature = (model, files, *, val=None, params=None, seed=None, effort=None, time_limit_s=None,
-    fix=None, bound=None, columns=None, resample=None, trim_start_s=None, max_samples=None, progress=None))]
+    fix=None, bound=None, columns=None, resample=None, trim_start_s=None, skip_rows=None, max_samples=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit<'py>(
     py: Python<'py>,
@@ -504,6 +509,7 @@ fn fit<'py>(
     columns: Option<Vec<String>>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
+    skip_rows: Option<i128>,
     max_samples: Option<i128>,
     progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
@@ -515,7 +521,7 @@ fn fit<'py>(
     };
     let ps = params_source(py, params)?;
     let settings = fit_settings(py, seed, effort, time_limit_s, fix, bound, report.is_some())?;
-    let read = read_settings(py, max_samples, columns, resample, trim_start_s)?;
+    let read = read_settings(py, max_samples, columns, resample, trim_start_s, skip_rows)?;
     let out = run_reporting(py, report, || api::fit(&model, &fit_src, &val_src, &ps, &settings, &read))?;
     let d = json_to_py(py, &out.summary)?;
     d.set_item("params_toml", out.params_toml)?;
@@ -528,7 +534,7 @@ fn fit<'py>(
 /// `magnetization_A_per_m`; for a loop file `field_A_per_m` and the model's `flux_density_T` or
 /// `magnetization_A_per_m`.
 #[pyfunction]
-#[pyo3(signature = (model, files, *, params=None, columns=None, resample=None, trim_start_s=None, max_samples=None))]
+#[pyo3(signature = (model, files, *, params=None, columns=None, resample=None, trim_start_s=None, skip_rows=None, max_samples=None))]
 #[allow(clippy::too_many_arguments)]
 fn compare<'py>(
     py: Python<'py>,
@@ -538,11 +544,12 @@ fn compare<'py>(
     columns: Option<Vec<String>>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
+    skip_rows: Option<i128>,
     max_samples: Option<i128>,
 ) -> PyResult<Bound<'py, PyAny>> {
     let src = sources(py, files, 0)?;
     let ps = params_source(py, params)?;
-    let read = read_settings(py, max_samples, columns, resample, trim_start_s)?;
+    let read = read_settings(py, max_samples, columns, resample, trim_start_s, skip_rows)?;
     let (summary, predictions) = run(py, || api::compare(&model, &ps, &src, &read))?;
     let d = json_to_py(py, &summary)?;
     let list: Vec<Bound<'py, PyDict>> =
@@ -586,7 +593,7 @@ fn simulation_items(
 /// for `fit` (a diagnosis refits the model once per candidate effect: a minute or more).
 #[pyfunction]
 #[pyo3(signature = (model, files, *, val=None, params=None, seed=None, effort=None, time_limit_s=None,
-    columns=None, resample=None, trim_start_s=None, max_samples=None, progress=None))]
+    columns=None, resample=None, trim_start_s=None, skip_rows=None, max_samples=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn diagnose<'py>(
     py: Python<'py>,
@@ -600,6 +607,7 @@ fn diagnose<'py>(
     columns: Option<Vec<String>>,
     resample: Option<String>,
     trim_start_s: Option<f64>,
+    skip_rows: Option<i128>,
     max_samples: Option<i128>,
     progress: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
@@ -611,7 +619,7 @@ fn diagnose<'py>(
     };
     let ps = params_source(py, params)?;
     let settings = fit_settings(py, seed, effort, time_limit_s, None, None, report.is_some())?;
-    let read = read_settings(py, max_samples, columns, resample, trim_start_s)?;
+    let read = read_settings(py, max_samples, columns, resample, trim_start_s, skip_rows)?;
     let d = run_reporting(py, report, || api::diagnose(&model, &fit_src, &val_src, &ps, &settings, &read))?;
     json_to_py(py, &d)
 }

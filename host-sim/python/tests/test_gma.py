@@ -90,6 +90,17 @@ def test_read_recording_applies_the_clis_column_options(tmp_path):
     np.testing.assert_allclose(rec["displacement_um"], [4.0, 3.0, 2.0])
 
 
+def test_a_loggers_preamble_is_passed_over_with_skip_rows(tmp_path):
+    f = tmp_path / "labview.csv"
+    f.write_text("LabVIEW Measurement\nOperator,lab\ntime_s,current_A,displacement_um\n0,0.1,1\n0.0001,0.2,2\n0.0002,0.3,3\n")
+    with pytest.raises(gma.GmaError, match="skip-rows 2"):
+        gma.read_recording(f)
+    rec = gma.read_recording(f, skip_rows=2)
+    np.testing.assert_allclose(rec["current_A"], [0.1, 0.2, 0.3])
+    with pytest.raises(gma.GmaError, match="skip_rows must be a whole number of at least 0"):
+        gma.read_recording(f, skip_rows=-1)
+
+
 def test_read_loop_converts_the_files_units_to_si():
     lp = gma.read_loop(CORPUS / "loop_units.csv")  # header `H [kA/m],B [T]`
     assert lp["channel"] == "flux_density"
@@ -284,7 +295,7 @@ def test_a_masked_sample_is_refused_and_an_implausible_time_axis_is_said_as_from
 
 def test_read_options_are_refused_for_arrays_not_ignored():
     rec = gma.read_recording(VAL_CSV)
-    for option in [{"trim_start_s": 0.1}, {"max_samples": 500}, {"columns": ["current_A=current_A:mA"]}]:
+    for option in [{"trim_start_s": 0.1}, {"max_samples": 500}, {"columns": ["current_A=current_A:mA"]}, {"skip_rows": 1}]:
         with pytest.raises(gma.GmaError) as e:
             gma.compare("ja", [FIT_CSV, rec], **option)
         assert f"{next(iter(option))} applies to files read from disk, and input 1 is given as arrays" in str(e.value)

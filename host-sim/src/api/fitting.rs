@@ -60,7 +60,7 @@ pub fn fit_recordings(
     };
     // First the doubts about the inputs (a `--val` file that is a fit file), then the start's.
     warnings.splice(0..0, p.input_warnings.iter().chain(&res.start_moved).cloned());
-    if let Some(w) = fit::strain_scale_doubt(&res.params, constraints) {
+    if let Some(w) = fit::strain_scale_doubt(p.spec, &res.params, constraints) {
         warnings.push(w);
     }
     warnings.extend(fit::unresolved_mode(p.spec, &res.params, fit_files.iter().chain(val_files)));

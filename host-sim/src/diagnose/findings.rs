@@ -20,7 +20,7 @@ pub(crate) fn baseline_findings(spec: ModelSpec, base: &FitResult, sigs: &[Signa
     let mut findings = Vec::new();
     // λ_s far outside the materials' range is most often a displacement in another unit, said
     // first (a doubt about the data outweighs the residual's statistics) and as `gma fit` says it.
-    if let Some(w) = fit::strain_scale_doubt(&base.params, &fit::Constraints::default()) {
+    if let Some(w) = fit::strain_scale_doubt(spec, &base.params, &fit::Constraints::default()) {
         findings.push(format!("in the fit of `{spec}`: {w}"));
     }
     let white = whiteness(&sigs.iter().map(|s| s.residual.as_slice()).collect::<Vec<_>>());

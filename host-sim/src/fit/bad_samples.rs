@@ -6,6 +6,7 @@
 
 use anyhow::Result;
 
+use crate::columns::MAX_GAP_STEPS;
 use crate::data_doubts::DataDoubt;
 use crate::error::InRecording;
 use crate::recording::Recording;
@@ -166,14 +167,9 @@ fn spike_message(rec: &Recording, name: &str, s: &Spike, more: usize) -> String 
         1 => " (1 more such run in this column)".to_string(),
         m => format!(" ({m} more such runs in this column)"),
     };
-    let (what, fix) = if s.samples == 1 {
-        (
-            "an isolated spike or dropout",
-            "remove the row from the file, or replace the value with its neighbours' mean",
-        )
-    } else {
-        ("a run of spiked or dropped samples", "remove those rows, or cut the file there")
-    };
+    let what =
+        if s.samples == 1 { "an isolated spike or dropout" } else { "a run of spiked or dropped samples" };
+    let fix = bad_rows_fix(s.samples);
     let (rows, off) = match (s.samples, s.index) {
         (1, 0) => {
             ("the first row".to_string(), format!("the next sample ({}) and all the others", s.neighbours.0))
@@ -192,6 +188,27 @@ fn spike_message(rec: &Recording, name: &str, s: &Spike, more: usize) -> String 
          range (max − min) so that a wrong model scores as a right one{more}; {fix}, and run again",
         s.value, s.local_change
     )
+}
+
+/// What to do about `rows` bad rows amid a file: rows removed leave a gap in the time axis,
+/// which `--resample` bridges only up to [`MAX_GAP_STEPS`] steps, so longer runs are replaced or
+/// the file split there (advice that ends in a refusal is no advice).
+fn bad_rows_fix(rows: usize) -> String {
+    let bridged = rows as f64 + 1.0 <= MAX_GAP_STEPS;
+    match rows {
+        1 => "replace the value with its neighbours' mean (or remove the row and read the file with \
+              `--resample linear`, which bridges the gap)"
+            .to_string(),
+        _ if bridged => "replace those values with a straight line between their neighbours (or remove the rows \
+                         and read the file with `--resample linear`, which bridges the gap)"
+            .to_string(),
+        _ => format!(
+            "replace those values with a straight line between their neighbours, or split the file there into \
+             two recordings (removing the rows alone leaves a gap of {} steps in the time axis, beyond the \
+             {MAX_GAP_STEPS} that `--resample` bridges)",
+            rows + 1
+        ),
+    }
 }
 
 /// "both neighbours (a and b)".
@@ -214,7 +231,9 @@ fn drive_stepped_near(drive: &[f64], k: usize, floor: f64) -> bool {
 
 /// A follower whose level steps (one change beyond [`SPIKE_CHANGES`] local changes, not back)
 /// where the drive did not step is refused, naming the row: a probe re-zeroed or knocked during
-/// the file, which no actuator model follows. The first [`STEP_LOOKBACK`] samples are not judged.
+/// the file, which no actuator model follows; one that comes back within [`STEP_LOOKBACK`]
+/// samples is said as a run off range (too long for a spike). The first [`STEP_LOOKBACK`] samples
+/// are not judged.
 fn level_steps(rec: &Recording) -> Result<()> {
     let Some((drive_name, drive)) = drive_of(rec) else { return Ok(()) };
     let (drive_lo, drive_hi) = bounds(drive);
@@ -238,6 +257,22 @@ fn level_steps(rec: &Recording) -> Result<()> {
                 continue;
             }
             let time = rec.time_s[k];
+            if let Some(rows) = comes_back(x, k) {
+                let last = k + rows - 1;
+                return Err(InRecording::error(
+                    &rec.name,
+                    format!(
+                        "`{name}` jumps from {} to {} at time_s = {time} (sample {k} as read) and comes back \
+                         after {rows} rows (samples {k}–{last}), over {SPIKE_CHANGES}× its local sample-to-sample \
+                         change, while `{drive_name}` did not step: a sensor over range or lost samples, not the \
+                         actuator, and it would set the NRMSE's range (max − min) so that a wrong model scores \
+                         as a right one; {}, and run again",
+                        x[k - 1],
+                        x[k],
+                        bad_rows_fix(rows)
+                    ),
+                ));
+            }
             return Err(InRecording::error(
                 &rec.name,
                 format!(
@@ -253,6 +288,13 @@ fn level_steps(rec: &Recording) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// How many rows after `x` steps at `k` it comes back to its level before (within a quarter
+/// of the step) within [`STEP_LOOKBACK`] samples: a run off range, not a level step.
+fn comes_back(x: &[f64], k: usize) -> Option<usize> {
+    let (before, jump) = (x[k - 1], (x[k] - x[k - 1]).abs());
+    (k + 1..(k + STEP_LOOKBACK).min(x.len())).find(|&j| (x[j] - before).abs() < 0.25 * jump).map(|j| j - k)
 }
 
 /// The runs of `x` at one exact value for [`STUCK_RUN`] samples and more while `reference`

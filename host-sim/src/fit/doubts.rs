@@ -8,6 +8,7 @@ use model_core::{ActuatorParams, Effect, ModelSpec};
 use super::constraints::Constraints;
 use super::free_params::MODE_FREQUENCY;
 use crate::channels::FLUX_SCALE_RANGE;
+use crate::field_units::fields_in_kilo;
 use crate::recording::Recording;
 use crate::score::FileScore;
 use crate::simulation::{model_input, Drive};
@@ -16,11 +17,16 @@ use crate::warning::Warning;
 /// A λ_s the fit identified outside the physical range (the registry's for it, narrower than
 /// [`LAMBDA_RANGE`], which only keeps the solve finite) is said: the strain scale is where a
 /// displacement in the wrong unit lands. Nothing when λ_s was held (`--fix`).
-pub fn strain_scale_doubt(params: &ActuatorParams, constraints: &Constraints) -> Option<Warning> {
+pub fn strain_scale_doubt(
+    spec: ModelSpec,
+    params: &ActuatorParams,
+    constraints: &Constraints,
+) -> Option<Warning> {
     let lambda_s = params.magnetostriction.lambda_s as f64;
     let (lo, hi) = (STRAIN_SCALE.lo, STRAIN_SCALE.hi);
-    (!constraints.is_fixed(STRAIN_SCALE.key) && !(lo..=hi).contains(&lambda_s))
-        .then_some(Warning::StrainScaleUnlikely { lambda_s, lo, hi })
+    (!constraints.is_fixed(STRAIN_SCALE.key) && !(lo..=hi).contains(&lambda_s)).then(|| {
+        Warning::StrainScaleUnlikely { lambda_s, lo, hi, fields_in_kilo: fields_in_kilo(spec, params) }
+    })
 }
 
 /// A mechanical mode that none of `files` can show (above each one's Nyquist frequency) is said:

@@ -476,7 +476,8 @@ fn jitter(
         located!(file, Some(line), Some(col as u64);
             "time step {step:.3e} s differs from the median step {dt:.3e} s by more than {:.0} % (missing \
              samples or jittered time stamps; `--resample linear` interpolates jittered time stamps onto \
-             a uniform grid){}",
+             a uniform grid and bridges gaps of up to {MAX_GAP_STEPS} steps; split the recording at a \
+             longer gap){}",
             MAX_JITTER * 100.0,
             crate::cell_text::resolution_hint(resolution_s, Some(dt))
         );
