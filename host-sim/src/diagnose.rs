@@ -331,8 +331,8 @@ pub fn diagnose(
     let mut findings = Measured::partly(fit_files, score_files);
     // The channels' signs, judged at the baseline's fit (not the start set's), and a file at
     // another scale than the others (before any effect is named for it).
-    let mut doubts = crate::fit::sign_doubts(spec, &base.params, fit_files.iter().chain(val_files))?;
-    doubts.extend(crate::fit::scale_outlier(init, &base, fit_files, opts, &Default::default())?);
+    let doubts =
+        crate::fit::sign_and_scale_doubts(init, &base, fit_files, val_files, opts, &Default::default())?;
     findings.extend(doubts.iter().map(|w| format!("in the fit of `{spec}`: {w}")));
     findings.extend(baseline_findings(spec, &base, &sigs));
     findings.extend(file_trends(spec, &base.params, fit_files, val_files)?);

@@ -9,7 +9,7 @@ use model_core::magnetization::{
 use model_core::{ActuatorParams, MagnetizationLaw, ModelSpec};
 
 use crate::fit::StartScore;
-use crate::loops::{clockwise, features, off_centre, LoopFile};
+use crate::loops::{clockwise, features, field_in_kilo, off_centre, LoopFile};
 use crate::progress::Progress;
 use crate::search::{minimize, Bound, Fidelity, Local, Plan, SearchOptions, Start};
 use crate::warning::Warning;
@@ -504,7 +504,11 @@ pub fn fit_shown(
         warnings.push(Warning::Multivalued { ratio });
     }
     // First: an offset explains the edge and squareness warnings it causes.
-    warnings.splice(0..0, files.iter().filter_map(off_centre).chain(files.iter().filter_map(clockwise)));
+    let doubts = files.iter().filter_map(field_in_kilo);
+    warnings.splice(
+        0..0,
+        doubts.chain(files.iter().filter_map(off_centre)).chain(files.iter().filter_map(clockwise)),
+    );
     let start = match start_score {
         Ok(e) => StartScore { nrmse: Some(mean(&e)), kept, refused: None, seen_mode: None },
         Err(why) => StartScore { nrmse: None, kept: false, refused: Some(why), seen_mode: None },

@@ -303,6 +303,27 @@ pub(crate) fn off_centre(f: &LoopFile) -> Option<Warning> {
     })
 }
 
+/// M/H at a loop's field extreme beyond which the loop is doubted. A Terfenol-D rod comes near
+/// M_s ≈ 7.65e5 A/m at tens of kA/m (M/H of 15–150 there); with H in kA/m under an A/m header
+/// the same loop reads 1000× that (1e4 and more for a loop to ±75 kA/m). Measured soft magnets
+/// reach 1 100–5 500 (MnZn ferrites, M130 steel, an amorphous alloy: tests/data/measured-loops),
+/// and stay below; a softer one (a permalloy at saturation) would be asked about too.
+const MAX_SECANT_SUSCEPTIBILITY: f64 = 1e4;
+
+/// A loop whose magnetization at its field extreme is over [`MAX_SECANT_SUSCEPTIBILITY`] times
+/// that field: most often H in kA/m read as A/m (a J–A fit then returns a and k of a few A/m and
+/// scores well: a plausible wrong answer), or a very soft magnet's loop.
+pub(crate) fn field_in_kilo(f: &LoopFile) -> Option<Warning> {
+    let m = f.magnetization();
+    let at = (0..f.h.len()).max_by(|&i, &j| f.h[i].abs().total_cmp(&f.h[j].abs()))?;
+    let (h, m_peak) = (f.h[at].abs(), span(&m).1.max(-span(&m).0));
+    (h > 0.0 && m_peak / h > MAX_SECANT_SUSCEPTIBILITY).then(|| Warning::LoopFieldSmall {
+        file: f.name.clone(),
+        h_peak_a_per_m: h,
+        m_peak_a_per_m: m_peak,
+    })
+}
+
 /// Largest plausible field magnitude [A/m] (the strongest pulsed lab fields, ≈ 100 T).
 const PLAUSIBLE_H: f64 = 1e8;
 /// Largest plausible flux density [T] (as for a recording's `flux_density_T`).

@@ -249,6 +249,16 @@ pub enum Warning {
         /// The fitted α.
         alpha: f64,
     },
+    /// A loop whose M at its field extreme is over a thousand times that field
+    /// ([`crate::loops::field_in_kilo`]): H in kA/m read as A/m, or not a magnetostrictive rod.
+    LoopFieldSmall {
+        /// The loop file.
+        file: String,
+        /// Its largest |H| [A/m], as read.
+        h_peak_a_per_m: f64,
+        /// Its largest |M| [A/m].
+        m_peak_a_per_m: f64,
+    },
     /// A loop traversed clockwise in the H–M plane (a ferromagnet's runs counterclockwise).
     LoopClockwise {
         /// The loop file.
@@ -343,6 +353,7 @@ impl Warning {
             | Warning::ModeAboveNyquist { .. }
             | Warning::WeakLoop { .. }
             | Warning::LoopClockwise { .. }
+            | Warning::LoopFieldSmall { .. }
             | Warning::LoopOffCentre { .. }
             | Warning::ValidationIsFitFile { .. }
             | Warning::SameInputTwice { .. }
@@ -499,6 +510,9 @@ impl fmt::Display for Warning {
                  does not bound α when a is large against M_s): the model holds the fit there, not the loop; α \
                  scales as 1/M, so for a file whose M is known only up to a factor the limit moves with it"
             ),
+            Warning::LoopFieldSmall { file, h_peak_a_per_m, m_peak_a_per_m } => {
+                loop_field_small(f, file, *h_peak_a_per_m, *m_peak_a_per_m)
+            }
             Warning::LoopClockwise { file, share } => write!(
                 f,
                 "{file}: the loop runs clockwise in the H–M plane (∮ M dH = +{:.0} % of its bounding box): a \
@@ -545,6 +559,18 @@ impl fmt::Display for Warning {
             Warning::Data(doubt) => write!(f, "{doubt}"),
         }
     }
+}
+
+/// [`Warning::LoopFieldSmall`] in words.
+fn loop_field_small(f: &mut fmt::Formatter<'_>, file: &str, h: f64, m: f64) -> fmt::Result {
+    write!(
+        f,
+        "{file}: M reaches {m:.3e} A/m at fields of at most {h:.3e} A/m (M/H = {:.0}): a Terfenol-D rod needs \
+         tens of kA/m to come near saturation (M/H of 15–150 there), and only the softest magnets reach this; \
+         if the file is a rod's, is H in kA/m under an A/m header? name the unit (`H [kA/m]` in the two-column \
+         form) or write H in A/m (a fit's a and k come out in the file's field unit)",
+        m / h
+    )
 }
 
 /// [`Warning::StrainScaleUnlikely`] in words: a field in kA/m is the likelier cause where the set

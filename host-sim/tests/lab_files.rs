@@ -151,6 +151,13 @@ fn a_file_at_another_probe_gain_is_named() {
     let switched = scaled(d, &c, "three.csv", 3.0, false);
     let w = warnings(&json(&["fit", "--model", "ja+mech", &a, &b, &switched]));
     assert!(w.contains("three.csv: its displacement spreads"), "{w}");
+    // Not also called wired backwards: negating it would damage a good file.
+    assert!(!w.contains("three.csv: the displacement follows the model far better"), "{w}");
+    // A third of the gain: the joint fit follows the others worse than it (each file's NRMSE is
+    // against its own range), so the file is found by its scale standing apart.
+    let switched = scaled(d, &c, "third.csv", 1.0 / 3.0, false);
+    let w = warnings(&json(&["fit", "--model", "ja+mech", &a, &b, &switched]));
+    assert!(w.contains("third.csv: its displacement spreads 0.3"), "{w}");
 }
 
 /// One rig logged at 10 kHz and at 5 kHz, fitted jointly: each file is stepped at its own rate,
@@ -200,6 +207,14 @@ fn a_set_compared_with_an_effect_it_was_not_fitted_with_is_said() {
     assert!(w.contains("without `anhysteretic`"), "{w}");
     let w = warnings(&json(&["compare", "--model", "ja+mech", "--params", &set, "--out-dir", &out, &file]));
     assert!(!w.contains("was fitted as a model without"), "{w}");
+    // `simulate --drive` runs the set on a measured drive: the same doubt, in its JSON too.
+    let sim = d.join("sim.csv").display().to_string();
+    let run = |model: &str| {
+        json(&["simulate", "--model", model, "--params", &set, "--drive", &file, "-o", &sim, "--overwrite"])
+    };
+    let j = run("eddy+ja+mech");
+    assert!(warnings(&j).contains("was fitted as a model without `eddy`"), "{j}");
+    assert!(run("ja+mech").get("warnings").is_none());
 }
 
 /// A LabVIEW export: a preamble block above the table. It was refused with a hint to map a

@@ -74,8 +74,7 @@ pub fn fit_recordings(
         nrmse_val = Some(ev.mean_nrmse());
     }
     // Judged at the fitted parameters: the start set may sit elsewhere on the rod's curve.
-    warnings.extend(fit::sign_doubts(p.spec, &res.params, fit_files.iter().chain(val_files))?);
-    warnings.extend(fit::scale_outlier(&p.init, &res, fit_files, p.opts, constraints)?);
+    warnings.extend(fit::sign_and_scale_doubts(&p.init, &res, fit_files, val_files, p.opts, constraints)?);
     let summary = FitSummary {
         model: p.spec.to_string(),
         ja_variant: ja_variant(p.spec, &res.params),

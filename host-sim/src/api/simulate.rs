@@ -165,6 +165,14 @@ pub fn run(a: &SimulateArgs) -> Result<Simulated> {
     replaces_only(&a.out, OutputKind::Recording { overwrite: a.overwrite }, "--out")?;
     let role = if a.drive.is_some() { "the model's parameters" } else { "the simulated rig's parameters" };
     let (p, source) = params::load_input(params_input, spec, role)?;
+    // Effects the set was never fitted with run on their start values: said, as `compare` says it.
+    let doubts: Vec<String> = crate::fit::unfitted_effects(spec, &source)
+        .map(|w| {
+            w.say();
+            w.to_string()
+        })
+        .into_iter()
+        .collect();
     for (name, v) in [("--noise-um", a.noise_um), ("--quantum-um", a.quantum_um)] {
         if !(v.is_finite() && (0.0..=MAX_SENSOR_UM).contains(&v)) {
             bail!("{name} must be in [0, {MAX_SENSOR_UM:e}] µm, got {v}");
@@ -220,7 +228,7 @@ pub fn run(a: &SimulateArgs) -> Result<Simulated> {
         Some(_) => (significant(rec.dt_s(), 12), significant(rec.duration_s(), 12)),
     };
     let (drive_file, drive_column) = drive.unzip();
-    let result = json!({
+    let mut result = json!({
         "out": name,
         "simulated": true,
         "model": spec.to_string(),
@@ -233,6 +241,10 @@ pub fn run(a: &SimulateArgs) -> Result<Simulated> {
         "seed": a.seed,
         "description": what,
     });
+    // Only where there is a doubt: the answer without one stays as it was.
+    if !doubts.is_empty() {
+        result["warnings"] = json!(doubts);
+    }
     Ok(Simulated { result, source })
 }
 

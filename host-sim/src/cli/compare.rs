@@ -111,6 +111,7 @@ pub fn run(a: &CompareArgs) -> Result<()> {
                     files.first().map(|f| f.name.as_str()).unwrap_or("the input")
                 );
             }
+            cut.extend(files.iter().filter_map(loops::field_in_kilo));
             compare_loops(a, spec, &p, &files, &stems)?
         }
         Data::Recordings(files, _) => {

@@ -9,6 +9,7 @@ use model_core::ActuatorParams;
 
 use super::plausible::{demagnetised_run, spread};
 use super::{fit_constrained, Constraints, FitOptions, FitResult};
+use crate::data_doubts::DataDoubt;
 use crate::recording::Recording;
 use crate::warning::Warning;
 
@@ -23,10 +24,42 @@ const OUTLIER_NRMSE: f64 = 2.5;
 /// moves one file by 3–10×.
 const GAINS_DISAGREE: f64 = 2.0;
 
+/// How far apart (a ratio) one file's displacement spread, against the joint fit's model run
+/// on its drive, must stand from every other file's for it to be checked: a rig's own files at
+/// different drives agree within tens of percent; a file at half the gain stands about 2× apart.
+const ODD_SCALE: f64 = 1.6;
+
+/// The file among `files` whose ratio of measured to modelled displacement spread (the joint
+/// fit's model, run demagnetised on each file's drive) lies [`ODD_SCALE`] or more beyond every
+/// other file's, on one side; `None` when none does.
+fn odd_scale(joint: &FitResult, files: &[Recording]) -> Result<Option<usize>> {
+    let mut logs = Vec::with_capacity(files.len());
+    for rec in files {
+        let (Some(y), Some(sim)) =
+            (rec.displacement_um.as_deref(), demagnetised_run(joint.spec, &joint.params, rec)?)
+        else {
+            return Ok(None);
+        };
+        let ratio = spread(y) / spread(&sim.displacement_um);
+        if !(ratio.is_finite() && ratio > 0.0) {
+            return Ok(None);
+        }
+        logs.push(ratio.ln());
+    }
+    let apart = |k: usize| -> f64 {
+        let others = logs.iter().enumerate().filter(|(j, _)| *j != k).map(|(_, v)| *v);
+        let (lo, hi) = others.fold((f64::MAX, f64::MIN), |(l, h), v| (l.min(v), h.max(v)));
+        (logs[k] - hi).max(lo - logs[k])
+    };
+    let k = (0..logs.len()).max_by(|&a, &b| apart(a).total_cmp(&apart(b)));
+    Ok(k.filter(|&k| apart(k) >= ODD_SCALE.ln()))
+}
+
 /// The file among `files` whose displacement the other files' model, fitted without it
 /// (from `start` and the joint fit's result), makes [`GAINS_DISAGREE`] times too small or too
 /// large on its own drive, when the joint fit `joint` followed it [`OUTLIER_NRMSE`] times worse
-/// than every other file. One more fit, only when a file stands out so.
+/// than every other file, or its scale stands apart ([`odd_scale`]). One more fit, only when a
+/// file stands out so.
 pub fn scale_outlier(
     start: &ActuatorParams,
     joint: &FitResult,
@@ -40,9 +73,19 @@ pub fn scale_outlier(
     };
     let others_worst =
         scores.iter().enumerate().filter(|(k, _)| *k != worst).map(|(_, s)| *s).fold(0.0, f64::max);
-    if files.len() < 2 || scores[worst] < OUTLIER_NRMSE * others_worst {
+    if files.len() < 2 {
         return Ok(None);
     }
+    // The file the joint fit follows worst, or else the one whose scale stands apart (a file at
+    // a lower gain reads small against its own range, and the others bend more).
+    let worst = if scores[worst] >= OUTLIER_NRMSE * others_worst {
+        worst
+    } else {
+        match odd_scale(joint, files)? {
+            Some(k) => k,
+            None => return Ok(None),
+        }
+    };
     let others: Vec<Recording> =
         files.iter().enumerate().filter(|(k, _)| *k != worst).map(|(_, r)| r.clone()).collect();
     let quiet = FitOptions { progress: false, ..opts };
@@ -73,4 +116,32 @@ pub fn scale_outlier(
         others_nrmse: followed,
         doubted_from: GAINS_DISAGREE,
     }))
+}
+
+/// [`super::sign_doubts`] and [`scale_outlier`] on the fit files (the sign doubts on `val_files`
+/// too): a file named at another scale is not also said to read better negated (a poor joint fit
+/// of it says nothing of its wiring, and negating it would damage good data).
+pub fn sign_and_scale_doubts(
+    start: &ActuatorParams,
+    joint: &FitResult,
+    files: &[Recording],
+    val_files: &[Recording],
+    opts: FitOptions,
+    constraints: &Constraints,
+) -> Result<Vec<Warning>> {
+    let scale = scale_outlier(start, joint, files, opts, constraints)?;
+    let named = match &scale {
+        Some(Warning::GainsDisagree { file, .. }) => Some(file.clone()),
+        _ => None,
+    };
+    let mut doubts: Vec<Warning> =
+        super::sign_doubts(joint.spec, &joint.params, files.iter().chain(val_files))?
+            .into_iter()
+            .filter(|w| match w {
+                Warning::Data(DataDoubt::BothNegated { file, .. }) => Some(file) != named.as_ref(),
+                _ => true,
+            })
+            .collect();
+    doubts.extend(scale);
+    Ok(doubts)
 }
