@@ -221,6 +221,38 @@ fn the_corrected_sub_steps_are_as_many_as_their_tolerance_asks() {
     }
 }
 
+/// The corrected sub-steps' error estimate is what their documentation says: the difference
+/// between the corrected integrated magnetization and the explicit sub-step's (M_irr; M for the
+/// total forms), here for one sub-step rising and falling from states round a loop; and their
+/// first try spans 8 explicit sub-steps.
+#[test]
+fn the_corrected_error_estimate_is_the_corrected_minus_the_explicit_step() {
+    for variant in JaVariant::ALL {
+        let ja = JilesAtherton::new(JaParams { variant, ..JaParams::TSMA_ROD1_002 }).unwrap();
+        let dh_max = ja.max_substep_a_per_m();
+        let mut s = JaState::default();
+        for h in [15_000.0f32, 40_000.0, 10_000.0, -30_000.0, 0.0] {
+            ja.step(&mut s, h);
+            for dh in [dh_max, -dh_max, 0.3 * dh_max] {
+                let (mut corrected, mut explicit) = (s, s);
+                let err = ja.substeps_corrected(&mut corrected, 1, dh, direction_of(dh));
+                ja.substep(&mut explicit, dh);
+                let diff = (corrected.m_irr_a_per_m - explicit.m_irr_a_per_m).abs();
+                assert!(
+                    (err - diff).abs() <= 1e-6 * ja.params().ms_a_per_m,
+                    "{variant} at {h}, dh {dh}: {err} vs {diff}"
+                );
+                assert!(err > 0.0 || diff == 0.0);
+            }
+        }
+        for k in [0u32, 1, 5] {
+            let dh = (k as f32 + 0.5) * 8.0 * dh_max;
+            assert_eq!(ja.first_corrected_count(dh), k + 1, "{variant}");
+            assert_eq!(ja.first_corrected_count(-dh), k + 1, "{variant}");
+        }
+    }
+}
+
 /// The sub-step is min(a/4, k/2): with a small pinning field (k = a/20) and with a mean field
 /// of consequence (α·M_s/(3a) = 0.61) the loop at 100 samples per cycle stays within
 /// 2·10⁻³ M_s of the one at 64 000, whose steps (≤ 6.4 A/m) are over 20× finer.
@@ -357,6 +389,73 @@ fn variant_names_round_trip_and_the_default_is_the_bulk_form() {
         assert_eq!(JaVariant::from_name(v.name()), Some(v));
     }
     assert_eq!(JaVariant::from_name("ja-1986"), None);
+}
+
+/// The help texts tell the forms apart: each variant's equation and paper are its own, the
+/// equations name the gate (or its absence) and the paper its year; `Display` is the name, and
+/// pads like a string (report columns).
+#[test]
+fn each_variant_describes_its_own_equation_and_paper() {
+    for (i, v) in JaVariant::ALL.into_iter().enumerate() {
+        assert!(v.equation().starts_with("dM") && v.equation().contains("M_an"), "{v}: {}", v.equation());
+        assert!(v.paper().contains("19"), "{v}: {}", v.paper());
+        assert_eq!(format!("{v}"), v.name());
+        for w in &JaVariant::ALL[i + 1..] {
+            assert!(v.equation() != w.equation() && v.name() != w.name(), "{v} and {w}");
+        }
+    }
+    assert!(JaVariant::Ungated1986.equation().contains("no δ_M"));
+    assert!(
+        JaVariant::Szewczyk.equation().contains("(1 + c)")
+            && JaVariant::Szewczyk.paper().contains("Szewczyk")
+    );
+    assert!(
+        JaVariant::Bulk.paper().contains("Venkataraman") && JaVariant::Original1986.paper().contains("1986")
+    );
+    assert_eq!(format!("[{:>10}]", JaVariant::Bulk), "[      bulk]");
+}
+
+/// A refined law's sub-steps are `factor` times finer and it may take that many times more
+/// of them (the factor held to [1, 16]), so a long move is integrated finer, not cut short.
+#[test]
+fn a_refined_law_takes_finer_and_more_sub_steps() {
+    let ja = JilesAtherton::new(JaParams::TSMA_ROD1_002).unwrap();
+    for (factor, applied) in [(0u32, 1u32), (4, 4), (100, 16)] {
+        let fine = ja.refined(factor);
+        assert_eq!(fine.max_substep_a_per_m(), ja.max_substep_a_per_m() / applied as f32, "×{factor}");
+        assert_eq!(fine.substeps_for(1e12), MAX_SUBSTEPS * applied, "×{factor}");
+        assert_eq!(fine.substeps_for(10.0 * ja.max_substep_a_per_m()), 10 * applied + 1, "×{factor}");
+    }
+}
+
+/// A branch starts at the state it is made from: advancing it is the plain step from there.
+#[test]
+fn a_branch_starts_at_its_state() {
+    for variant in JaVariant::ALL {
+        let ja = JilesAtherton::new(JaParams { variant, ..JaParams::TSMA_ROD1_002 }).unwrap();
+        let mut s = JaState::default();
+        ja.step(&mut s, 20_000.0);
+        let (mut plain, mut on_branch, mut b) = (s, s, JaBranch::from(s));
+        assert_eq!(ja.step_on_branch(&mut on_branch, &mut b, 25_000.0, 1.0), ja.step(&mut plain, 25_000.0));
+        assert_eq!(on_branch, plain, "{variant}");
+    }
+}
+
+/// `step_along` returns the magnetization it moves to, and a move against its direction
+/// retraces that branch (the irreversible slope still acting): below where a reversal, which
+/// falls on the reversible slope alone, would be.
+#[test]
+fn a_move_along_a_branch_retraces_it() {
+    for variant in JaVariant::ALL {
+        let ja = JilesAtherton::new(JaParams { variant, ..JaParams::TSMA_ROD1_002 }).unwrap();
+        let mut s = JaState::default();
+        ja.step(&mut s, 20_000.0);
+        let (mut along, mut reversed) = (s, s);
+        let m = ja.step_along(&mut along, 17_000.0, 1.0);
+        ja.step(&mut reversed, 17_000.0);
+        assert_eq!((m, along.h_a_per_m), (along.m_a_per_m, 17_000.0), "{variant}");
+        assert!(m < reversed.m_a_per_m - 1e-3 * ja.params().ms_a_per_m, "{variant}: {m} vs {reversed:?}");
+    }
 }
 
 #[test]
