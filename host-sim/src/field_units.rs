@@ -44,6 +44,12 @@ fn field_floor_value(spec: ModelSpec, p: &ActuatorParams, key: &str) -> Option<f
     }
 }
 
+/// The doubt about set `name` (as a command says it) when it holds a field in kA/m for `spec`.
+pub fn kilo_doubt(name: &str, spec: ModelSpec, p: &ActuatorParams) -> Option<String> {
+    let kilo = fields_in_kilo(spec, p);
+    (!kilo.is_empty()).then(|| format!("{name} holds {}", kilo_words(&kilo)))
+}
+
 /// [`fields_in_kilo`] in words: "`coil.bias_a_per_m` = 8 A/m (…)".
 pub fn kilo_words(fields: &[(&'static str, f64)]) -> String {
     let each: Vec<String> = fields.iter().map(|(k, v)| format!("`{k}` = {v} A/m")).collect();

@@ -314,9 +314,9 @@ const MAX_SECANT_SUSCEPTIBILITY: f64 = 1e4;
 /// that field: most often H in kA/m read as A/m (a J–A fit then returns a and k of a few A/m and
 /// scores well: a plausible wrong answer), or a very soft magnet's loop.
 pub(crate) fn field_in_kilo(f: &LoopFile) -> Option<Warning> {
-    let m = f.magnetization();
-    let at = (0..f.h.len()).max_by(|&i, &j| f.h[i].abs().total_cmp(&f.h[j].abs()))?;
-    let (h, m_peak) = (f.h[at].abs(), span(&m).1.max(-span(&m).0));
+    let (m_lo, m_hi) = span(&f.magnetization());
+    let (h_lo, h_hi) = span(&f.h);
+    let (h, m_peak) = (h_hi.max(-h_lo), m_hi.max(-m_lo));
     (h > 0.0 && m_peak / h > MAX_SECANT_SUSCEPTIBILITY).then(|| Warning::LoopFieldSmall {
         file: f.name.clone(),
         h_peak_a_per_m: h,

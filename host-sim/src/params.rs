@@ -128,9 +128,8 @@ pub fn load_text(
             "{name}: {why}; a fit and the drive refuse it, other commands use it as given"
         ));
     }
-    let kilo = crate::field_units::fields_in_kilo(spec, &f.params);
-    if !kilo.is_empty() {
-        crate::warning::warn(format_args!("{name} holds {}", crate::field_units::kilo_words(&kilo)));
+    if let Some(doubt) = crate::field_units::kilo_doubt(name, spec, &f.params) {
+        crate::warning::warn(doubt);
     }
     let parameters_not_fitted = not_fitted_in(text);
     Ok((

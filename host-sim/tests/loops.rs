@@ -201,6 +201,12 @@ fn fit_loop_json(path: &std::path::Path) -> serde_json::Value {
     serde_json::from_slice(&o.stdout).unwrap()
 }
 
+/// The warnings of `gma fit --model ja` on `rows` (`H,M` in A/m) written to `path`.
+fn fit_warnings(path: &std::path::Path, rows: &[String]) -> Vec<String> {
+    std::fs::write(path, format!("H(A/m),M(A/m)\n{}\n", rows.join("\n"))).unwrap();
+    warnings(&fit_loop_json(path))
+}
+
 fn warnings(j: &serde_json::Value) -> Vec<String> {
     j["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap().to_string()).collect()
 }
@@ -233,10 +239,7 @@ fn a_weak_loop_is_fitted_within_the_models_range_and_said() {
 fn a_loop_traversed_clockwise_is_said() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("loop.csv");
-    let said = |rows: &[String]| -> Vec<String> {
-        std::fs::write(&path, format!("H(A/m),M(A/m)\n{}\n", rows.join("\n"))).unwrap();
-        warnings(&fit_loop_json(&path))
-    };
+    let said = |rows: &[String]| fit_warnings(&path, rows);
     let rows = tanh_loop_rows(8e5, 300.0);
     let reversed: Vec<String> = rows.iter().rev().cloned().collect();
     let clockwise = |w: &[String]| w.iter().any(|w| w.contains("the loop runs clockwise in the H–M plane"));
@@ -261,10 +264,7 @@ fn a_loop_traversed_clockwise_is_said() {
 fn a_loop_with_its_field_in_kilo_amperes_per_metre_is_said() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("loop.csv");
-    let said = |rows: &[String]| -> Vec<String> {
-        std::fs::write(&path, format!("H(A/m),M(A/m)\n{}\n", rows.join("\n"))).unwrap();
-        warnings(&fit_loop_json(&path))
-    };
+    let said = |rows: &[String]| fit_warnings(&path, rows);
     let rows = tanh_loop_rows(8e5, 300.0);
     let in_kilo: Vec<String> = rows
         .iter()

@@ -128,14 +128,7 @@ pub fn run(a: &CompareArgs) -> Result<()> {
             .warnings
             .push(format!("{why}; a fit and the drive refuse it, other commands use it as given"));
     }
-    let kilo = crate::field_units::fields_in_kilo(spec, &p);
-    if !kilo.is_empty() {
-        summary.warnings.push(format!(
-            "{} holds {}",
-            source.parameters_source,
-            crate::field_units::kilo_words(&kilo)
-        ));
-    }
+    summary.warnings.extend(crate::field_units::kilo_doubt(&source.parameters_source, spec, &p));
     folder.keep();
     // The result first, then its doubts heaviest first, then each file's figures.
     let to_stderr = text_to_stderr(a);
