@@ -287,6 +287,9 @@ pub enum Warning {
         others_nrmse: (f64, f64),
         /// The ratio from which scales are doubted.
         doubted_from: f64,
+        /// With only two files, the other one: neither can be told the odd one (`gain` is then
+        /// `file`'s scale against this one's, and `others_nrmse` each file's own fit).
+        pair: Option<String>,
     },
     /// A parameter set run with effects the model it was fitted as lacks: their values are start
     /// values.
@@ -535,9 +538,10 @@ impl fmt::Display for Warning {
                 )
             }
             Warning::FluxScaleAtBound { file, scale } => flux_scale_at_bound(f, file, *scale),
-            Warning::GainsDisagree { file, gain, joint_nrmse, others_nrmse, doubted_from } => {
-                gains_disagree(f, file, *gain, *joint_nrmse, *others_nrmse, *doubted_from)
-            }
+            Warning::GainsDisagree { file, gain, joint_nrmse, others_nrmse, doubted_from, pair } => match pair {
+                None => gains_disagree(f, file, *gain, *joint_nrmse, *others_nrmse, *doubted_from),
+                Some(other) => pair_gains_disagree(f, (other, file), *gain, *others_nrmse, *doubted_from),
+            },
             Warning::EffectsNotFitted { params, model, effects } => write!(
                 f,
                 "{params} was fitted as a model without `{}`, run here as `{model}`: those values are the start \
@@ -674,11 +678,32 @@ fn gains_disagree(
          (the model fitted without it, which follows them at {followed}, run on its drive from the \
          demagnetised rod); the joint fit follows it at {:.2} % only by bending every parameter: files of one \
          rig do not disagree so (doubted from {doubted_from}×). A probe gain or range not the others' (an amplifier range \
-         switch, a sensitivity entered for another probe) or a file of another rig reads like this; check its \
-         probe scale (if that is the cause, divide its displacement by {gain:.3} and fit again) or fit it on its \
-         own. An effect the model lacks that acts on this file alone (a drive near a mode, hours of heating) \
+         switch, a sensitivity entered for another probe), a current clamp's range or a command in other units, \
+         or a file of another rig reads like this; check its probe's and its drive's scales (if the probe is the \
+         cause, divide its displacement by {gain:.3} and fit again) or fit it on its own. An effect the model lacks that acts on this file alone (a drive near a mode, hours of heating) \
          can read so too: `gma diagnose` tells",
         100.0 * joint_nrmse,
+    )
+}
+
+/// [`Warning::GainsDisagree`] of two files in words: which of them is off, nothing tells.
+fn pair_gains_disagree(
+    f: &mut fmt::Formatter<'_>,
+    (first, second): (&str, &str),
+    gain: f64,
+    (first_own, second_own): (f64, f64),
+    doubted_from: f64,
+) -> fmt::Result {
+    write!(
+        f,
+        "{first} and {second}: their displacement per unit drive disagrees by {gain:.3}× ({second}'s against \
+         {first}'s, each file's model, fitted to it alone (at {:.2} % and {:.2} %), run on the other's drive from \
+         the demagnetised rod, the two readings mirroring each other): files of one rig do not disagree so \
+         (doubted from {doubted_from}×), and two files cannot tell which of them is off. A probe gain or range, \
+         a current clamp's range or a command in other units in one of them, or files of two rigs, read like \
+         this; check both files' probe and drive scales, or fit each on its own",
+        100.0 * first_own,
+        100.0 * second_own,
     )
 }
 

@@ -1287,6 +1287,22 @@ fn report_writes_each_models_parameters_that_compare_reproduces() {
     assert!(!o.status.success() && e.contains("it is the input"), "{e}");
     assert!(!e.contains("diagnos"), "refused before the ladder: {e}");
     assert_eq!(std::fs::read(first).unwrap(), before);
+    // Another rig's files into the same folder: its ladder would replace some rungs and leave
+    // the others; refused at once, naming a file there, nothing overwritten.
+    let o = gma(&[
+        "report",
+        "--model",
+        "ja",
+        &fit2,
+        "-o",
+        html.to_str().unwrap(),
+        "--params-out-dir",
+        out.to_str().unwrap(),
+    ]);
+    let e = common::err(&o);
+    assert!(!o.status.success() && e.contains("fitted to other files") && e.contains("params-"), "{e}");
+    assert!(!e.contains("diagnos"), "refused before the ladder: {e}");
+    assert_eq!(std::fs::read(first).unwrap(), before);
 }
 
 /// A mass–spring–damper outside what a model's `mech` holds at the sample rate is refused with

@@ -160,6 +160,57 @@ fn a_file_at_another_probe_gain_is_named() {
     assert!(w.contains("third.csv: its displacement spreads 0.3"), "{w}");
 }
 
+/// `file` with its displacement logged `rows` samples late (an ADC's channel skew), as
+/// `dir/name`: the first `rows` rows dropped, each displacement from `rows` rows before.
+fn displacement_late(dir: &Path, file: &str, name: &str, rows: usize) -> String {
+    let text = std::fs::read_to_string(file).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let y = lines[0].split(',').position(|c| c == "displacement_um").unwrap();
+    let mut out = format!("{}\n", lines[0]);
+    for k in 1 + rows..lines.len() {
+        let mut cells: Vec<&str> = lines[k].split(',').collect();
+        cells[y] = lines[k - rows].split(',').nth(y).unwrap();
+        out.push_str(&cells.join(","));
+        out.push('\n');
+    }
+    let path = dir.join(name);
+    std::fs::write(&path, out).unwrap();
+    path.display().to_string()
+}
+
+/// Two files: neither can be told the odd one. A file at 3× the other's probe gain is said as
+/// the pair disagreeing (both named, no advice to rescale either); two files of one rig whose
+/// displacement is logged 3 samples late (a sine's model runs badly on a chirp's drive) were
+/// once told "divide its displacement by 3.56", and now nothing is said of their scales.
+#[test]
+fn two_files_at_other_scales_are_said_as_a_pair() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let a = rig_file(d, "a.csv", multisine(8), 10_000.0, 1.0, 3);
+    let c = rig_file(
+        d,
+        "c.csv",
+        Waveform::Steps { levels: vec![0.0, 1.0, -1.0, 0.5], hold_s: 0.25 },
+        10_000.0,
+        1.0,
+        5,
+    );
+    let three = scaled(d, &c, "three.csv", 3.0, false);
+    let w = warnings(&json(&["fit", "--model", "ja+mech", &a, &three]));
+    assert!(
+        w.contains("a.csv and ") && w.contains("three.csv: their displacement per unit drive disagrees by"),
+        "{w}"
+    );
+    assert!(!w.contains("divide its displacement"), "{w}");
+    let sine = rig_file(d, "sine.csv", sine(100.0), 10_000.0, 1.0, 11);
+    let chirp = Waveform::Chirp { f0_hz: 200.0, f1_hz: 2000.0, log: false };
+    let chirp = rig_file(d, "chirp.csv", chirp, 10_000.0, 1.0, 12);
+    let (sine, chirp) =
+        (displacement_late(d, &sine, "sine-late.csv", 3), displacement_late(d, &chirp, "chirp-late.csv", 3));
+    let w = warnings(&json(&["fit", "--model", "ja+mech", &sine, &chirp]));
+    assert!(!w.contains("disagrees by") && !w.contains("spreads"), "{w}");
+}
+
 /// One rig logged at 10 kHz and at 5 kHz, fitted jointly: each file is stepped at its own rate,
 /// so the mode (the rig's 1 700 Hz, below both Nyquist frequencies) is found, and no warning
 /// says the files cannot show it (a joint fit once returned 11 238 Hz, ζ 0.021).

@@ -61,6 +61,39 @@ fn ladder_files_in(dir: &Path) -> Result<Vec<PathBuf>> {
         .collect())
 }
 
+/// Refuses a ladder file already in `--params-out-dir` that was not fitted to this run's inputs
+/// (`ours`, their SHA-256 digests), as its header's `# input … sha256 …` lines say: this run
+/// would replace the rungs it shares with that ladder and leave the others beside them, two
+/// rigs' parameters read as one ladder.
+fn from_these_inputs(existing: &Path, ours: &[String]) -> Result<()> {
+    let text = std::fs::read_to_string(existing).unwrap_or_default();
+    let mut theirs: Vec<&str> = text
+        .lines()
+        .take_while(|l| l.starts_with('#'))
+        .filter_map(|l| l.strip_prefix("# input ")?.rsplit_once(" sha256 ").map(|(_, d)| d.trim()))
+        .collect();
+    theirs.sort_unstable();
+    theirs.dedup();
+    let mut ours: Vec<&str> = ours.iter().map(String::as_str).collect();
+    ours.sort_unstable();
+    ours.dedup();
+    if theirs != ours {
+        let what = if theirs.is_empty() {
+            "has no `# input` lines in its header, so it was not written by a `gma report` on these files"
+        } else {
+            "was fitted to other files (the inputs its header lists are not this run's)"
+        };
+        bail!(
+            "--params-out-dir {}: {} {what}; this run would replace the ladder files it shares with it and \
+             leave the others beside them, two ladders read as one. Choose an empty folder, or move the \
+             params-K-….toml files out of this one",
+            display(existing.parent().unwrap_or(Path::new("."))),
+            display(Path::new(existing.file_name().unwrap_or_default())),
+        );
+    }
+    Ok(())
+}
+
 /// Writes each model's parameter file (paths from [`params_paths`]), after checking them all;
 /// each marks what no file constrained when fitted on `fit_files` ([`fit::not_fitted`]).
 fn write_params(
@@ -97,8 +130,10 @@ pub fn run(a: &ReportArgs) -> Result<()> {
     // earlier rung's file is a natural next run, and would be overwritten after the ladder.
     if let Some((dir, _)) = params_folder {
         check_outputs(&[params_paths(dir, &[p.spec])[0].as_path()], &p.inputs)?;
+        let ours: Vec<String> = crate::digests::input_digests().into_iter().map(|d| d.sha256).collect();
         for existing in ladder_files_in(dir)? {
             check_outputs(&[existing.as_path()], &p.inputs)?;
+            from_these_inputs(&existing, &ours)?;
         }
     }
     p.warn_about_inputs();

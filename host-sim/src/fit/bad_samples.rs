@@ -298,10 +298,10 @@ fn comes_back(x: &[f64], k: usize) -> Option<usize> {
 }
 
 /// The runs of `x` at one exact value for [`STUCK_RUN`] samples and more while `reference`
-/// crossed [`STUCK_DRIVE_SHARE`] of its span, or a tenth with `clip_only` (first run's index
-/// and value, runs, samples).
-/// `clip_only`: only runs at `x`'s range end that `x` reached by a change under a twentieth of
-/// its span (a clamp saturating; a square drive's level, reached by a step, is no clip).
+/// crossed [`STUCK_DRIVE_SHARE`] of its span, or a tenth for a clip: a run at `x`'s range end
+/// that `x` reached by a change under a twentieth of its span (a sensor saturating; a square
+/// drive's level, reached by a step, is no clip). First run's index and value, runs, samples.
+/// `clip_only`: only clips (a current clamp: the current stands still at a drive's hold).
 fn stuck_runs(x: &[f64], reference: &[f64], clip_only: bool) -> Option<(usize, f64, usize, usize)> {
     let (lo, hi) = bounds(x);
     let (ref_lo, ref_hi) = bounds(reference);
@@ -312,13 +312,13 @@ fn stuck_runs(x: &[f64], reference: &[f64], clip_only: bool) -> Option<(usize, f
             continue;
         }
         let (r_lo, r_hi) = bounds(&reference[start..k]);
-        // A clip's run, at a range end reached smoothly, needs only a tenth.
-        let share = if clip_only { STUCK_DRIVE_SHARE / 2.5 } else { STUCK_DRIVE_SHARE };
-        let moved = r_hi - r_lo > share * (ref_hi - ref_lo);
+        let moved = |share: f64| r_hi - r_lo > share * (ref_hi - ref_lo);
         let clipped = (x[start] == lo || x[start] == hi)
             && start > 0
             && (x[start] - x[start - 1]).abs() < 0.05 * (hi - lo);
-        if k - start >= STUCK_RUN && moved && (!clip_only || clipped) {
+        // A clip's run, at a range end reached smoothly, needs only a tenth.
+        let stuck = (!clip_only && moved(STUCK_DRIVE_SHARE)) || (clipped && moved(STUCK_DRIVE_SHARE / 2.5));
+        if k - start >= STUCK_RUN && stuck {
             runs += 1;
             samples += k - start;
             first.get_or_insert((start, x[start]));

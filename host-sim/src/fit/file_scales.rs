@@ -59,7 +59,7 @@ fn odd_scale(joint: &FitResult, files: &[Recording]) -> Result<Option<usize>> {
 /// (from `start` and the joint fit's result), makes [`GAINS_DISAGREE`] times too small or too
 /// large on its own drive, when the joint fit `joint` followed it [`OUTLIER_NRMSE`] times worse
 /// than every other file, or its scale stands apart ([`odd_scale`]). One more fit, only when a
-/// file stands out so.
+/// file stands out so; with two files, two ([`pair_disagrees`]).
 pub fn scale_outlier(
     start: &ActuatorParams,
     joint: &FitResult,
@@ -86,21 +86,17 @@ pub fn scale_outlier(
             None => return Ok(None),
         }
     };
+    let quiet = FitOptions { progress: false, ..opts };
+    if files.len() == 2 {
+        return pair_disagrees(start, joint, files, quiet, constraints);
+    }
     let others: Vec<Recording> =
         files.iter().enumerate().filter(|(k, _)| *k != worst).map(|(_, r)| r.clone()).collect();
-    let quiet = FitOptions { progress: false, ..opts };
-    let Ok(without) = fit_constrained(joint.spec, &[*start, joint.params], &others, quiet, constraints)
+    let Some((ratio, without)) = scale_without(start, joint, &others, &files[worst], quiet, constraints)?
     else {
         return Ok(None);
     };
-    let rec = &files[worst];
-    let (Some(y), Some(sim)) =
-        (rec.displacement_um.as_deref(), demagnetised_run(joint.spec, &without.params, rec)?)
-    else {
-        return Ok(None);
-    };
-    let ratio = spread(y) / spread(&sim.displacement_um);
-    if !(ratio.is_finite() && ratio > 0.0) || (1.0 / GAINS_DISAGREE..GAINS_DISAGREE).contains(&ratio) {
+    if (1.0 / GAINS_DISAGREE..GAINS_DISAGREE).contains(&ratio) {
         return Ok(None);
     }
     let followed = without
@@ -110,11 +106,79 @@ pub fn scale_outlier(
         .map(|s| s.nrmse)
         .fold((f64::MAX, f64::MIN), |(l, h), s| (l.min(s), h.max(s)));
     Ok(Some(Warning::GainsDisagree {
-        file: rec.name.clone(),
+        file: files[worst].name.clone(),
         gain: ratio,
         joint_nrmse: scores[worst],
         others_nrmse: followed,
         doubted_from: GAINS_DISAGREE,
+        pair: None,
+    }))
+}
+
+/// `rec`'s displacement spread against what the model fitted to `others` (from `start` and the
+/// joint fit's result) makes of its drive from the demagnetised rod, and that fit; `None` where
+/// the fit or the run fails.
+fn scale_without(
+    start: &ActuatorParams,
+    joint: &FitResult,
+    others: &[Recording],
+    rec: &Recording,
+    quiet: FitOptions,
+    constraints: &Constraints,
+) -> Result<Option<(f64, FitResult)>> {
+    let Ok(without) = fit_constrained(joint.spec, &[*start, joint.params], others, quiet, constraints) else {
+        return Ok(None);
+    };
+    let (Some(y), Some(sim)) =
+        (rec.displacement_um.as_deref(), demagnetised_run(joint.spec, &without.params, rec)?)
+    else {
+        return Ok(None);
+    };
+    let ratio = spread(y) / spread(&sim.displacement_um);
+    Ok((ratio.is_finite() && ratio > 0.0).then_some((ratio, without)))
+}
+
+/// How far the two files' scales, each judged by the other's model, may fail to mirror each
+/// other (a gain g reads g one way and 1/g the other) and still be one scale's difference: a
+/// model fitted to one file's drive and run on another's (a sine's on a chirp's) can miss by
+/// more than any gain, and then it says nothing of the scales.
+const PAIR_MIRROR: f64 = 1.5;
+
+/// Two files: neither can be told the odd one, so each is judged by the other's model, and the
+/// pair said to disagree when both readings do, [`GAINS_DISAGREE`] or more apart, and mirror
+/// each other within [`PAIR_MIRROR`] (a second file's gain g reads g one way and 1/g the other;
+/// a model that cannot carry one file's drive to the other's reads them at random).
+fn pair_disagrees(
+    start: &ActuatorParams,
+    joint: &FitResult,
+    files: &[Recording],
+    quiet: FitOptions,
+    constraints: &Constraints,
+) -> Result<Option<Warning>> {
+    let (a, b) = (&files[0], &files[1]);
+    let Some((b_by_a, from_a)) = scale_without(start, joint, std::slice::from_ref(a), b, quiet, constraints)?
+    else {
+        return Ok(None);
+    };
+    let Some((a_by_b, from_b)) = scale_without(start, joint, std::slice::from_ref(b), a, quiet, constraints)?
+    else {
+        return Ok(None);
+    };
+    let disagree = |r: f64| !(1.0 / GAINS_DISAGREE..GAINS_DISAGREE).contains(&r);
+    let mirrored = (b_by_a * a_by_b).ln().abs() <= PAIR_MIRROR.ln();
+    if !(disagree(b_by_a) && disagree(a_by_b) && mirrored) {
+        return Ok(None);
+    }
+    let followed = |f: &FitResult| f.fit.files.first().map_or(f64::NAN, |s| s.nrmse);
+    let scores: Vec<f64> = joint.fit.files.iter().map(|s| s.nrmse).collect();
+    Ok(Some(Warning::GainsDisagree {
+        file: b.name.clone(),
+        // b's scale against a's: the geometric mean of both readings.
+        gain: (b_by_a / a_by_b).sqrt(),
+        joint_nrmse: scores.get(1).copied().unwrap_or(f64::NAN),
+        others_nrmse: (followed(&from_a), followed(&from_b)),
+        doubted_from: GAINS_DISAGREE,
+        pair: Some(a.name.clone()),
     }))
 }
 
@@ -130,15 +194,17 @@ pub fn sign_and_scale_doubts(
     constraints: &Constraints,
 ) -> Result<Vec<Warning>> {
     let scale = scale_outlier(start, joint, files, opts, constraints)?;
-    let named = match &scale {
-        Some(Warning::GainsDisagree { file, .. }) => Some(file.clone()),
-        _ => None,
+    let named: Vec<String> = match &scale {
+        Some(Warning::GainsDisagree { file, pair, .. }) => {
+            std::iter::once(file.clone()).chain(pair.clone()).collect()
+        }
+        _ => Vec::new(),
     };
     let mut doubts: Vec<Warning> =
         super::sign_doubts(joint.spec, &joint.params, files.iter().chain(val_files))?
             .into_iter()
             .filter(|w| match w {
-                Warning::Data(DataDoubt::BothNegated { file, .. }) => Some(file) != named.as_ref(),
+                Warning::Data(DataDoubt::BothNegated { file, .. }) => !named.contains(file),
                 _ => true,
             })
             .collect();
