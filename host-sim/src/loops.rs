@@ -264,16 +264,21 @@ fn span(v: &[f64]) -> (f64, f64) {
 /// A loop traversed clockwise in the H–M plane: a ferromagnet's loop runs counterclockwise (the
 /// rising branch below the falling one), ∮ M dH < 0, so a positive area over 1 % of the loop's
 /// bounding box says the rows are in reverse time order. Only for files that run (nearly) a
-/// whole loop from an end of the field's range: the H path's total variation from there at
-/// least 1.8 × its range.
+/// whole loop from an end of the field's range, or close on their first point: the H path's
+/// total variation from there at least 1.8 × its range.
 pub(crate) fn clockwise(f: &LoopFile) -> Option<Warning> {
     let (h_lo, h_hi) = span(&f.h);
     // From the first point at an end of the field's range: an initial magnetization curve before
     // it (from the demagnetized state) is not part of the loop, and closing it back to its start
     // would add its own area.
     let near_end = |h: f64| (h - h_lo).min(h_hi - h) <= 0.02 * (h_hi - h_lo);
-    let first = f.h.iter().position(|&h| near_end(h))?;
     let all_m = f.magnetization();
+    // A file that closes on its own first point (a whole cycle from mid-loop) is all loop.
+    let (all_lo, all_hi) = span(&all_m);
+    let (h_ends, m_ends) = ((f.h.first()?, f.h.last()?), (all_m.first()?, all_m.last()?));
+    let closed = (h_ends.1 - h_ends.0).abs() <= 0.02 * (h_hi - h_lo)
+        && (m_ends.1 - m_ends.0).abs() <= 0.02 * (all_hi - all_lo);
+    let first = if closed { 0 } else { f.h.iter().position(|&h| near_end(h))? };
     let (h, m) = (&f.h[first..], &all_m[first..]);
     let (m_lo, m_hi) = span(m);
     let travel: f64 = h.windows(2).map(|w| (w[1] - w[0]).abs()).sum();

@@ -255,6 +255,13 @@ fn a_loop_traversed_clockwise_is_said() {
     let backwards = said(&reversed);
     let named = format!("{}: the loop runs clockwise", path.display());
     assert!(clockwise(&backwards) && backwards.iter().any(|w| w.starts_with(&named)), "{backwards:?}");
+    // A whole cycle from mid-branch, closed on its first point (H = 0 on the falling branch):
+    // from its first end the path runs 1.5 ranges only, and the reversed file was not said.
+    let mid = 50;
+    let cycle: Vec<String> = rows[mid..].iter().chain(&rows[..=mid]).cloned().collect();
+    assert!(!clockwise(&said(&cycle)), "{:?}", said(&cycle));
+    let cycle_reversed: Vec<String> = cycle.iter().rev().cloned().collect();
+    assert!(clockwise(&said(&cycle_reversed)), "{:?}", said(&cycle_reversed));
 }
 
 /// H written in kA/m under an A/m header: the loop reaches M_s at fields of a few A/m, a J–A fit

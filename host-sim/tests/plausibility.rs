@@ -465,3 +465,22 @@ fn a_thermometer_in_kelvin_is_said_with_its_unit() {
         warnings(&compare(&["--model", "ja+mech", "--column", "temperature_C=temperature_C:K", &f]).unwrap());
     assert!(!w.join("\n").contains("kelvin"), "{w:?}");
 }
+
+/// A command logged in mV beside the logged current, run through an amplifier's model (the
+/// command drives it): the current's scale was checked and the command's not, so the fit ran
+/// to 25.6 % with its gain at a range end, and the only unit hint asked about the displacement.
+/// Refused with the command's unit, as a file without the current column is; a model driven by
+/// the current is not troubled by it.
+#[test]
+fn a_command_in_millivolts_beside_the_current_is_refused_with_its_unit() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = simulate(dir.path(), "good.csv", &["--model", "amp+ja+mech", "--duration-s", "0.2"]);
+    let u = column(&good, "command_V");
+    let mv = edited(dir.path(), &good, "mv.csv", None, |_, c| c[u] = scaled(&c[u], 1e3));
+    refused(
+        &gma(&["compare", "--model", "amp+ja+mech", &mv]),
+        &["mv.csv: ", "`command_V` reaches", "--column command_V=command_V:mV"],
+        "a command in mV",
+    );
+    assert!(compare(&["--model", "ja+mech", &mv]).is_ok(), "driven by the current");
+}

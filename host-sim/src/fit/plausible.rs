@@ -16,7 +16,7 @@ use crate::error::InRecording;
 use crate::recording::Recording;
 use crate::signal::correlation;
 use crate::simulated::Simulation;
-use crate::simulation::{drive_for, model_input, run_model, InitialState, Prepared};
+use crate::simulation::{drive_for, model_input, run_model, Drive, InitialState, Prepared};
 use crate::warning::Warning;
 
 /// The checks of `files` before any work: each drives `spec` ([`drive_for`]), has no isolated
@@ -57,7 +57,10 @@ const CLEARLY_WORSE: f64 = 2.0;
 pub fn check_physics(spec: ModelSpec, params: &ActuatorParams, rec: &Recording) -> Result<()> {
     if let Some(current) = rec.current_a.as_deref() {
         current_scale(params, &rec.name, "current_A", current, 1.0)?;
-    } else if let Some(command) = rec.command_v.as_deref() {
+    }
+    // The command too where it drives the model (an amplifier's structure), logged current or not.
+    let by_command = rec.current_a.is_none() || !matches!(drive_for(spec, rec), Ok(Drive::Current));
+    if let Some(command) = rec.command_v.as_deref().filter(|_| by_command) {
         current_scale(params, &rec.name, "command_V", command, params.amp.gain_a_per_v as f64)?;
     }
     channel_signs(spec, params, rec)
