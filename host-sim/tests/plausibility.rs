@@ -296,6 +296,28 @@ fn a_dropped_run_a_spiked_last_row_and_a_re_zeroed_probe_are_refused() {
             cmd[0],
         );
     }
+    // At 100 samples a period a quarter of the range is under 20× the mean change around it
+    // (a tester's 40 µm re-zero on a 143 µm span went unsaid); it breaks the line its
+    // neighbouring changes draw, which the drive's do not.
+    let fast = simulate(
+        dir.path(),
+        "fast.csv",
+        &["--freq-hz", "100", "--duration-s", "0.5", "--bias", "0.5", "--noise-um", "0.05"],
+    );
+    compare(&["--model", "ja+mech", &fast]).unwrap();
+    let all = rows(&fast);
+    let span =
+        all.iter().map(|r| r[y]).fold(f64::MIN, f64::max) - all.iter().map(|r| r[y]).fold(f64::MAX, f64::min);
+    let zeroed = edited(dir.path(), &fast, "fast-zeroed.csv", None, |k, c| {
+        if k >= step_at {
+            c[y] = format!("{}", c[y].parse::<f64>().unwrap() - 0.25 * span);
+        }
+    });
+    refused(
+        &gma(&["compare", "--model", "ja", &zeroed]),
+        &["fast-zeroed.csv: ", "steps from", &format!("time_s = {}", all[step_at][0]), "re-zeroed"],
+        "a re-zeroed probe at 100 samples a period",
+    );
 }
 
 /// A probe clipped at its range (the displacement held at one value over the top of each

@@ -250,21 +250,31 @@ fn level_steps(rec: &Recording) -> Result<()> {
         // mode settling): judged from the lookback's end on.
         for k in STEP_LOOKBACK..n {
             let jump = (x[k] - x[k - 1]).abs();
-            if jump <= SPIKE_CHANGES * floor || jump <= SPIKE_CHANGES * local_change(x, k, k, floor) {
+            if jump <= SPIKE_CHANGES * floor {
+                continue;
+            }
+            // Beyond the mean change around it, a slow channel's level tells a run that comes
+            // back; a step found only by the line it breaks (a fast channel) by a sharp return.
+            let by_level = jump > SPIKE_CHANGES * local_change(x, k, k, floor);
+            if !by_level && !breaks_line(x, k, floor) {
                 continue;
             }
             if drive_stepped_near(drive, k, drive_floor) {
                 continue;
             }
             let time = rec.time_s[k];
-            if let Some(rows) = comes_back(x, k) {
+            let beyond = if by_level {
+                format!("over {SPIKE_CHANGES}× its local sample-to-sample change")
+            } else {
+                format!("off the line of its neighbouring changes by over {SPIKE_CHANGES}× the local departure from one")
+            };
+            if let Some(rows) = comes_back(x, k, by_level) {
                 let last = k + rows - 1;
                 return Err(InRecording::error(
                     &rec.name,
                     format!(
                         "`{name}` jumps from {} to {} at time_s = {time} (sample {k} as read) and comes back \
-                         after {rows} rows (samples {k}–{last}), over {SPIKE_CHANGES}× its local sample-to-sample \
-                         change, while `{drive_name}` did not step: a sensor over range or lost samples, not the \
+                         after {rows} rows (samples {k}–{last}), {beyond}, while `{drive_name}` did not step: a sensor over range or lost samples, not the \
                          actuator, and it would set the NRMSE's range (max − min) so that a wrong model scores \
                          as a right one; {}, and run again",
                         x[k - 1],
@@ -276,8 +286,8 @@ fn level_steps(rec: &Recording) -> Result<()> {
             return Err(InRecording::error(
                 &rec.name,
                 format!(
-                    "`{name}` steps from {} to {} at time_s = {time} (sample {k} as read), over {SPIKE_CHANGES}× \
-                     its local sample-to-sample change, and stays there, while `{drive_name}` did not step in \
+                    "`{name}` steps from {} to {} at time_s = {time} (sample {k} as read), {beyond}, \
+                     and stays there, while `{drive_name}` did not step in \
                      the {STEP_LOOKBACK} samples before: a sensor re-zeroed or knocked during the file, not the \
                      actuator; split the file at that row (two recordings), or remove the step (subtract it from \
                      the rows after), and run again",
@@ -290,11 +300,44 @@ fn level_steps(rec: &Recording) -> Result<()> {
     Ok(())
 }
 
-/// How many rows after `x` steps at `k` it comes back to its level before (within a quarter
-/// of the step) within [`STEP_LOOKBACK`] samples: a run off range, not a level step.
-fn comes_back(x: &[f64], k: usize) -> Option<usize> {
+/// How far `x`'s change into `k` stands off the line of its neighbouring changes:
+/// Δ_k − (Δ_{k−1} + Δ_{k+1})/2, a third difference for a smooth channel, the step for a step.
+fn line_gap(x: &[f64], k: usize) -> f64 {
+    (x[k] - x[k - 1]) - 0.5 * ((x[k - 1] - x[k - 2]) + (x[k + 1] - x[k]))
+}
+
+/// A level step too small against the mean change around it (a quarter of the range where a
+/// fast sine moves a fiftieth a sample) still breaks the line its neighbouring changes draw:
+/// its [`line_gap`] is over 3× either neighbouring change (a corner, where the drive turns, is
+/// at most one of them) and over [`SPIKE_CHANGES`] times the mean gap around it, without the
+/// three it touches (at least `floor`).
+fn breaks_line(x: &[f64], k: usize, floor: f64) -> bool {
+    if k < 3 || k + 2 >= x.len() {
+        return false;
+    }
+    let gap = line_gap(x, k).abs();
+    if gap <= 3.0 * (x[k - 1] - x[k - 2]).abs().max((x[k + 1] - x[k]).abs()) {
+        return false;
+    }
+    let (lo, hi) = (k.saturating_sub(SPIKE_WINDOW).max(2), (k + SPIKE_WINDOW).min(x.len() - 2));
+    let around = (lo..=hi).filter(|&j| j + 1 < k || j > k + 1).map(|j| line_gap(x, j).abs());
+    let (sum, count) = around.fold((0.0, 0usize), |(s, c), g| (s + g, c + 1));
+    gap > SPIKE_CHANGES * (sum / count.max(1) as f64).max(floor)
+}
+
+/// How many rows after `x` steps at `k` it comes back within [`STEP_LOOKBACK`] samples: a run
+/// off range, not a level step. `by_level`: to its level before (within a quarter of the step),
+/// which a slow channel's own moves do not reach; else (or also) by a change that breaks the
+/// line of its neighbours the other way, by at least three quarters of the step's
+/// ([`line_gap`]; the change after a step stands off by half of it, the way back by all).
+fn comes_back(x: &[f64], k: usize, by_level: bool) -> Option<usize> {
     let (before, jump) = (x[k - 1], (x[k] - x[k - 1]).abs());
-    (k + 1..(k + STEP_LOOKBACK).min(x.len())).find(|&j| (x[j] - before).abs() < 0.25 * jump).map(|j| j - k)
+    let end = (k + STEP_LOOKBACK).min(x.len());
+    let level = (k + 1..end).find(|&j| by_level && (x[j] - before).abs() < 0.25 * jump);
+    let step_gap = line_gap(x, k);
+    let sharp =
+        (k + 2..end.min(x.len() - 1)).find(|&j| line_gap(x, j) * step_gap.signum() <= -0.75 * step_gap.abs());
+    [level, sharp].into_iter().flatten().min().map(|j| j - k)
 }
 
 /// The runs of `x` at one exact value for [`STUCK_RUN`] samples and more while `reference`
