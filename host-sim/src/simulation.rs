@@ -195,9 +195,7 @@ impl<'a> Prepared<'a> {
     fn with(rec: &'a Recording, drive: Drive, initial: InitialState) -> Self {
         let (mut drive_noise_a, mut drive_turns_in_noise, mut drive_estimate) = (0.0, false, None);
         if let (Drive::Current, Some(i)) = (drive, &rec.current_a) {
-            drive_noise_a = noisy_drive::white_noise_rms(i);
-            drive_estimate =
-                noisy_drive::denoised(i, drive_noise_a).map(|(smooth, _)| Arc::<[f64]>::from(smooth));
+            (drive_noise_a, drive_estimate) = noisy_drive::read(i);
             let path = drive_estimate.as_deref().unwrap_or(i);
             drive_turns_in_noise =
                 runs::turns_within(path, noisy_drive::REVERSAL_IN_NOISE_RMS * drive_noise_a);

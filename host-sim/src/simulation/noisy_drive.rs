@@ -12,6 +12,8 @@
 //! estimate of its error against the true current, which the noise level gives, over the whole
 //! file or, where the drive steps, between its steps.
 
+use std::sync::{Arc, Mutex};
+
 use realfft::RealFftPlanner;
 
 /// A turn of the field is a reversal when it moves back by more than this many noise rms (of
@@ -43,6 +45,40 @@ pub fn denoised(x: &[f64], sigma: f64) -> Option<(Vec<f64>, usize)> {
         (w, b) => w.or(b),
     };
     best.map(|(_, smooth, m)| (smooth, m))
+}
+
+/// How many logged currents [`read`] keeps (a diagnosis prepares its fit and validation files
+/// again for every candidate; a Python session may pass many).
+const READINGS_KEPT: usize = 32;
+
+/// A logged current's white-noise rms ([`white_noise_rms`]) and the current smoothed to it
+/// ([`denoised`]), or `None` where nothing beats the logged current.
+pub type Reading = (f64, Option<Arc<[f64]>>);
+
+/// The most recent readings, each with its current (found again by its values' bits): the
+/// newest last.
+static READINGS: Mutex<Vec<(Arc<[f64]>, Reading)>> = Mutex::new(Vec::new());
+
+/// [`white_noise_rms`] and [`denoised`] of the logged current `x`, worked out once per distinct
+/// current: a fit, its candidates and its checks prepare the same files many times, and the
+/// smoother's widths cost a tenth of a second on a 30 000-sample file. A pure function of `x`.
+pub fn read(x: &[f64]) -> Reading {
+    let same =
+        |kept: &[f64]| kept.len() == x.len() && kept.iter().zip(x).all(|(a, b)| a.to_bits() == b.to_bits());
+    if let Ok(kept) = READINGS.lock() {
+        if let Some((_, reading)) = kept.iter().rev().find(|(k, _)| same(k)) {
+            return reading.clone();
+        }
+    }
+    let noise = white_noise_rms(x);
+    let reading: Reading = (noise, denoised(x, noise).map(|(smooth, _)| Arc::<[f64]>::from(smooth)));
+    if let Ok(mut kept) = READINGS.lock() {
+        if kept.len() >= READINGS_KEPT {
+            kept.remove(0);
+        }
+        kept.push((Arc::from(x), reading.clone()));
+    }
+    reading
 }
 
 /// The local quadratic (Savitzky–Golay) fit whose half-width m minimises Stein's unbiased risk
