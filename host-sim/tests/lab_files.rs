@@ -213,7 +213,9 @@ fn two_files_at_other_scales_are_said_as_a_pair() {
 
 /// One rig logged at 10 kHz and at 5 kHz, fitted jointly: each file is stepped at its own rate,
 /// so the mode (the rig's 1 700 Hz, below both Nyquist frequencies) is found, and no warning
-/// says the files cannot show it (a joint fit once returned 11 238 Hz, ζ 0.021).
+/// says the files cannot show it (a joint fit once returned 11 238 Hz, ζ 0.021). A file at
+/// 2 kHz, whose Nyquist frequency the mode is above, is named as one that cannot show it (a
+/// tester's joint fit with one returned 2 899 Hz, ζ 0.021, unsaid).
 #[test]
 fn files_at_two_rates_fit_one_rig() {
     let dir = tempfile::tempdir().unwrap();
@@ -227,6 +229,13 @@ fn files_at_two_rates_fit_one_rig() {
     assert!((f_n / truth - 1.0).abs() < 0.05, "f_n {f_n} Hz against the rig's {truth} Hz");
     let w = warnings(&j);
     assert!(!w.contains("can show"), "{w}");
+    // A file at 2 kHz cannot show the mode the 10 kHz file shows: said, naming it.
+    let sparse = rig_file(d, "sparse.csv", chirp(800.0), 2_000.0, 1.0, 8);
+    let w = warnings(&json(&["fit", "--model", "ja+mech", &fast, &sparse]));
+    assert!(
+        w.contains("lies above the Nyquist frequency of") && w.contains("sparse.csv (1000.0 Hz), though not"),
+        "{w}"
+    );
 }
 
 /// A set fitted as `ja+mech` compared as `eddy+ja+mech`: the eddy lag's value is the start

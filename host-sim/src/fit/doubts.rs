@@ -30,7 +30,8 @@ pub fn strain_scale_doubt(
 }
 
 /// A mechanical mode that none of `files` can show (above each one's Nyquist frequency) is said:
-/// the mechanics is then a static gain, and a time column in ms read as seconds lands there.
+/// the mechanics is then a static gain, and a time column in ms read as seconds lands there. A
+/// mode above some files' Nyquist frequency only is said with those files.
 pub fn unresolved_mode<'a>(
     spec: ModelSpec,
     params: &ActuatorParams,
@@ -54,13 +55,22 @@ fn mode_above_nyquist<'a>(
     lowest_searched: bool,
     files: impl IntoIterator<Item = &'a Recording>,
 ) -> Option<Warning> {
-    let step_s = files.into_iter().map(Recording::dt_s).filter(|dt| *dt > 0.0).reduce(f64::min)?;
+    let steps: Vec<(&str, f64)> =
+        files.into_iter().map(|r| (r.name.as_str(), r.dt_s())).filter(|(_, dt)| *dt > 0.0).collect();
+    let step_s = steps.iter().map(|(_, dt)| *dt).reduce(f64::min)?;
     let nyquist_hz = 0.5 / step_s;
-    (natural_frequency_hz > nyquist_hz).then_some(Warning::ModeAboveNyquist {
+    if natural_frequency_hz > nyquist_hz {
+        return Some(Warning::ModeAboveNyquist { natural_frequency_hz, nyquist_hz, step_s, lowest_searched });
+    }
+    // Above some files' Nyquist frequency only (files of one rig at several rates): those
+    // cannot show it, and a joint fit may put it where their aliases fit best.
+    let slow: Vec<(&str, f64)> =
+        steps.into_iter().filter(|(_, dt)| natural_frequency_hz > 0.5 / dt).collect();
+    let slowest_nyquist_hz = slow.iter().map(|(_, dt)| 0.5 / dt).reduce(f64::max)?;
+    (!lowest_searched).then(|| Warning::ModeAboveSomeFiles {
         natural_frequency_hz,
-        nyquist_hz,
-        step_s,
-        lowest_searched,
+        files: slow.iter().map(|(name, _)| name.to_string()).collect(),
+        nyquist_hz: slowest_nyquist_hz,
     })
 }
 
