@@ -32,6 +32,12 @@ fn rig_file(dir: &Path, name: &str, waveform: Waveform, rate_hz: f64, duration_s
     path.display().to_string()
 }
 
+/// The rig's held steps (0, 1, −1, 0.5 × 0.8 A, 0.25 s each) at 10 kHz, as `dir/c.csv`.
+fn steps_file(dir: &Path) -> String {
+    let steps = Waveform::Steps { levels: vec![0.0, 1.0, -1.0, 0.5], hold_s: 0.25 };
+    rig_file(dir, "c.csv", steps, 10_000.0, 1.0, 5)
+}
+
 /// `file` with its displacement (and, with `drive_too`, its current) multiplied by `by`, as
 /// `dir/name`.
 fn scaled(dir: &Path, file: &str, name: &str, by: f64, drive_too: bool) -> String {
@@ -134,14 +140,7 @@ fn a_file_at_another_probe_gain_is_named() {
     let d = dir.path();
     let a = rig_file(d, "a.csv", multisine(8), 10_000.0, 1.0, 3);
     let b = rig_file(d, "b.csv", sine(5.0), 10_000.0, 1.0, 4);
-    let c = rig_file(
-        d,
-        "c.csv",
-        Waveform::Steps { levels: vec![0.0, 1.0, -1.0, 0.5], hold_s: 0.25 },
-        10_000.0,
-        1.0,
-        5,
-    );
+    let c = steps_file(d);
     let w = warnings(&json(&["fit", "--model", "ja+mech", &a, &b, &c]));
     assert!(!w.contains("displacement spreads"), "the rig's own files: {w}");
     let switched = scaled(d, &c, "switched.csv", 10.0, false);
@@ -187,14 +186,7 @@ fn two_files_at_other_scales_are_said_as_a_pair() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let a = rig_file(d, "a.csv", multisine(8), 10_000.0, 1.0, 3);
-    let c = rig_file(
-        d,
-        "c.csv",
-        Waveform::Steps { levels: vec![0.0, 1.0, -1.0, 0.5], hold_s: 0.25 },
-        10_000.0,
-        1.0,
-        5,
-    );
+    let c = steps_file(d);
     let three = scaled(d, &c, "three.csv", 3.0, false);
     let w = warnings(&json(&["fit", "--model", "ja+mech", &a, &three]));
     assert!(
