@@ -66,11 +66,11 @@ fn mode_above_nyquist<'a>(
     // cannot show it, and a joint fit may put it where their aliases fit best.
     let slow: Vec<(&str, f64)> =
         steps.into_iter().filter(|(_, dt)| natural_frequency_hz > 0.5 / dt).collect();
-    let slowest_nyquist_hz = slow.iter().map(|(_, dt)| 0.5 / dt).reduce(f64::max)?;
+    let top_slow_nyquist_hz = slow.iter().map(|(_, dt)| 0.5 / dt).reduce(f64::max)?;
     (!lowest_searched).then(|| Warning::ModeAboveSomeFiles {
         natural_frequency_hz,
         files: slow.iter().map(|(name, _)| name.to_string()).collect(),
-        nyquist_hz: slowest_nyquist_hz,
+        nyquist_hz: top_slow_nyquist_hz,
     })
 }
 
