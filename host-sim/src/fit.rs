@@ -43,7 +43,7 @@ pub use doubts::{
     flux_scale_doubts, strain_scale_doubt, unfitted_effects, unfitted_gain, unresolved_mode,
     unsearchable_mode,
 };
-pub use file_scales::{scale_outlier, sign_and_scale_doubts};
+pub use file_scales::sign_and_scale_doubts;
 pub use free_params::{free_params, identifiable, logs_coil_temperature, FreeParam, Given};
 use free_params::{given_by, MODE_DAMPING, MODE_FREQUENCY};
 pub use plausible::{check_files, check_physics, data_doubts, sign_doubts};

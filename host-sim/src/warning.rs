@@ -287,7 +287,7 @@ pub enum Warning {
         scale: f64,
     },
     /// One recording's displacement per unit drive disagrees with the other files' beyond what
-    /// the model explains ([`crate::fit::scale_outlier`]).
+    /// the model explains ([`crate::fit::sign_and_scale_doubts`]).
     GainsDisagree {
         /// The recording.
         file: String,
@@ -301,6 +301,24 @@ pub enum Warning {
         doubted_from: f64,
         /// With only two files, the other one: neither can be told the odd one (`gain` is then
         /// `file`'s scale against this one's, and `others_nrmse` each file's own fit).
+        pair: Option<String>,
+    },
+    /// One recording's drive column at another scale than the other files' (a clamp's or
+    /// monitor's range): the other files' model follows its displacement far better with the
+    /// drive rescaled than at any probe gain ([`crate::fit::sign_and_scale_doubts`]).
+    DriveScaleOff {
+        /// The recording.
+        file: String,
+        /// The drive column (`current_A` or `command_V`).
+        column: &'static str,
+        /// The scale its drive is followed best at.
+        scale: f64,
+        /// The share of its displacement's spread (rms) left unexplained so.
+        rescaled: f64,
+        /// The same, its drive as logged and the displacement at its best gain.
+        as_logged: f64,
+        /// With only two files, the other one: neither can be told the odd one (`scale` is then
+        /// `file`'s drive scale against this one's; the shares the worse of the two readings).
         pair: Option<String>,
     },
     /// A parameter set run with effects the model it was fitted as lacks: their values are start
@@ -378,6 +396,7 @@ impl Warning {
             | Warning::PreisachPlaneWide { .. }
             | Warning::FluxScaleAtBound { .. }
             | Warning::GainsDisagree { .. }
+            | Warning::DriveScaleOff { .. }
             | Warning::EffectsNotFitted { .. }
             | Warning::UnfittedGain { .. }
             | Warning::Data(_) => Weight::Data,
@@ -548,6 +567,9 @@ impl fmt::Display for Warning {
                 None => gains_disagree(f, file, *gain, *joint_nrmse, *others_nrmse, *doubted_from),
                 Some(other) => pair_gains_disagree(f, (other, file), *gain, *others_nrmse, *doubted_from),
             },
+            Warning::DriveScaleOff { file, column, scale, rescaled, as_logged, pair } => {
+                drive_scale_off(f, (file, pair.as_deref()), column, *scale, (*rescaled, *as_logged))
+            }
             Warning::EffectsNotFitted { params, model, effects } => write!(
                 f,
                 "{params} was fitted as a model without `{}`, run here as `{model}`: those values are the start \

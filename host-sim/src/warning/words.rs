@@ -180,6 +180,51 @@ pub(super) fn pair_gains_disagree(
     )
 }
 
+/// [`super::Warning::DriveScaleOff`] in words (of two files, `pair` the other).
+pub(super) fn drive_scale_off(
+    f: &mut fmt::Formatter<'_>,
+    (file, pair): (&str, Option<&str>),
+    column: &str,
+    scale: f64,
+    (rescaled, as_logged): (f64, f64),
+) -> fmt::Result {
+    if let Some(other) = pair {
+        return pair_drive_scales_disagree(f, (other, file), column, scale, (rescaled, as_logged));
+    }
+    write!(
+        f,
+        "{file}: the other files' rig (the model fitted without it, run on its drive from the start that \
+         best explains it) follows its displacement far better with its {column} multiplied by {scale:.3} ({:.1} % of the \
+         displacement's spread unexplained) than as logged at any probe gain ({:.1} %): its {column} reads at \
+         another scale than the others' (a current clamp's or monitor's range, a shunt or gain entered for \
+         another channel). Check that channel's scale (if it is the cause, multiply the column by {scale:.3} and \
+         fit again) or fit the file on its own. An effect the model lacks that acts on this file alone (eddy \
+         currents at a fast drive lower the field the rod sees) can read so too: `gma diagnose` tells",
+        100.0 * rescaled,
+        100.0 * as_logged,
+    )
+}
+
+/// [`super::Warning::DriveScaleOff`] of two files in words: which of them is off, nothing tells.
+fn pair_drive_scales_disagree(
+    f: &mut fmt::Formatter<'_>,
+    (first, second): (&str, &str),
+    column: &str,
+    scale: f64,
+    (rescaled, as_logged): (f64, f64),
+) -> fmt::Result {
+    write!(
+        f,
+        "{first} and {second}: their {column} scales disagree by {scale:.3}× ({second}'s against {first}'s): a \
+         model fitted to one file alone, run on the other's drive, follows that file's displacement far better \
+         with its drive rescaled ({:.1} % of the spread unexplained) than as logged at any probe gain ({:.1} %), \
+         and the reading the other way does not contradict it; two files cannot tell which of them is off. A current clamp's or monitor's range, or a shunt or gain entered for another channel, in one of \
+         them reads like this; check both files' {column} scales, or fit each on its own",
+        100.0 * rescaled,
+        100.0 * as_logged,
+    )
+}
+
 /// [`super::Warning::PreisachPlaneWide`] in words.
 pub(super) fn preisach_plane_wide(
     f: &mut fmt::Formatter<'_>,
