@@ -524,7 +524,7 @@ pub fn compare(
                 );
                 total += sc.nrmse;
                 sim.displacement_um.iter_mut().for_each(|y| *y += sc.offset_um);
-                rows.extend(FileScoreRow::for_recording(&rec.name, None, &sc));
+                rows.extend(FileScoreRow::for_recording(rec, None, &sc));
                 predictions.push(Prediction::Recording {
                     name: rec.name.clone(),
                     time_s: rec.time_s.clone(),
@@ -545,7 +545,7 @@ pub fn compare(
                 rows.push(FileScoreRow {
                     measured: Some(loops::features(&f.h, &f.magnetization())),
                     model: Some(loops::features(&f.h, &m)),
-                    ..FileScoreRow::new(&f.name, None, f.channel.name(), e)
+                    ..FileScoreRow::new(&f.name, None, (f.channel.name(), &f.value), e)
                 });
                 predictions.push(Prediction::Loop {
                     name: f.name.clone(),

@@ -10,6 +10,7 @@ use serde::Serialize;
 use crate::analysis::AnalysisSummary;
 use crate::fit::StartScore;
 use crate::loops::LoopFeatures;
+use crate::recording::Recording;
 use crate::uncertainty::Uncertainty;
 
 /// One file's score on one channel.
@@ -24,6 +25,10 @@ pub struct FileScoreRow {
     pub channel: &'static str,
     /// NRMSE on that channel (fraction).
     pub nrmse: f64,
+    /// MATLAB's `compare` fit on that channel, 100 (1 − ‖y − ŷ‖/‖y − ȳ‖) [%]
+    /// ([`crate::score::fit_percent`]); absent for a constant channel.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fit_percent: Option<f64>,
     /// Fitted displacement offset [µm] (displacement rows).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub offset_um: Option<f64>,
@@ -54,13 +59,19 @@ pub struct FileScoreRow {
 }
 
 impl FileScoreRow {
-    /// A row with only the score.
-    pub fn new(file: &str, split: Option<&'static str>, channel: &'static str, nrmse: f64) -> Self {
+    /// A row with only the score: the NRMSE `nrmse` on the channel's `measured` values.
+    pub fn new(
+        file: &str,
+        split: Option<&'static str>,
+        (channel, measured): (&'static str, &[f64]),
+        nrmse: f64,
+    ) -> Self {
         Self {
             file: file.into(),
             split,
             channel,
             nrmse,
+            fit_percent: crate::score::fit_percent(measured, nrmse),
             offset_um: None,
             flux_scale: None,
             ambient_c: None,
@@ -74,6 +85,12 @@ impl FileScoreRow {
 }
 
 impl FileScoreRow {
+    /// The fit % as the text shows it: `93.6 %`, `-12.0 %` ([`Self::fit_percent`]), `   — ` for
+    /// a constant channel.
+    pub fn fit_text(&self) -> String {
+        self.fit_percent.map_or("     —  ".to_string(), |p| format!("{p:5.1} %"))
+    }
+
     /// Whether this row is its file's first (a recording's displacement row, a loop file's only
     /// row): what counts files.
     pub fn is_first_of_file(&self) -> bool {
@@ -82,25 +99,30 @@ impl FileScoreRow {
 
     /// A recording's rows: displacement (with its offset and initial state), then the current
     /// the flux density and the temperature where the model is scored on them.
-    pub fn for_recording(file: &str, split: Option<&'static str>, s: &crate::score::FileScore) -> Vec<Self> {
+    pub fn for_recording(
+        rec: &Recording,
+        split: Option<&'static str>,
+        s: &crate::score::FileScore,
+    ) -> Vec<Self> {
+        let (file, channel) = (rec.name.as_str(), |v: &Option<Vec<f64>>| v.clone().unwrap_or_default());
         let mut rows = vec![FileScoreRow {
             offset_um: Some(s.offset_um),
             initial_excursion_a_per_m: s.initial_excursion_a_per_m,
-            ..FileScoreRow::new(file, split, "displacement", s.nrmse)
+            ..FileScoreRow::new(file, split, ("displacement", &channel(&rec.displacement_um)), s.nrmse)
         }];
         if let Some(c) = s.nrmse_current {
-            rows.push(FileScoreRow::new(file, split, "current", c));
+            rows.push(FileScoreRow::new(file, split, ("current", &channel(&rec.current_a)), c));
         }
         if let Some(b) = s.flux {
             rows.push(FileScoreRow {
                 flux_scale: Some(b.scale),
-                ..FileScoreRow::new(file, split, "flux_density", b.nrmse)
+                ..FileScoreRow::new(file, split, ("flux_density", &channel(&rec.flux_density_t)), b.nrmse)
             });
         }
         if let Some(t) = s.temperature {
             rows.push(FileScoreRow {
                 ambient_c: Some(t.ambient_c),
-                ..FileScoreRow::new(file, split, "temperature", t.nrmse)
+                ..FileScoreRow::new(file, split, ("temperature", &channel(&rec.temperature_c)), t.nrmse)
             });
         }
         rows
@@ -383,10 +405,11 @@ impl FitSummary {
         for r in &self.files {
             writeln!(
                 f,
-                "  {:5} {:14} NRMSE {:6.3} %  {}",
+                "  {:5} {:14} NRMSE {:6.3} %  fit {}  {}",
                 r.split.unwrap_or(""),
                 r.channel,
                 r.nrmse * 100.0,
+                r.fit_text(),
                 r.file
             )?;
         }
@@ -437,7 +460,8 @@ impl CompareSummary {
         for r in &self.files {
             let plots = r.plots.as_ref().map(|p| format!("  plots: {}", p.join(", "))).unwrap_or_default();
             let offset = r.offset_um.map(|o| format!("  offset {o:8.3} µm")).unwrap_or_default();
-            writeln!(f, "{:40} {:14} NRMSE {:6.3} %{offset}{plots}", r.file, r.channel, r.nrmse * 100.0)?;
+            let (file, channel, nrmse, fit) = (&r.file, r.channel, r.nrmse * 100.0, r.fit_text());
+            writeln!(f, "{file:40} {channel:14} NRMSE {nrmse:6.3} %  fit {fit}{offset}{plots}")?;
             if let Some(a) = &r.analysis {
                 writeln!(f, "{a}")?;
             }

@@ -31,6 +31,19 @@ pub fn nrmse(measured: &[f64], model: &[f64]) -> f64 {
     mse.sqrt() / (hi - lo).max(1e-12)
 }
 
+/// MATLAB's `compare` fit, 100 (1 − ‖y − ŷ‖/‖y − ȳ‖) [%], of a model whose [`nrmse`] against
+/// `measured` is `nrmse` (the same residual: ‖y − ŷ‖ = √n · nrmse · range): 100 for a perfect
+/// model, 0 for one no better than the measured mean, negative for one worse. `None` for a
+/// constant channel.
+pub fn fit_percent(measured: &[f64], nrmse: f64) -> Option<f64> {
+    let n = measured.len().max(1) as f64;
+    let (lo, hi) = measured.iter().fold((f64::MAX, f64::MIN), |(l, h), &v| (l.min(v), h.max(v)));
+    let mean = measured.iter().sum::<f64>() / n;
+    let rms_about_mean = (measured.iter().map(|y| (y - mean) * (y - mean)).sum::<f64>() / n).sqrt();
+    let fit = 100.0 * (1.0 - nrmse * (hi - lo).max(1e-12) / rms_about_mean);
+    fit.is_finite().then_some(fit)
+}
+
 /// How the model's magnetization matches a measured flux density.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FluxFit {

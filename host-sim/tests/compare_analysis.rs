@@ -35,6 +35,8 @@ fn json(o: &std::process::Output) -> serde_json::Value {
         .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&o.stdout)))
 }
 
+/// `--out-csv` adds up (measured − model = residual), and the figures the JSON and text give
+/// per file (MATLAB's fit %) follow from it by hand.
 #[test]
 fn compare_writes_the_analysis_plots_and_a_time_series_csv_that_adds_up() {
     let dir = tempfile::tempdir().unwrap();
@@ -81,6 +83,36 @@ fn compare_writes_the_analysis_plots_and_a_time_series_csv_that_adds_up() {
         residual_ss += v(4) * v(4);
     }
     assert!(residual_ss > 0.0);
+
+    // MATLAB's fit, 100 (1 − ‖y − ŷ‖/‖y − ȳ‖), worked out by hand from the CSV, is each file's
+    // `fit_percent`, and the text shows it.
+    for (k, name) in [&chirp, &sine].iter().enumerate() {
+        let own: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| &r[0] == name.to_str().unwrap())
+            .map(|r| (r[2].parse::<f64>().unwrap(), r[4].parse::<f64>().unwrap()))
+            .collect();
+        let mean = own.iter().map(|(y, _)| y).sum::<f64>() / own.len() as f64;
+        let residual = own.iter().map(|(_, e)| e * e).sum::<f64>().sqrt();
+        let about_mean = own.iter().map(|(y, _)| (y - mean) * (y - mean)).sum::<f64>().sqrt();
+        let by_hand = 100.0 * (1.0 - residual / about_mean);
+        let reported = lumped["files"][k]["fit_percent"].as_f64().unwrap();
+        assert!(
+            (reported - by_hand).abs() < 1e-6,
+            "{name:?}: fit_percent {reported} against {by_hand} by hand"
+        );
+        assert!((50.0..100.0).contains(&by_hand), "{name:?}: fit {by_hand} %");
+    }
+    let text = gma(&[
+        "compare",
+        "--model",
+        "ja+mech+eddy",
+        "--out-dir",
+        plots.to_str().unwrap(),
+        sine.to_str().unwrap(),
+    ]);
+    let fit = lumped["files"][1]["fit_percent"].as_f64().unwrap();
+    assert!(String::from_utf8_lossy(&text.stdout).contains(&format!("fit {fit:5.1} %")), "{}", err(&text));
 
     // The JSON gains the analysis; the bounds follow N.
     let files = lumped["files"].as_array().unwrap();

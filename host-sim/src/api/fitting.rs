@@ -110,7 +110,7 @@ pub fn fit_recordings(
 /// The contract's per-file rows: displacement, and current and flux density where the model
 /// is scored on them.
 fn rows(split: &'static str, recs: &[Recording], scores: &[crate::score::FileScore]) -> Vec<FileScoreRow> {
-    recs.iter().zip(scores).flat_map(|(r, s)| FileScoreRow::for_recording(&r.name, Some(split), s)).collect()
+    recs.iter().zip(scores).flat_map(|(r, s)| FileScoreRow::for_recording(r, Some(split), s)).collect()
 }
 
 /// The magnetization stage alone, on loop files.
@@ -131,7 +131,7 @@ pub fn fit_loops(
     let mut files: Vec<FileScoreRow> = fit_files
         .iter()
         .zip(&res.nrmse)
-        .map(|(f, e)| FileScoreRow::new(&f.name, Some("fit"), f.channel.name(), *e))
+        .map(|(f, e)| FileScoreRow::new(&f.name, Some("fit"), (f.channel.name(), &f.value), *e))
         .collect();
     let mut val_nrmse = Vec::new();
     let h_max =
@@ -140,7 +140,7 @@ pub fn fit_loops(
         let m = loop_fit::run(model, &res.values(), &f.h, h_max)
             .map_err(|e| crate::error::InRecording::error(&f.name, e.0))?;
         let e = crate::score::nrmse(&f.value, &f.channel_from_m(&m));
-        files.push(FileScoreRow::new(&f.name, Some("val"), f.channel.name(), e));
+        files.push(FileScoreRow::new(&f.name, Some("val"), (f.channel.name(), &f.value), e));
         val_nrmse.push(e);
     }
     let summary = FitSummary {

@@ -233,7 +233,7 @@ fn compare_recordings(
         if let Some(w) = &mut csv {
             write_time_series(w, rec, &sim, sc.offset_um, any_flux)?;
         }
-        let mut channels = FileScoreRow::for_recording(&rec.name, None, &sc);
+        let mut channels = FileScoreRow::for_recording(rec, None, &sc);
         channels[0].plots = Some(written);
         channels[0].analysis = summary;
         rows.extend(channels);
@@ -332,7 +332,7 @@ fn compare_loops(
             plots: Some(vec![display(&out)]),
             measured: Some(loops::features(&f.h, &f.magnetization())),
             model: Some(loops::features(&f.h, &m)),
-            ..FileScoreRow::new(&f.name, None, f.channel.name(), e)
+            ..FileScoreRow::new(&f.name, None, (f.channel.name(), &f.value), e)
         });
         charts.push((out, vec![loop_plots::chart(f, &m, &spec.to_string())], XScale::Linear));
     }
