@@ -104,25 +104,28 @@ impl FileScoreRow {
         split: Option<&'static str>,
         s: &crate::score::FileScore,
     ) -> Vec<Self> {
-        let (file, channel) = (rec.name.as_str(), |v: &Option<Vec<f64>>| v.clone().unwrap_or_default());
+        let file = rec.name.as_str();
+        fn channel(v: &Option<Vec<f64>>) -> &[f64] {
+            v.as_deref().unwrap_or_default()
+        }
         let mut rows = vec![FileScoreRow {
             offset_um: Some(s.offset_um),
             initial_excursion_a_per_m: s.initial_excursion_a_per_m,
-            ..FileScoreRow::new(file, split, ("displacement", &channel(&rec.displacement_um)), s.nrmse)
+            ..FileScoreRow::new(file, split, ("displacement", channel(&rec.displacement_um)), s.nrmse)
         }];
         if let Some(c) = s.nrmse_current {
-            rows.push(FileScoreRow::new(file, split, ("current", &channel(&rec.current_a)), c));
+            rows.push(FileScoreRow::new(file, split, ("current", channel(&rec.current_a)), c));
         }
         if let Some(b) = s.flux {
             rows.push(FileScoreRow {
                 flux_scale: Some(b.scale),
-                ..FileScoreRow::new(file, split, ("flux_density", &channel(&rec.flux_density_t)), b.nrmse)
+                ..FileScoreRow::new(file, split, ("flux_density", channel(&rec.flux_density_t)), b.nrmse)
             });
         }
         if let Some(t) = s.temperature {
             rows.push(FileScoreRow {
                 ambient_c: Some(t.ambient_c),
-                ..FileScoreRow::new(file, split, ("temperature", &channel(&rec.temperature_c)), t.nrmse)
+                ..FileScoreRow::new(file, split, ("temperature", channel(&rec.temperature_c)), t.nrmse)
             });
         }
         rows

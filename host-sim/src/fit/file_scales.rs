@@ -11,6 +11,7 @@ use super::plausible::{demagnetised_run, spread};
 use super::{fit_constrained, Constraints, FitOptions, FitResult};
 use crate::data_doubts::DataDoubt;
 use crate::recording::Recording;
+use crate::signal::correlation;
 use crate::simulation::{drive_for, run_model, Drive, Prepared};
 use crate::warning::Warning;
 
@@ -246,22 +247,30 @@ fn drive_scale(
             }
         }
     }
-    // Golden-section between the best scale's neighbours, in log g.
+    // Golden-section between the best scale's neighbours, in log g: one new run a step, the
+    // other inner point kept.
+    let at = |x: f64| -> Result<f64> { Ok(unexplained(x.exp(), 1.0)?.map_or(f64::INFINITY, |u| u.0)) };
     let (mut lo, mut hi) = (best.0.ln() - 0.25 * 2f64.ln(), best.0.ln() + 0.25 * 2f64.ln());
     let golden = 0.5 * (5f64.sqrt() - 1.0);
-    for _ in 0..12 {
-        let (a, b) = (hi - golden * (hi - lo), lo + golden * (hi - lo));
-        let at = |x: f64| -> Result<f64> { Ok(unexplained(x.exp(), 1.0)?.map_or(f64::INFINITY, |u| u.0)) };
-        let (ua, ub) = (at(a)?, at(b)?);
+    let (mut a, mut b) = (hi - golden * (hi - lo), lo + golden * (hi - lo));
+    let (mut ua, mut ub) = (at(a)?, at(b)?);
+    for step in 0..=12 {
         for (x, u) in [(a, ua), (b, ub)] {
             if u < best.1 {
                 best = (x.exp(), u);
             }
         }
+        if step == 12 {
+            break;
+        }
         if ua < ub {
-            hi = b;
+            (hi, b, ub) = (b, a, ua);
+            a = hi - golden * (hi - lo);
+            ua = at(a)?;
         } else {
-            lo = a;
+            (lo, a, ua) = (a, b, ub);
+            b = lo + golden * (hi - lo);
+            ub = at(b)?;
         }
     }
     Ok(Some(DriveScale { scale: best.0, rescaled: best.1, as_logged }))
@@ -272,16 +281,13 @@ fn drive_scale(
 fn shares_unexplained(y: &[f64], m: &[f64]) -> (f64, f64) {
     let n = y.len().max(1) as f64;
     let (my, mm) = (y.iter().sum::<f64>() / n, m.iter().sum::<f64>() / n);
-    let (mut syy, mut smm, mut sym, mut see) = (0.0, 0.0, 0.0, 0.0);
+    let (mut syy, mut see) = (0.0, 0.0);
     for (a, b) in y.iter().zip(m) {
-        let (dy, dm) = (a - my, b - mm);
-        syy += dy * dy;
-        smm += dm * dm;
-        sym += dy * dm;
-        see += (dy - dm) * (dy - dm);
+        syy += (a - my) * (a - my);
+        see += ((a - my) - (b - mm)) * ((a - my) - (b - mm));
     }
-    let rho = sym / (syy * smm).sqrt();
-    let at_gain = if rho > 0.0 { (1.0 - rho * rho).max(0.0).sqrt() } else { 1.0 };
+    let rho = correlation(y, m);
+    let at_gain = if rho > 0.0 { (1.0 - rho * rho).sqrt() } else { 1.0 };
     ((see / syy).sqrt(), at_gain)
 }
 
